@@ -1,0 +1,109 @@
+"""Task settings of the environments: what counts as a safe lift, and the reward weights."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any
+
+__all__ = [
+    "ACTION_TYPES",
+    "ESTIMATORS",
+    "OBSERVATION_MODES",
+    "LiftCriteria",
+    "Outcome",
+    "RewardWeights",
+    "as_dataclass",
+]
+
+OBSERVATION_MODES = ("belief", "raw", "oracle")
+"""``belief``: measurements + estimator output; ``raw``: measurements only; ``oracle``: belief + true xi."""
+
+ACTION_TYPES = ("multidiscrete", "discrete", "continuous")
+"""``MultiDiscrete([3, 3, 2])``, flat ``Discrete(18)`` (for DQN), or ``Box(-1, 1, (3,))``."""
+
+ESTIMATORS = ("kalman", "multiple_model", "imm")
+"""The paper's thresholded KF alone, or with a multiple-model (MMAE / IMM) estimator beside it."""
+
+
+class Outcome(IntEnum):
+    """How an episode ended (``NONE`` while it runs)."""
+
+    NONE = 0
+    SUCCESS = 1
+    UNSAFE = 2
+    PREMATURE = 3
+    TIMEOUT = 4
+
+    @property
+    def label(self) -> str:
+        """Lower-case name used in ``info["outcome"]`` and reports."""
+        return self.name.lower()
+
+
+def _finite(owner: str, name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"{owner}.{name} must be a finite number, got {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"{owner}.{name} must be in [{low}, {high}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class LiftCriteria:
+    """When a lift is safe (paper §II: the centre of mass must be over the feet).
+
+    Attributes:
+        success_lean_m: Forward shoulder displacement that puts the centre of mass over
+            the feet [m]; a lift with ``xi = +1`` and ``x`` at least this succeeds.
+        upright_m: Below this displacement the person is still upright [m]; lifting
+            then (or while ``xi = -1``) is unsafe. Other lifts are premature.
+    """
+
+    success_lean_m: float = 0.15
+    upright_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _finite("LiftCriteria", "success_lean_m", self.success_lean_m, 0.0, 1.0)
+        _finite("LiftCriteria", "upright_m", self.upright_m, -1.0, self.success_lean_m)
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the named reward terms (each appears in ``info["reward_terms"]``).
+
+    Attributes:
+        success: Reward for a successful lift.
+        unsafe: Penalty (subtracted) for lifting a resisting or upright person.
+        premature: Penalty (subtracted) for any other lift before the person is ready.
+        time_per_s: Cost per second that passes (subtracted).
+        force_per_n_s: Cost per newton-second of push (gentleness; subtracted).
+    """
+
+    success: float = 1.0
+    unsafe: float = 2.0
+    premature: float = 0.5
+    time_per_s: float = 0.01
+    force_per_n_s: float = 0.0005
+
+    def __post_init__(self) -> None:
+        """Validate ranges: weights are finite and non-negative."""
+        for field in dataclasses.fields(self):
+            _finite("RewardWeights", field.name, getattr(self, field.name), 0.0, 1e6)
+
+
+def as_dataclass(cls: type[Any], value: Any, argument: str) -> Any:
+    """Accept an instance of ``cls``, a mapping of its fields, or None (defaults)."""
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, dict):
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(value) - known)
+        if unknown:
+            raise ValueError(f"{argument}: unknown {cls.__name__} field(s) {unknown}; known: {sorted(known)}")
+        return cls(**value)
+    raise ValueError(f"{argument} must be a {cls.__name__}, a dict of its fields or None, got {type(value).__name__}")

@@ -1,0 +1,364 @@
+"""Typed, unit-annotated parameters of the three-level human model (paper §III).
+
+One frozen dataclass per model level, plus the sensors, the cues and the timing. The
+single env, the batched env and the estimator's nominal model all read these objects;
+there is no second copy of any constant. Every field is validated on construction and
+an out-of-range value raises ``ValueError`` naming the field.
+
+Field names carry their units (``_m``, ``_n``, ``_s``, ``_per_s`` ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+__all__ = [
+    "Biomechanics",
+    "Cooperativeness",
+    "Cues",
+    "Intention",
+    "PersonParams",
+    "Realism",
+    "Sensors",
+    "Timing",
+    "from_mapping",
+]
+
+T = TypeVar("T")
+
+MAX_REACTION_DELAY_S = 1.2
+"""Longest supported reaction delay [s]; the delay line holds this many seconds of cues."""
+
+
+def _check_number(owner: str, name: str, value: Any, low: float, high: float = math.inf) -> None:
+    """Raise ``ValueError`` naming ``owner.name`` unless ``low <= value <= high`` and finite."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{owner}.{name} must be a number, got {value!r}")
+    if not math.isfinite(value) or not (low <= value <= high):
+        raise ValueError(f"{owner}.{name} must be in [{low}, {high}], got {value!r}")
+
+
+def _validate_ranges(obj: Any, ranges: dict[str, tuple[float, float]]) -> None:
+    owner = type(obj).__name__
+    for name, (low, high) in ranges.items():
+        _check_number(owner, name, getattr(obj, name), low, high)
+
+
+def from_mapping(cls: type[T], values: dict[str, Any]) -> T:
+    """Build dataclass ``cls`` from a mapping; unknown keys raise ``ValueError`` naming them."""
+    known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} field(s): {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    return cls(**values)
+
+
+@dataclass(frozen=True)
+class Biomechanics:
+    """Level 1, eq. 1: ``xddot = -lambda1*xdot + k1*(eta - x) + k2*c_p + w_x``.
+
+    Attributes:
+        damping_rate_per_s: ``lambda1`` [1/s], damping of torso motion.
+        voluntary_gain_per_s2: ``k1`` [1/s^2], the person's pull of ``x`` toward ``eta``.
+        push_compliance_m_per_s2_n: ``k2`` [m/(s^2 N)], acceleration per newton of push.
+        accel_noise_std_m_per_s2: Std of ``w_x`` [m/s^2], held over one simulation step.
+        stiffness_factor_uncooperative: Multiplies ``k2`` while ``xi = -1`` (an
+            uncooperative person stiffens against a push, paper §VI). 1 = off.
+        stiffness_factor_unresponsive: Multiplies ``k2`` while ``xi = 0``. 1 = off.
+    """
+
+    damping_rate_per_s: float = 6.0
+    voluntary_gain_per_s2: float = 9.0
+    push_compliance_m_per_s2_n: float = 0.012
+    accel_noise_std_m_per_s2: float = 0.02
+    stiffness_factor_uncooperative: float = 0.4
+    stiffness_factor_unresponsive: float = 0.85
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _validate_ranges(
+            self,
+            {
+                "damping_rate_per_s": (0.01, 100.0),
+                "voluntary_gain_per_s2": (0.01, 1000.0),
+                "push_compliance_m_per_s2_n": (0.0, 1.0),
+                "accel_noise_std_m_per_s2": (0.0, 10.0),
+                "stiffness_factor_uncooperative": (0.0, 10.0),
+                "stiffness_factor_unresponsive": (0.0, 10.0),
+            },
+        )
+
+
+@dataclass(frozen=True)
+class Intention:
+    """Level 2, eq. 6: ``eta[t+1] = eta[t] + xi*(k3*c_p + k4*c_v)*dt + w_eta`` plus realism.
+
+    Attributes:
+        push_gain_m_per_s_n: ``k3`` [m/(s N)], intention change per newton of push.
+        verbal_gain_m_per_s: ``k4`` [m/s], intention change per unit verbal cue.
+        noise_std_m_per_sqrt_s: Intensity of ``w_eta`` [m/sqrt(s)]; per-step std is
+            this times ``sqrt(dt)``.
+        reaction_delay_s: The intention answers the cues this long after they act [s].
+        saturate: Clip ``eta`` to the anatomical range ``[min_m, max_m]``.
+        min_m: Furthest the person can intend to lean back [m].
+        max_m: Furthest the person can intend to lean forward [m].
+        relaxation_rate_per_s: With no cue acting, ``eta`` relaxes toward upright (0) at
+            this rate [1/s]; 0 = off.
+    """
+
+    push_gain_m_per_s_n: float = 0.006
+    verbal_gain_m_per_s: float = 0.12
+    noise_std_m_per_sqrt_s: float = 0.004
+    reaction_delay_s: float = 0.3
+    saturate: bool = True
+    min_m: float = -0.10
+    max_m: float = 0.35
+    relaxation_rate_per_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _validate_ranges(
+            self,
+            {
+                "push_gain_m_per_s_n": (0.0, 1.0),
+                "verbal_gain_m_per_s": (0.0, 10.0),
+                "noise_std_m_per_sqrt_s": (0.0, 1.0),
+                "reaction_delay_s": (0.0, MAX_REACTION_DELAY_S),
+                "min_m": (-1.0, 0.0),
+                "max_m": (0.0, 1.0),
+                "relaxation_rate_per_s": (0.0, 100.0),
+            },
+        )
+        if not isinstance(self.saturate, bool):
+            raise ValueError(f"Intention.saturate must be a bool, got {self.saturate!r}")
+
+
+@dataclass(frozen=True)
+class Cooperativeness:
+    """Level 3, eq. 8: a cue-driven continuous-time Markov chain on ``xi`` in {-1, 0, +1}.
+
+    Only neighbouring levels are reachable in one jump. The rates [1/s] encode the
+    caregiving-handbook rules of paper §II; a step of length ``dt`` moves up with
+    probability ``(1 - exp(-(up + down) dt)) * up / (up + down)`` (exact for a CTMC whose
+    rates are constant over the step) and down likewise.
+
+    Attributes:
+        explain_calm_rate_per_s: -1 -> 0 while "lean forward" is heard (explaining calms).
+        words_alone_rate_per_s: 0 -> +1 while "lean forward" is heard: people rarely act
+            on words alone, so this is small.
+        guided_push_rate_per_s: 0 -> +1 under a push with a recent explanation: what
+            actually turns a person cooperative.
+        guided_calm_rate_per_s: -1 -> 0 under a push with a recent explanation.
+        push_alone_rate_per_s: 0 -> +1 under a push with no recent explanation.
+        startle_rate_per_s: One level down under a firm push with no recent explanation.
+        prepared_startle_rate_per_s: One level down under a firm push after explaining.
+        confusion_rate_per_s: One level down while "lean back" is heard.
+        drift_rate_per_s: One level toward ``baseline`` once idle for ``idle_after_s``.
+        explanation_memory_s: How long a "lean forward" counts as a recent explanation [s].
+        idle_after_s: No cue for this long counts as idle [s].
+        touch_threshold_n: A push below this force is not felt [N].
+        firm_push_threshold_n: A push at or above this force is firm [N].
+        persuadability: Scales the rates toward cooperation (persona trait).
+        startle_sensitivity: Scales the startle and confusion rates (persona trait).
+        hearing: 0..1, how much of a verbal cue gets through: scales the verbal rates and
+            how much an explanation prepares a push (persona trait).
+        baseline: The level an idle person drifts back to, in {-1, 0, 1}.
+        initial_p_uncooperative: Probability that an episode starts at ``xi = -1``.
+        initial_p_cooperative: Probability that an episode starts at ``xi = +1``
+            (the rest start at 0).
+    """
+
+    explain_calm_rate_per_s: float = 0.6
+    words_alone_rate_per_s: float = 0.08
+    guided_push_rate_per_s: float = 1.2
+    guided_calm_rate_per_s: float = 0.6
+    push_alone_rate_per_s: float = 0.08
+    startle_rate_per_s: float = 1.0
+    prepared_startle_rate_per_s: float = 0.15
+    confusion_rate_per_s: float = 0.5
+    drift_rate_per_s: float = 0.05
+    explanation_memory_s: float = 6.0
+    idle_after_s: float = 3.0
+    touch_threshold_n: float = 2.0
+    firm_push_threshold_n: float = 20.0
+    persuadability: float = 1.0
+    startle_sensitivity: float = 1.0
+    hearing: float = 1.0
+    baseline: int = 0
+    initial_p_uncooperative: float = 0.3
+    initial_p_cooperative: float = 0.1
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        rate = (0.0, 100.0)
+        _validate_ranges(
+            self,
+            {
+                "explain_calm_rate_per_s": rate,
+                "words_alone_rate_per_s": rate,
+                "guided_push_rate_per_s": rate,
+                "guided_calm_rate_per_s": rate,
+                "push_alone_rate_per_s": rate,
+                "startle_rate_per_s": rate,
+                "prepared_startle_rate_per_s": rate,
+                "confusion_rate_per_s": rate,
+                "drift_rate_per_s": rate,
+                "explanation_memory_s": (0.0, 1000.0),
+                "idle_after_s": (0.0, 1000.0),
+                "touch_threshold_n": (0.0, 1000.0),
+                "firm_push_threshold_n": (0.0, 1000.0),
+                "persuadability": (0.0, 100.0),
+                "startle_sensitivity": (0.0, 100.0),
+                "hearing": (0.0, 1.0),
+                "initial_p_uncooperative": (0.0, 1.0),
+                "initial_p_cooperative": (0.0, 1.0),
+            },
+        )
+        if self.baseline not in (-1, 0, 1) or isinstance(self.baseline, bool):
+            raise ValueError(f"Cooperativeness.baseline must be -1, 0 or 1, got {self.baseline!r}")
+        if self.initial_p_uncooperative + self.initial_p_cooperative > 1.0 + 1e-12:
+            raise ValueError(
+                "Cooperativeness.initial_p_uncooperative + initial_p_cooperative must be <= 1, got "
+                f"{self.initial_p_uncooperative} + {self.initial_p_cooperative}"
+            )
+        if self.firm_push_threshold_n < self.touch_threshold_n:
+            raise ValueError(
+                f"Cooperativeness.firm_push_threshold_n ({self.firm_push_threshold_n}) must be >= "
+                f"touch_threshold_n ({self.touch_threshold_n})"
+            )
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """Measurement noise of the robot's sensors.
+
+    Attributes:
+        position_noise_std_m: Std of the camera's shoulder-position reading [m].
+        force_noise_std_n: Std of the force sensor's reading [N].
+    """
+
+    position_noise_std_m: float = 0.004
+    force_noise_std_n: float = 0.5
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _validate_ranges(self, {"position_noise_std_m": (0.0, 1.0), "force_noise_std_n": (0.0, 100.0)})
+
+
+@dataclass(frozen=True)
+class Cues:
+    """What the robot can do.
+
+    Attributes:
+        soft_push_n: Force of a gentle push [N].
+        firm_push_n: Force of a firm push; also the top of the continuous-force variant [N].
+        verbal_duration_s: How long one utterance plays [s].
+    """
+
+    soft_push_n: float = 10.0
+    firm_push_n: float = 30.0
+    verbal_duration_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _validate_ranges(
+            self, {"soft_push_n": (0.0, 200.0), "firm_push_n": (0.0, 200.0), "verbal_duration_s": (0.02, 10.0)}
+        )
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Time base shared by simulator, sensors and filter.
+
+    Attributes:
+        dt_s: Simulation, measurement and filter step [s] (50 Hz).
+        substeps: Simulation steps per agent action (agent acts every ``substeps*dt_s``).
+        episode_s: An episode is truncated after this long [s].
+    """
+
+    dt_s: float = 0.02
+    substeps: int = 5
+    episode_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _validate_ranges(self, {"dt_s": (1e-4, 0.1), "episode_s": (0.1, 3600.0)})
+        if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or not 1 <= self.substeps <= 100:
+            raise ValueError(f"Timing.substeps must be an int in [1, 100], got {self.substeps!r}")
+
+    @property
+    def action_period_s(self) -> float:
+        """Time between two agent actions [s]."""
+        return self.dt_s * self.substeps
+
+    @property
+    def max_episode_steps(self) -> int:
+        """Agent steps in one full episode."""
+        return round(self.episode_s / self.action_period_s)
+
+
+@dataclass(frozen=True)
+class Realism:
+    """Switches for the simulator's departures from the paper's linear model.
+
+    Each ``True`` keeps the knob at its persona's value; ``False`` turns it off.
+
+    Attributes:
+        reaction_delay: The intention answers cues after ``Intention.reaction_delay_s``.
+        saturation: ``eta`` is clipped to the anatomical range.
+        relaxation: ``eta`` relaxes toward upright when no cue acts.
+        state_dependent_stiffness: ``k2`` depends on ``xi``.
+        sensor_noise: Position and force readings are noisy.
+        process_noise: ``w_x`` and ``w_eta`` are on.
+        person_variation: Each episode's person varies around the persona's values.
+    """
+
+    reaction_delay: bool = True
+    saturation: bool = True
+    relaxation: bool = True
+    state_dependent_stiffness: bool = True
+    sensor_noise: bool = True
+    process_noise: bool = True
+    person_variation: bool = True
+
+    def __post_init__(self) -> None:
+        """Every switch must be a bool."""
+        for field in dataclasses.fields(self):
+            if not isinstance(getattr(self, field.name), bool):
+                raise ValueError(f"Realism.{field.name} must be a bool, got {getattr(self, field.name)!r}")
+
+    @classmethod
+    def off(cls) -> Realism:
+        """The paper's idealised linear model: every realism knob off."""
+        return cls(**{f.name: False for f in dataclasses.fields(cls)})
+
+
+@dataclass(frozen=True)
+class PersonParams:
+    """One simulated person: the three model levels and the sensors that watch them."""
+
+    biomechanics: Biomechanics = Biomechanics()
+    intention: Intention = Intention()
+    cooperativeness: Cooperativeness = Cooperativeness()
+    sensors: Sensors = Sensors()
+
+    def with_realism(self, realism: Realism) -> PersonParams:
+        """Return this person with the switched-off realism knobs neutralised."""
+        bio, intent, sensors = self.biomechanics, self.intention, self.sensors
+        if not realism.state_dependent_stiffness:
+            bio = dataclasses.replace(bio, stiffness_factor_uncooperative=1.0, stiffness_factor_unresponsive=1.0)
+        if not realism.process_noise:
+            bio = dataclasses.replace(bio, accel_noise_std_m_per_s2=0.0)
+            intent = dataclasses.replace(intent, noise_std_m_per_sqrt_s=0.0)
+        if not realism.reaction_delay:
+            intent = dataclasses.replace(intent, reaction_delay_s=0.0)
+        if not realism.saturation:
+            intent = dataclasses.replace(intent, saturate=False)
+        if not realism.relaxation:
+            intent = dataclasses.replace(intent, relaxation_rate_per_s=0.0)
+        if not realism.sensor_noise:
+            sensors = Sensors(position_noise_std_m=0.0, force_noise_std_n=0.0)
+        return PersonParams(bio, intent, self.cooperativeness, sensors)

@@ -1,0 +1,40 @@
+"""Registered env ids: one per observation mode, action type, estimator and persona set."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+from coop_gym.model.params import Timing
+
+__all__ = ["ENV_IDS", "register_envs"]
+
+MAX_EPISODE_STEPS = Timing().max_episode_steps
+"""30 s at one action per 0.1 s: the ``TimeLimit`` of every registered id."""
+
+# id -> kwargs of SitToStandEnv
+ENV_IDS: dict[str, dict[str, Any]] = {
+    "CoopGym/SitToStand-v0": {},
+    "CoopGym/SitToStandRaw-v0": {"observation_mode": "raw"},
+    "CoopGym/SitToStandOracle-v0": {"observation_mode": "oracle"},
+    "CoopGym/SitToStandDiscrete-v0": {"action_type": "discrete"},
+    "CoopGym/SitToStandContinuous-v0": {"action_type": "continuous"},
+    "CoopGym/SitToStandMM-v0": {"estimator": "multiple_model"},
+    "CoopGym/SitToStandIMM-v0": {"estimator": "imm"},
+    "CoopGym/SitToStandHeldOut-v0": {"personas": "test"},
+}
+
+
+def register_envs() -> None:
+    """Register every id once (idempotent: re-importing registers nothing twice)."""
+    for env_id, kwargs in ENV_IDS.items():
+        if env_id in gym.registry:
+            continue
+        gym.register(
+            id=env_id,
+            entry_point="coop_gym.envs.sit_to_stand:SitToStandEnv",
+            vector_entry_point="coop_gym.envs.vector:SitToStandVectorEnv",
+            max_episode_steps=MAX_EPISODE_STEPS,
+            kwargs=dict(kwargs),
+        )

@@ -1,0 +1,1 @@
+"""Estimators of cooperativeness: the paper's thresholded Kalman filter and better ones."""

@@ -1,0 +1,82 @@
+"""The paper's thresholded judgment of cooperativeness (§IV-A).
+
+At a fixed delay after the initial onset of a cue the filter's ``xi`` estimate is
+sampled and compared with a threshold: ``xi_hat >= +t`` judges cooperative (+1),
+``xi_hat <= -t`` uncooperative (-1), anything between unresponsive (0). The paper used
+a delay of 0.75 s and ``t = 0.3``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+__all__ = ["JUDGMENT_COLUMNS", "ThresholdJudgment", "judgment_substep", "threshold_judgment"]
+
+
+@dataclass(frozen=True)
+class ThresholdJudgment:
+    """Settings of the thresholded judgment.
+
+    Attributes:
+        delay_s: Time after a cue's initial onset at which ``xi_hat`` is sampled [s].
+        threshold: Half-width of the "unresponsive" band around 0.
+    """
+
+    delay_s: float = 0.75
+    threshold: float = 0.3
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        if not (isinstance(self.delay_s, (int, float)) and math.isfinite(self.delay_s) and 0.0 <= self.delay_s <= 30.0):
+            raise ValueError(f"ThresholdJudgment.delay_s must be in [0, 30] s, got {self.delay_s!r}")
+        if not (isinstance(self.threshold, (int, float)) and math.isfinite(self.threshold) and self.threshold > 0.0):
+            raise ValueError(f"ThresholdJudgment.threshold must be > 0, got {self.threshold!r}")
+
+    def judge(self, xi_estimate: NDArray[np.float64] | float) -> NDArray[np.int64]:
+        """Threshold one or many ``xi`` estimates into {-1, 0, +1}."""
+        return threshold_judgment(np.asarray(xi_estimate, dtype=np.float64), self.threshold)
+
+
+def threshold_judgment(xi_estimate: NDArray[np.float64], threshold: float) -> NDArray[np.int64]:
+    """``+1`` where ``xi_hat >= t``, ``-1`` where ``xi_hat <= -t``, else ``0``."""
+    est = np.asarray(xi_estimate, dtype=np.float64)
+    return np.where(est >= threshold, 1, np.where(est <= -threshold, -1, 0)).astype(np.int64)
+
+
+JUDGMENT_COLUMNS = ("since_onset_s", "pending", "judgment", "cue_was_active")
+"""Layout of a judgment-tracker row (one per env)."""
+J_SINCE_ONSET, J_PENDING, J_JUDGMENT, J_CUE_ACTIVE = range(len(JUDGMENT_COLUMNS))
+
+
+@njit(cache=True)
+def judgment_substep(
+    row: NDArray[np.float64], cue_active: bool, xi_estimate: float, delay_s: float, threshold: float, dt_s: float
+) -> bool:
+    """Advance a judgment tracker by one filter step, in place; True when a judgment is made.
+
+    A cue's *initial onset* is a step with a cue active after a step with none. The
+    window then runs ``delay_s``; at its end the current estimate is thresholded.
+    """
+    if cue_active and row[J_CUE_ACTIVE] < 0.5:
+        row[J_SINCE_ONSET] = 0.0
+        row[J_PENDING] = 1.0
+    else:
+        row[J_SINCE_ONSET] += dt_s
+    row[J_CUE_ACTIVE] = 1.0 if cue_active else 0.0
+    # Compare with half a step of slack so a 0.75 s delay at 50 Hz lands on step 37/38
+    # deterministically despite floating-point sums.
+    if row[J_PENDING] > 0.5 and row[J_SINCE_ONSET] >= delay_s - 0.5 * dt_s:
+        row[J_PENDING] = 0.0
+        if xi_estimate >= threshold:
+            row[J_JUDGMENT] = 1.0
+        elif xi_estimate <= -threshold:
+            row[J_JUDGMENT] = -1.0
+        else:
+            row[J_JUDGMENT] = 0.0
+        return True
+    return False
