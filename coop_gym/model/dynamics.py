@@ -463,7 +463,7 @@ def simulate(
     measurements = np.empty((n, 2))
     _simulate_kernel(s, p, cp, cv, normals, states, measurements)
     return Trajectory(
-        time_s=(np.arange(n) + 1) * timing.dt_s,
+        time_s=np.arange(1, n + 1, dtype=np.float64) * timing.dt_s,
         true_state=states,
         measured_position_m=measurements[:, 0].copy(),
         measured_force_n=measurements[:, 1].copy(),
