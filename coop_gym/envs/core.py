@@ -301,7 +301,10 @@ class SitToStandCore:
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
 
         cls = IMMEstimator if self.estimator == "imm" else MultipleModelEstimator
-        return cls(np.tile(self._persona_nominal[0], (self.n_envs, 1)), **options)
+        try:
+            return cls(np.tile(self._persona_nominal[0], (self.n_envs, 1)), np.zeros(self.n_envs), **options)
+        except TypeError as exc:  # an unknown option name
+            raise ValueError(f"estimator_options for {self.estimator!r}: {exc}") from None
 
     # --- episodes -------------------------------------------------------------
 
@@ -358,7 +361,9 @@ class SitToStandCore:
         f[F_SINCE_ONSET] = self.timing.episode_s
         f[F_TRUE_XI] = xi
         if self.mm is not None:
-            self.mm.reset_env(i, self.nominal[i], x0)
+            # The persona (and so the nominal model) may change from episode to episode.
+            self.mm.nominal[i] = self.nominal[i]
+            self.mm.reset([i], x0)
             f[F_P_M1 : F_P_P1 + 1] = self.mm.probabilities[i]
         self.out.terminated[i] = False
         self.out.outcome[i] = Outcome.NONE

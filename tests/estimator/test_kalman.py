@@ -75,7 +75,7 @@ def test_filter_recovers_the_sign_of_xi_from_a_noise_free_nominal_response() -> 
 
 
 def test_nominal_model_validates_fields() -> None:
-    with pytest.raises(ValueError, match="NominalModel.dt_s"):
+    with pytest.raises(ValueError, match=r"NominalModel\.dt_s"):
         NominalModel(dt_s=0.0)
     with pytest.raises(ValueError, match="unknown NominalModel field"):
         NominalModel.from_dict({"k9": 1.0})
