@@ -35,16 +35,21 @@ class Persona:
         name: Identifier used in env ids and kwargs.
         description: One line for humans.
         params: The persona's typical parameters.
-        variation_relative_std: Std of the log of each varied parameter (0.15 ~ +/-15 %).
+        variation_relative_std: Std of the log of each varied parameter (0.2 ~ +/-20 %).
     """
 
     name: str
     description: str
     params: PersonParams
-    variation_relative_std: float = 0.15
+    # Calibrated with estimator/calibrate.py (people differ by about +/-20 %).
+    variation_relative_std: float = 0.2
 
     def __post_init__(self) -> None:
-        """Validate the variation level."""
+        """Validate the name, the parameters and the variation level."""
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"Persona.name must be a non-empty str, got {self.name!r}")
+        if not isinstance(self.params, PersonParams):
+            raise ValueError(f"Persona.params must be a PersonParams, got {type(self.params).__name__}")
         if not 0.0 <= self.variation_relative_std <= 1.0:
             raise ValueError(f"Persona.variation_relative_std must be in [0, 1], got {self.variation_relative_std!r}")
 
@@ -69,7 +74,7 @@ PERSONAS: dict[str, Persona] = {
                     stiffness_factor_unresponsive=1.0,
                 ),
                 # Too infirm to lean back far against a push.
-                intention=dataclasses.replace(_TYPICAL.intention, min_m=-0.05),
+                intention=dataclasses.replace(_TYPICAL.intention, min_m=-0.02),
                 cooperativeness=dataclasses.replace(
                     _TYPICAL.cooperativeness, initial_p_uncooperative=0.35, initial_p_cooperative=0.1
                 ),
