@@ -82,9 +82,11 @@ def _log_normalise(log_mu: NDArray[np.float64]) -> None:
     total = 0.0
     for j in range(N_MODES):
         total += math.exp(log_mu[j] - mx)
-    lse = mx + math.log(total)
+    # Subtract mx first: forming mx + log(total) would round at the scale of |mx| (a
+    # log-likelihood of -1e7 leaves the probabilities summing to 1 only to ~1e-9).
+    log_total = math.log(total)
     for j in range(N_MODES):
-        log_mu[j] -= lse
+        log_mu[j] = (log_mu[j] - mx) - log_total
 
 
 @njit(cache=True, inline="always")
