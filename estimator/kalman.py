@@ -105,44 +105,39 @@ def kalman_step(
     m[1] = a10 * m0 + a11 * m1 + a12 * m2 + b1 * push_force_n
     m[2] = m2 + a23 * m3
     m[3] = m3
-    # A P: rows 0..3 (A's row r has non-zeros only where set above).
-    AP = np.empty((4, 4))
+    # No temporaries: a heap allocation per call cost more than this arithmetic (the env
+    # calls it 5 times per agent step); the operations and their order are unchanged.
+    # A P, in place column by column (column j of A P needs only column j of P).
     for j in range(4):
-        AP[0, j] = P[0, j] + a01 * P[1, j]
-        AP[1, j] = a10 * P[0, j] + a11 * P[1, j] + a12 * P[2, j]
-        AP[2, j] = P[2, j] + a23 * P[3, j]
-        AP[3, j] = P[3, j]
-    # (A P) A^T + Q
+        p0, p1, p2, p3 = P[0, j], P[1, j], P[2, j], P[3, j]
+        P[0, j] = p0 + a01 * p1
+        P[1, j] = a10 * p0 + a11 * p1 + a12 * p2
+        P[2, j] = p2 + a23 * p3
+    # (A P) A^T + Q, in place row by row.
     for i in range(4):
-        r0 = AP[i, 0] + a01 * AP[i, 1]
-        r1 = a10 * AP[i, 0] + a11 * AP[i, 1] + a12 * AP[i, 2]
-        r2 = AP[i, 2] + a23 * AP[i, 3]
-        r3 = AP[i, 3]
-        P[i, 0] = r0
-        P[i, 1] = r1
-        P[i, 2] = r2
-        P[i, 3] = r3
+        q0, q1, q2, q3 = P[i, 0], P[i, 1], P[i, 2], P[i, 3]
+        P[i, 0] = q0 + a01 * q1
+        P[i, 1] = a10 * q0 + a11 * q1 + a12 * q2
+        P[i, 2] = q2 + a23 * q3
     P[0, 0] += nominal[_Q0]
     P[1, 1] += nominal[_Q1]
     P[2, 2] += nominal[_Q2]
     P[3, 3] += nominal[_Q3]
     # --- update with the scalar measurement y = H s + v, H = [1 0 0 0] ---
     innovation = measured_position_m - m[0]
-    S = P[0, 0] + nominal[_R]
-    K = np.empty(4)
-    for i in range(4):
-        K[i] = P[i, 0] / S
+    R = nominal[_R]
+    S = P[0, 0] + R
+    K = (P[0, 0] / S, P[1, 0] / S, P[2, 0] / S, P[3, 0] / S)
     for i in range(4):
         m[i] += K[i] * innovation
-    # Joseph form: P = (I - K H) P (I - K H)^T + K R K^T, as filterpy computes it.
-    IKHP = np.empty((4, 4))
+    # Joseph form: P = (I - K H) P (I - K H)^T + K R K^T, as filterpy computes it, with
+    # (I - K H) P [i, j] = P[i, j] - K[i] * P[0, j] (row 0 kept before it is overwritten).
+    row0 = (P[0, 0], P[0, 1], P[0, 2], P[0, 3])
     for i in range(4):
-        for j in range(4):
-            IKHP[i, j] = P[i, j] - K[i] * P[0, j]
-    for i in range(4):
+        ikhp_i0 = P[i, 0] - K[i] * row0[0]
         for j in range(4):
             # (I-KH)P(I-KH)^T [i, j] = IKHP[i, j] - IKHP[i, 0] * K[j]
-            P[i, j] = IKHP[i, j] - IKHP[i, 0] * K[j] + K[i] * nominal[_R] * K[j]
+            P[i, j] = (P[i, j] - K[i] * row0[j]) - ikhp_i0 * K[j] + K[i] * R * K[j]
     # Symmetrise to stop rounding from breaking P = P^T over long runs.
     for i in range(4):
         for j in range(i + 1, 4):
