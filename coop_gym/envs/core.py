@@ -4,31 +4,62 @@ This is where model and filter meet. :class:`SitToStandCore` holds ``N`` indepen
 episodes as arrays and advances them one agent action at a time:
 
     decode action -> lift outcome | (cues -> person -> sensors -> filter -> judgment) x substeps
-    -> features -> reward terms
+    -> features -> reward terms -> observation
 
 The maths is not here: the person is :mod:`coop_gym.model.dynamics`, the filter
 :mod:`estimator.kalman` / :mod:`estimator.judgment`. The single env is this core with
 ``N = 1``; the vector env is the same core with ``N`` envs, so the two cannot drift.
 
-Randomness: env ``i`` draws only from its own ``numpy.random.Generator``. Step noise is
-taken from a per-env block of standard normals refilled from that generator, with a
-fixed number consumed per step, so env ``i`` of a vector env seeded ``s`` and a single
-env seeded ``s + i`` see identical random streams.
+Speed: one compiled call steps every env, writing the reward terms, the info values
+(:data:`REPORT_COLUMNS`) and the clipped float32 observation into preallocated arrays;
+another resets any set of envs. Per-env state lives in one packed float row
+(:attr:`SitToStandCore.state`; ``m``, ``P``, ``params`` ... are views into it) so a call
+passes few arrays.
+
+Randomness: env ``i`` draws only from its own ``numpy.random.Generator``, in a fixed
+order -- at reset ``integers(n_personas)``, the person's variation normals, ``random()``
+for the initial ``xi`` and ``normal(0, 5 mm)`` for the initial lean; then
+``substeps x NORMALS_PER_SUBSTEP`` standard normals per non-lift step. So env ``i`` of a
+vector env seeded ``s`` and a single env seeded ``s + i`` see identical streams. The
+compiled kernels draw these through the generator's own C functions (NumPy's
+"extending via Numba" interface) with NumPy's algorithms (ziggurat normals, Lemire
+bounded integers), so the numbers are exactly those the ``Generator`` methods return
+(tests hold them equal), and the ``Generator`` object stays the single source of truth.
 """
 
 from __future__ import annotations
 
+import ctypes
+import dataclasses
+import hashlib
+import inspect
+import os
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core.extending import intrinsic
+
+# NumPy's ziggurat tables, as Numba ships them for its own np.random.Generator support.
+from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 from numpy.typing import NDArray
 
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,
+    P_A00,
+    P_A01,
+    P_A10,
+    P_A11,
+    P_B0,
+    P_B1,
+    P_DT,
+    P_K1,
+    P_LAMBDA1,
+    PARAM_COLUMNS,
     S_ETA,
     S_X,
     S_XDOT,
@@ -38,15 +69,18 @@ from coop_gym.model.dynamics import (
     measure,
     pack_person,
     person_substep,
+    zoh_coefficients,
 )
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
-from coop_gym.model.personas import Persona, sample_person
+from coop_gym.model.personas import _VARIED as _VARIED_PARAMETERS  # which fields sample_person varies
+from coop_gym.model.personas import Persona
 from estimator.judgment import J_JUDGMENT, J_SINCE_ONSET, JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
 from estimator.kalman import NOMINAL_COLUMNS, kalman_step, nominal_row
 from estimator.nominal import STATE_DIM, NominalModel
 
 __all__ = [
     "FEATURES",
+    "REPORT_COLUMNS",
     "REWARD_TERMS",
     "SitToStandCore",
     "StepArrays",
@@ -92,12 +126,94 @@ FEATURES: tuple[str, ...] = (
 REWARD_TERMS: tuple[str, ...] = ("success", "unsafe", "premature", "time", "force")
 """Names of the reward terms, in the column order of :attr:`StepArrays.reward_terms`."""
 
+REPORT_COLUMNS: tuple[str, ...] = (
+    *FEATURES,
+    *(f"reward_{name}" for name in REWARD_TERMS),
+    "reward",
+    "outcome",
+    "push_force_n",
+    "true_x_m",
+    "true_xdot_m_per_s",
+    "true_eta_m",
+    "true_xi",
+    "persona_index",
+)
+"""Columns of :attr:`SitToStandCore.report`: one float row per env with everything ``info`` needs.
+
+Kept in one row so an env reads it with a single ``tolist()``.
+"""
+R_TERMS = len(FEATURES)
+R_REWARD = R_TERMS + len(REWARD_TERMS)
+R_OUTCOME, R_PUSH, R_TRUE_X, R_TRUE_XDOT, R_TRUE_ETA, R_TRUE_XI, R_PERSONA = range(R_REWARD + 1, len(REPORT_COLUMNS))
+
 # Per-env bookkeeping of the cue scheduler: the utterance playing and the clock.
 E_VERBAL_VALUE, E_VERBAL_REMAINING, E_ELAPSED, E_IMPULSE = range(4)
 _N_ENV_COLUMNS = 4
 
-BLOCK_STEPS = 32
-"""Agent steps of noise drawn at once per env."""
+# Column blocks of the packed per-env state row (SitToStandCore.state).
+_ST_PERSON = 0
+_ST_CUES = _ST_PERSON + len(STATE_COLUMNS)
+_ST_MEAN = _ST_CUES + _N_ENV_COLUMNS
+_ST_COV = _ST_MEAN + STATE_DIM
+_ST_JUDGE = _ST_COV + STATE_DIM * STATE_DIM
+_ST_NOMINAL = _ST_JUDGE + len(JUDGMENT_COLUMNS)
+_ST_PARAMS = _ST_NOMINAL + len(NOMINAL_COLUMNS)
+_ST_DELAY_PUSH = _ST_PARAMS + len(PARAM_COLUMNS)
+_ST_DELAY_VERBAL = _ST_DELAY_PUSH + DELAY_LINE_LENGTH
+_ST_REPORT = _ST_DELAY_VERBAL + DELAY_LINE_LENGTH
+_ST_BLOCKS = _ST_REPORT + len(REPORT_COLUMNS)  # then 3 x substeps: measured force, verbal cue, position
+
+# Scalars the kernels read, packed in one float array (SitToStandCore.consts).
+(
+    _C_SUBSTEPS,
+    _C_VERBAL_S,
+    _C_JUDGE_DELAY_S,
+    _C_JUDGE_THRESHOLD,
+    _C_SUCCESS_LEAN_M,
+    _C_UPRIGHT_M,
+    _C_EPISODE_S,
+    _C_W_SUCCESS,
+    _C_W_UNSAFE,
+    _C_W_PREMATURE,
+    _C_TIME_TERM,
+    _C_W_FORCE,
+    _C_BUILD_OBS,
+    _C_VARY,
+    _C_XDOT_VAR,
+    _C_ETA_VAR,
+    _C_XI_VAR,
+    _C_XI_STD,
+    _C_N_OBS,
+    _C_N_VARIED,
+    _C_OBS_AT,
+    _C_VARIED_AT,
+    _C_TEMPLATE_AT,
+    _N_CONSTS,
+) = range(24)
+# After the scalars come the observation spec (feature index, low, high; n_obs each), the
+# columns sample_person varies, and the person's initial state row.
+
+# Columns of the command row: push [N], verbal request {-1, 0, 1}, lift {0, 1}, active {0, 1}
+# (an inactive env is not stepped).
+CMD_PUSH, CMD_VERBAL, CMD_LIFT, CMD_ACTIVE = range(4)
+CMD_COLUMNS = 4
+
+# Columns of the scratch rows of a reset: the draws, then the variation normals (turned into factors).
+_D_PERSONA, _D_UNIFORM, _D_LEAN, _D_NORMALS = range(4)
+
+# Columns of a persona-table row: the packed person, the filter's nominal row, the initial-xi cuts.
+_PT_PARAMS = 0
+_PT_NOMINAL = _PT_PARAMS + len(PARAM_COLUMNS)
+_PT_XI_CUTS = _PT_NOMINAL + len(NOMINAL_COLUMNS)
+_PT_WIDTH = _PT_XI_CUTS + 2
+
+# Columns of an env's bit-generator row: addresses of its C functions and of its state.
+_G_NEXT_UINT64, _G_NEXT_UINT32, _G_NEXT_DOUBLE, _G_STATE = range(4)
+
+INITIAL_LEAN_STD_M = 0.005
+"""People sit a little differently: std of the initial forward lean [m]."""
+
+_NO_OVERRIDE = -99  # "draw it" for the persona / initial-xi overrides of a reset
 
 
 def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel | None = None) -> NominalModel:
@@ -122,7 +238,7 @@ def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel |
 
 @dataclass
 class StepArrays:
-    """What one core step produced, for ``N`` envs (arrays are reused between steps).
+    """What one core step produced, for ``N`` envs (views into the core's arrays, reused between steps).
 
     Attributes:
         features: (N, len(FEATURES)) float64, see :data:`FEATURES`.
@@ -143,93 +259,354 @@ class StepArrays:
     verbal_cue: NDArray[np.float64]
 
 
+# --- NumPy's random streams inside compiled code ---------------------------------
+# A bit generator exposes C functions taking its state pointer (``BitGenerator.ctypes``);
+# calling them advances the very state the Python ``Generator`` uses.
+
+
+def _call_uint64_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
+    sig = types.uint64(types.uint64, types.uint64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        function_type = ir.FunctionType(ir.IntType(64), (ir.IntType(8).as_pointer(),))
+        function = builder.inttoptr(args[0], function_type.as_pointer())
+        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
+
+    return sig, codegen
+
+
+_call_uint64: Any = intrinsic(_call_uint64_typing)
+
+
+def _call_uint32_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
+    sig = types.uint32(types.uint64, types.uint64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        function_type = ir.FunctionType(ir.IntType(32), (ir.IntType(8).as_pointer(),))
+        function = builder.inttoptr(args[0], function_type.as_pointer())
+        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
+
+    return sig, codegen
+
+
+_call_uint32: Any = intrinsic(_call_uint32_typing)
+
+
+def _call_double_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
+    sig = types.float64(types.uint64, types.uint64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        function_type = ir.FunctionType(ir.DoubleType(), (ir.IntType(8).as_pointer(),))
+        function = builder.inttoptr(args[0], function_type.as_pointer())
+        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
+
+    return sig, codegen
+
+
+_call_double: Any = intrinsic(_call_double_typing)
+
+
+_U1 = np.uint64(1)
+_U8 = np.uint64(8)
+_U32 = np.uint64(32)
+_BYTE = np.uint64(0xFF)
+_MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
+_LOW32 = np.uint64(0xFFFFFFFF)
+
+
+@njit(cache=True)
+def _random(g: NDArray[np.uint64]) -> float:
+    """``Generator.random()``: a double in [0, 1) from the bit generator ``g``."""
+    return _call_double(g[_G_NEXT_DOUBLE], g[_G_STATE])
+
+
+@njit(cache=True)
+def _standard_normal(g: NDArray[np.uint64]) -> float:
+    """``Generator.standard_normal()``: NumPy's 256-layer ziggurat, step for step."""
+    while True:
+        r = _call_uint64(g[_G_NEXT_UINT64], g[_G_STATE])
+        idx = r & _BYTE
+        r >>= _U8
+        sign = r & _U1
+        rabs = (r >> _U1) & _MANTISSA
+        x = rabs * wi_double[idx]
+        if sign:
+            x = -x
+        if rabs < ki_double[idx]:
+            return x
+        if idx == 0:
+            # The tail beyond the base layer.
+            while True:
+                xx = -ziggurat_nor_inv_r * np.log1p(-_random(g))
+                yy = -np.log1p(-_random(g))
+                if yy + yy > xx * xx:
+                    if (rabs >> _U8) & _U1:
+                        return -(ziggurat_nor_r + xx)
+                    return ziggurat_nor_r + xx
+        elif (fi_double[idx - 1] - fi_double[idx]) * _random(g) + fi_double[idx] < np.exp(-0.5 * x * x):
+            return x
+
+
+@njit(cache=True)
+def _integers(g: NDArray[np.uint64], high: int) -> int:
+    """``Generator.integers(high)`` for ``1 <= high < 2**32``: Lemire's bounded draw on 32 bits."""
+    span = np.uint64(high - 1)
+    if span == 0:
+        return 0
+    bound = span + _U1
+    m = np.uint64(_call_uint32(g[_G_NEXT_UINT32], g[_G_STATE])) * bound
+    leftover = m & _LOW32
+    if leftover < bound:
+        threshold = (_LOW32 - span) % bound
+        while leftover < threshold:
+            m = np.uint64(_call_uint32(g[_G_NEXT_UINT32], g[_G_STATE])) * bound
+            leftover = m & _LOW32
+    return int(m >> _U32)
+
+
+def bit_generator_row(rng: np.random.Generator) -> NDArray[np.uint64]:
+    """The addresses the kernels need to draw from ``rng`` (see :data:`_G_STATE` ...)."""
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"an env's random source must be a numpy.random.Generator, got {type(rng).__name__}")
+    c = rng.bit_generator.ctypes
+    return np.array(
+        [
+            ctypes.cast(c.next_uint64, ctypes.c_void_p).value,
+            ctypes.cast(c.next_uint32, ctypes.c_void_p).value,
+            ctypes.cast(c.next_double, ctypes.c_void_p).value,
+            c.state_address,
+        ],
+        dtype=np.uint64,
+    )
+
+
+# --- kernels --------------------------------------------------------------------
+# Few, packed arguments: dispatching a compiled call costs ~0.1 us per argument, as much
+# as a whole env step's arithmetic.
+
+
+@njit(cache=True)
+def _observe_row(row: NDArray[np.float64], obs_row: NDArray[np.float32], consts: NDArray[np.float64]) -> None:
+    # Select the features and clip in float64, then round: as np.clip(f, low, high).astype(float32).
+    n_obs = int(consts[_C_N_OBS])
+    at = int(consts[_C_OBS_AT])
+    for k in range(n_obs):
+        value = row[_ST_REPORT + int(consts[at + k])]
+        obs_row[k] = min(max(value, consts[at + n_obs + k]), consts[at + 2 * n_obs + k])
+
+
+@njit(cache=True)
+def _observe(
+    indices: NDArray[np.int64], state: NDArray[np.float64], obs: NDArray[np.float32], consts: NDArray[np.float64]
+) -> None:
+    for i in indices:
+        _observe_row(state[i], obs[i], consts)
+
+
+@njit(cache=True)
+def _draw_reset(
+    indices: NDArray[np.int64],
+    generators: NDArray[np.uint64],
+    n_personas: int,
+    persona_override: int,
+    draws: NDArray[np.float64],
+) -> int:
+    # The random draws of a reset in the documented order (draws row r is env indices[r]).
+    # Returns -1, or the index of an env without a generator (nothing is drawn then).
+    for r in range(indices.shape[0]):
+        if generators[indices[r], _G_STATE] == 0:
+            return indices[r]
+    for r in range(indices.shape[0]):
+        g = generators[indices[r]]
+        drawn = _integers(g, n_personas)
+        draws[r, _D_PERSONA] = drawn if persona_override == _NO_OVERRIDE else persona_override
+        for j in range(_D_NORMALS, draws.shape[1]):
+            draws[r, j] = _standard_normal(g)
+        draws[r, _D_UNIFORM] = _random(g)
+        draws[r, _D_LEAN] = 0.0 + INITIAL_LEAN_STD_M * _standard_normal(g)
+    return -1
+
+
+@njit(cache=True)
+def _reset_rows(
+    indices: NDArray[np.int64],
+    xi_override: int,
+    draws: NDArray[np.float64],
+    persona_table: NDArray[np.float64],
+    state: NDArray[np.float64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> None:
+    # Start episodes from the draws (their normals columns already turned into variation factors).
+    episode_s = consts[_C_EPISODE_S]
+    n_varied = int(consts[_C_N_VARIED])
+    varied_at = int(consts[_C_VARIED_AT])
+    template_at = int(consts[_C_TEMPLATE_AT])
+    for r in range(indices.shape[0]):
+        i = indices[r]
+        k = int(draws[r, _D_PERSONA])
+        persona = persona_table[k]
+        row = state[i]
+        row[:] = 0.0
+        # The person: the persona's packed row with the varied gains scaled (= sample_person + pack_person).
+        p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
+        p[:] = persona[_PT_PARAMS : _PT_PARAMS + len(PARAM_COLUMNS)]
+        if consts[_C_VARY] > 0.5:
+            for j in range(n_varied):
+                column = int(consts[varied_at + j])
+                p[column] = persona[_PT_PARAMS + column] * draws[r, _D_NORMALS + j]
+        a00, a01, a10, a11, b0, b1 = zoh_coefficients(p[P_LAMBDA1], p[P_K1], p[P_DT])
+        p[P_A00] = a00
+        p[P_A01] = a01
+        p[P_A10] = a10
+        p[P_A11] = a11
+        p[P_B0] = b0
+        p[P_B1] = b1
+        u = draws[r, _D_UNIFORM]
+        xi = -1.0 if u < persona[_PT_XI_CUTS] else (1.0 if u > persona[_PT_XI_CUTS + 1] else 0.0)
+        if xi_override != _NO_OVERRIDE:
+            xi = float(xi_override)
+        x0 = draws[r, _D_LEAN]
+        # initial_state_row(xi, x0): at rest at x0, intending to stay.
+        s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+        s[:] = consts[template_at : template_at + len(STATE_COLUMNS)]
+        s[S_X] = x0
+        s[S_ETA] = x0
+        s[S_XI] = xi
+        # The filter, centred on the first reading with the nominal model's prior.
+        nominal_width = len(NOMINAL_COLUMNS)
+        row[_ST_NOMINAL : _ST_NOMINAL + nominal_width] = persona[_PT_NOMINAL : _PT_NOMINAL + nominal_width]
+        row[_ST_MEAN] = x0
+        row[_ST_MEAN + 2] = x0
+        row[_ST_COV] = persona[_PT_NOMINAL + nominal_width - 1]  # P[0, 0] = R
+        row[_ST_COV + STATE_DIM + 1] = consts[_C_XDOT_VAR]
+        row[_ST_COV + 2 * (STATE_DIM + 1)] = consts[_C_ETA_VAR]
+        row[_ST_COV + 3 * (STATE_DIM + 1)] = consts[_C_XI_VAR]
+        row[_ST_JUDGE + J_SINCE_ONSET] = episode_s
+        rep = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
+        rep[F_POS] = x0
+        rep[F_X_HAT] = x0
+        rep[F_ETA_HAT] = x0
+        rep[F_XI_STD] = consts[_C_XI_STD]
+        rep[F_SINCE_ONSET] = episode_s
+        rep[F_TRUE_XI] = xi
+        rep[R_TRUE_X] = x0
+        rep[R_TRUE_ETA] = x0
+        rep[R_TRUE_XI] = xi
+        rep[R_PERSONA] = k
+        if consts[_C_BUILD_OBS] > 0.5:
+            _observe_row(row, obs[i], consts)
+
+
 @njit(cache=True)
 def _advance(
-    lift: NDArray[np.bool_],
-    push_force_n: NDArray[np.float64],
-    verbal_request: NDArray[np.float64],
-    person: NDArray[np.float64],
-    params: NDArray[np.float64],
-    delay_push: NDArray[np.float64],
-    delay_verbal: NDArray[np.float64],
-    normals: NDArray[np.float64],
-    cursor: NDArray[np.int64],
-    env: NDArray[np.float64],
-    m: NDArray[np.float64],
-    P: NDArray[np.float64],
-    nominal: NDArray[np.float64],
-    judge: NDArray[np.float64],
-    features: NDArray[np.float64],
-    outcome: NDArray[np.int64],
-    block_cp: NDArray[np.float64],
-    block_cv: NDArray[np.float64],
-    block_y: NDArray[np.float64],
-    substeps: int,
-    verbal_duration_s: float,
-    judgment_delay_s: float,
-    judgment_threshold: float,
-    success_lean_m: float,
-    upright_m: float,
-    episode_s: float,
-) -> None:
-    for i in range(lift.shape[0]):
-        s = person[i]
-        p = params[i]
-        dt = p[0]
-        env[i, E_IMPULSE] = 0.0
-        outcome[i] = 0
-        if lift[i]:
-            # The lift is judged on the true state at the moment it starts (§II).
-            if s[S_XI] > 0.5 and s[S_X] >= success_lean_m:
-                outcome[i] = 1  # Outcome.SUCCESS
-            elif s[S_XI] < -0.5 or s[S_X] < upright_m:
-                outcome[i] = 2  # Outcome.UNSAFE
-            else:
-                outcome[i] = 3  # Outcome.PREMATURE
-            for k in range(substeps):
-                block_cp[i, k] = 0.0
-                block_cv[i, k] = 0.0
-                block_y[i, k] = features[i, 0]
+    cmd: NDArray[np.float64],
+    state: NDArray[np.float64],
+    generators: NDArray[np.uint64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> int:
+    # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
+    n_envs = cmd.shape[0]
+    for i in range(n_envs):
+        if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, _G_STATE] == 0:
+            return i
+    substeps = int(consts[_C_SUBSTEPS])
+    verbal_duration_s = consts[_C_VERBAL_S]
+    episode_s = consts[_C_EPISODE_S]
+    z = np.empty(NORMALS_PER_SUBSTEP)
+    for i in range(n_envs):
+        if cmd[i, CMD_ACTIVE] < 0.5:
             continue
-        # A verbal cue is an utterance of fixed length; one can't talk over oneself.
-        if env[i, E_VERBAL_REMAINING] <= 0.0 and verbal_request[i] != 0.0:
-            env[i, E_VERBAL_VALUE] = verbal_request[i]
-            env[i, E_VERBAL_REMAINING] = verbal_duration_s
-        cp = push_force_n[i]
-        c = cursor[i]
-        for k in range(substeps):
-            cv = env[i, E_VERBAL_VALUE] if env[i, E_VERBAL_REMAINING] > 1e-9 else 0.0
-            z = normals[i, c : c + NORMALS_PER_SUBSTEP]
-            c += NORMALS_PER_SUBSTEP
-            person_substep(s, p, delay_push[i], delay_verbal[i], cp, cv, z)
-            pos, force = measure(s, p, cp, z[3], z[4])
-            kalman_step(m[i], P[i], nominal[i], force, cv, pos)
-            judgment_substep(judge[i], cp > 0.0 or cv != 0.0, m[i, 3], judgment_delay_s, judgment_threshold, dt)
-            block_cp[i, k] = force
-            block_cv[i, k] = cv
-            block_y[i, k] = pos
-            env[i, E_VERBAL_REMAINING] -= dt
-            env[i, E_IMPULSE] += cp * dt
-            features[i, 0] = pos
-            features[i, 1] = force
-        cursor[i] = c
-        if env[i, E_VERBAL_REMAINING] <= 1e-9:
-            env[i, E_VERBAL_REMAINING] = 0.0
-            env[i, E_VERBAL_VALUE] = 0.0
-        env[i, E_ELAPSED] += substeps * dt
-        f = features[i]
-        f[2] = env[i, E_VERBAL_VALUE]
-        f[3] = min(judge[i, J_SINCE_ONSET], episode_s)
-        f[4] = m[i, 0]
-        f[5] = m[i, 1]
-        f[6] = m[i, 2]
-        f[7] = m[i, 3]
-        f[8] = np.sqrt(max(P[i, 3, 3], 0.0))
-        f[9] = judge[i, J_JUDGMENT]
-        f[10] = env[i, E_ELAPSED]
-        f[14] = s[S_XI]
-        if env[i, E_ELAPSED] >= episode_s - 1e-9:
-            outcome[i] = 4  # Outcome.TIMEOUT (TimeLimit truncates on this same step)
+        row = state[i]
+        s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+        env = row[_ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
+        m = row[_ST_MEAN : _ST_MEAN + STATE_DIM]
+        P = row[_ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
+        judge = row[_ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
+        nominal = row[_ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
+        p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
+        delay_push = row[_ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
+        delay_verbal = row[_ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
+        f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
+        block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
+        g = generators[i]
+        dt = p[P_DT]
+        cp = cmd[i, CMD_PUSH]
+        lift = cmd[i, CMD_LIFT] > 0.5
+        env[E_IMPULSE] = 0.0
+        result = 0
+        if lift:
+            # The lift is judged on the true state at the moment it starts (§II).
+            if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
+                result = 1  # Outcome.SUCCESS
+            elif s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
+                result = 2  # Outcome.UNSAFE
+            else:
+                result = 3  # Outcome.PREMATURE
+            for k in range(substeps):
+                block[k] = 0.0
+                block[substeps + k] = 0.0
+                block[2 * substeps + k] = f[F_POS]
+        else:
+            # A verbal cue is an utterance of fixed length; one can't talk over oneself.
+            if env[E_VERBAL_REMAINING] <= 0.0 and cmd[i, CMD_VERBAL] != 0.0:
+                env[E_VERBAL_VALUE] = cmd[i, CMD_VERBAL]
+                env[E_VERBAL_REMAINING] = verbal_duration_s
+            for k in range(substeps):
+                cv = env[E_VERBAL_VALUE] if env[E_VERBAL_REMAINING] > 1e-9 else 0.0
+                for j in range(NORMALS_PER_SUBSTEP):
+                    z[j] = _standard_normal(g)
+                person_substep(s, p, delay_push, delay_verbal, cp, cv, z)
+                pos, force = measure(s, p, cp, z[3], z[4])
+                kalman_step(m, P, nominal, force, cv, pos)
+                judgment_substep(
+                    judge, cp > 0.0 or cv != 0.0, m[3], consts[_C_JUDGE_DELAY_S], consts[_C_JUDGE_THRESHOLD], dt
+                )
+                block[k] = force
+                block[substeps + k] = cv
+                block[2 * substeps + k] = pos
+                env[E_VERBAL_REMAINING] -= dt
+                env[E_IMPULSE] += cp * dt
+                f[F_POS] = pos
+                f[F_FORCE] = force
+            if env[E_VERBAL_REMAINING] <= 1e-9:
+                env[E_VERBAL_REMAINING] = 0.0
+                env[E_VERBAL_VALUE] = 0.0
+            env[E_ELAPSED] += substeps * dt
+            f[F_VERBAL] = env[E_VERBAL_VALUE]
+            f[F_SINCE_ONSET] = min(judge[J_SINCE_ONSET], episode_s)
+            f[F_X_HAT] = m[0]
+            f[F_XDOT_HAT] = m[1]
+            f[F_ETA_HAT] = m[2]
+            f[F_XI_HAT] = m[3]
+            f[F_XI_STD] = np.sqrt(max(P[3, 3], 0.0))
+            f[F_JUDGMENT] = judge[J_JUDGMENT]
+            f[F_ELAPSED] = env[E_ELAPSED]
+            f[F_TRUE_XI] = s[S_XI]
+            if env[E_ELAPSED] >= episode_s - 1e-9:
+                result = 4  # Outcome.TIMEOUT (truncation happens on this same step)
+        # Named reward terms (RewardWeights), then their sum.
+        t_success = consts[_C_W_SUCCESS] if result == 1 else 0.0
+        t_unsafe = -consts[_C_W_UNSAFE] if result == 2 else 0.0
+        t_premature = -consts[_C_W_PREMATURE] if result == 3 else 0.0
+        t_time = 0.0 if lift else consts[_C_TIME_TERM]
+        t_force = -consts[_C_W_FORCE] * env[E_IMPULSE]
+        f[R_TERMS] = t_success
+        f[R_TERMS + 1] = t_unsafe
+        f[R_TERMS + 2] = t_premature
+        f[R_TERMS + 3] = t_time
+        f[R_TERMS + 4] = t_force
+        f[R_REWARD] = t_success + t_unsafe + t_premature + t_time + t_force
+        f[R_OUTCOME] = result
+        f[R_PUSH] = 0.0 if lift else cp
+        f[R_TRUE_X] = s[S_X]
+        f[R_TRUE_XDOT] = s[S_XDOT]
+        f[R_TRUE_ETA] = s[S_ETA]
+        f[R_TRUE_XI] = s[S_XI]
+        if consts[_C_BUILD_OBS] > 0.5:
+            _observe_row(row, obs[i], consts)
+    return -1
 
 
 class SitToStandCore:
@@ -240,6 +617,18 @@ class SitToStandCore:
         personas: Personas to draw each episode's person from (uniformly).
         timing, cues, realism, lift, reward, judgment: Settings (see their classes).
         estimator: ``"kalman"``, ``"multiple_model"`` or ``"imm"``.
+        multiple_model_options: Keyword arguments of the multiple-model estimator.
+        observation_index: Indices into :data:`FEATURES` that make the observation
+            (default: all of them, unclipped).
+        observation_low, observation_high: Bounds the observation is clipped into.
+
+    Attributes:
+        state: (N, W) packed per-env state; ``person``, ``m``, ``P``, ``judge``, ``nominal``,
+            ``params``, ``delay_push``, ``delay_verbal`` and ``report`` are views into it.
+        report: (N, len(REPORT_COLUMNS)) what the last step or reset of each env produced.
+        obs: (N, len(observation_index)) float32 observation of the last step or reset.
+        cmd: (N, 4) command rows (:data:`CMD_PUSH` ...) for :meth:`step_commands`.
+        generators: (N, 4) uint64 addresses of each env's bit generator (0: none yet).
     """
 
     def __init__(
@@ -254,9 +643,18 @@ class SitToStandCore:
         judgment: ThresholdJudgment,
         estimator: str = "kalman",
         multiple_model_options: dict[str, Any] | None = None,
+        observation_index: tuple[int, ...] | None = None,
+        observation_low: NDArray[np.float64] | None = None,
+        observation_high: NDArray[np.float64] | None = None,
     ) -> None:
         """Allocate the arrays; every env must be reset before it is stepped."""
-        self.n_envs = n_envs
+        # Kept to rebuild the arrays and their views when unpickled (see __setstate__).
+        self._init_args = (n_envs, personas, timing, cues, realism, lift, reward, judgment, estimator,
+                           multiple_model_options, observation_index, observation_low, observation_high)  # fmt: skip
+        if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
+            raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
+        n = int(n_envs)
+        self.n_envs = n
         self.personas = personas
         self.timing = timing
         self.cues = cues
@@ -267,35 +665,94 @@ class SitToStandCore:
         self.estimator = estimator
         # The filter's nominal model depends only on the persona: pack each once.
         self._persona_nominal = [nominal_row(nominal_model_for(p.params, timing)) for p in personas]
-        self._nominal_prior = NominalModel()
-        n = n_envs
-        self.person = np.zeros((n, len(STATE_COLUMNS)))
-        self.params = np.zeros((n, len(pack_person(PersonParams(), timing))))
-        self.delay_push = np.zeros((n, DELAY_LINE_LENGTH))
-        self.delay_verbal = np.zeros((n, DELAY_LINE_LENGTH))
-        self.per_step = NORMALS_PER_SUBSTEP * timing.substeps
-        self.normals = np.zeros((n, BLOCK_STEPS * self.per_step))
-        self.cursor = np.full(n, self.normals.shape[1], dtype=np.int64)
-        self.env = np.zeros((n, _N_ENV_COLUMNS))
-        self.m = np.zeros((n, STATE_DIM))
-        self.P = np.zeros((n, STATE_DIM, STATE_DIM))
-        self.nominal = np.zeros((n, len(NOMINAL_COLUMNS)))
-        self.judge = np.zeros((n, len(JUDGMENT_COLUMNS)))
-        self.persona_index = np.zeros(n, dtype=np.int64)
+        self._nominal_prior = prior = NominalModel()
+        # Each persona packed once; a reset scales the varied gains (as sample_person does) and
+        # recomputes the zero-order hold, instead of building and validating dataclasses.
+        table = np.zeros((len(personas), _PT_WIDTH))
+        for k, persona in enumerate(personas):
+            coop = persona.params.cooperativeness
+            table[k, _PT_PARAMS:_PT_NOMINAL] = pack_person(persona.params.with_realism(realism), timing)
+            table[k, _PT_NOMINAL:_PT_XI_CUTS] = self._persona_nominal[k]
+            table[k, _PT_XI_CUTS] = coop.initial_p_uncooperative
+            table[k, _PT_XI_CUTS + 1] = 1.0 - coop.initial_p_cooperative
+        self.persona_table = table
+        varied = [PARAM_COLUMNS.index(name) for names in _VARIED_PARAMETERS.values() for name in names]
+        stds = {p.variation_relative_std for p in personas}
+        # One shared std (the usual case) broadcasts from a 1-element array (cheaper for a ufunc
+        # than a Python float); else each reset env takes its persona's.
+        self._variation_std = np.array([stds.pop()]) if len(stds) == 1 else None
+        self._persona_variation_std = np.array([p.variation_relative_std for p in personas])
+
+        index = tuple(range(len(FEATURES))) if observation_index is None else tuple(observation_index)
+        n_obs = len(index)
+        template = initial_state_row(0, 0.0)
+        consts = np.zeros(_N_CONSTS + 3 * n_obs + len(varied) + len(template))
+        consts[_C_SUBSTEPS] = timing.substeps
+        consts[_C_VERBAL_S] = cues.verbal_duration_s
+        consts[_C_JUDGE_DELAY_S] = judgment.delay_s
+        consts[_C_JUDGE_THRESHOLD] = judgment.threshold
+        consts[_C_SUCCESS_LEAN_M] = lift.success_lean_m
+        consts[_C_UPRIGHT_M] = lift.upright_m
+        consts[_C_EPISODE_S] = timing.episode_s
+        consts[_C_W_SUCCESS] = reward.success
+        consts[_C_W_UNSAFE] = reward.unsafe
+        consts[_C_W_PREMATURE] = reward.premature
+        consts[_C_TIME_TERM] = -reward.time_per_s * timing.action_period_s
+        consts[_C_W_FORCE] = reward.force_per_n_s
+        consts[_C_VARY] = 1.0 if realism.person_variation else 0.0
+        consts[_C_XDOT_VAR] = prior.initial_velocity_std_m_per_s**2
+        consts[_C_ETA_VAR] = prior.initial_intention_std_m**2
+        consts[_C_XI_VAR] = prior.initial_cooperativeness_std**2
+        consts[_C_XI_STD] = prior.initial_cooperativeness_std
+        consts[_C_N_OBS] = n_obs
+        consts[_C_N_VARIED] = len(varied)
+        at = _N_CONSTS
+        consts[_C_OBS_AT] = at
+        consts[at : at + n_obs] = index
+        consts[at + n_obs : at + 2 * n_obs] = -np.inf if observation_low is None else observation_low
+        consts[at + 2 * n_obs : at + 3 * n_obs] = np.inf if observation_high is None else observation_high
+        consts[_C_VARIED_AT] = at = at + 3 * n_obs
+        consts[at : at + len(varied)] = varied
+        consts[_C_TEMPLATE_AT] = at = at + len(varied)
+        consts[at : at + len(template)] = template
+        self.consts = consts
+
+        substeps = timing.substeps
+        self.state = st = np.zeros((n, _ST_BLOCKS + 3 * substeps))
+        self.person = st[:, _ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+        self.env = st[:, _ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
+        self.m = st[:, _ST_MEAN : _ST_MEAN + STATE_DIM]
+        self.P = st[:, _ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape(n, STATE_DIM, STATE_DIM)
+        self.judge = st[:, _ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
+        self.nominal = st[:, _ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
+        self.params = st[:, _ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
+        self.delay_push = st[:, _ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
+        self.delay_verbal = st[:, _ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
+        self.report = st[:, _ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
+        self._block_cp = st[:, _ST_BLOCKS : _ST_BLOCKS + substeps]
+        self._block_cv = st[:, _ST_BLOCKS + substeps : _ST_BLOCKS + 2 * substeps]
+        self._block_y = st[:, _ST_BLOCKS + 2 * substeps : _ST_BLOCKS + 3 * substeps]
         self.rngs: list[np.random.Generator | None] = [None] * n
-        self._block_cp = np.zeros((n, timing.substeps))
-        self._block_cv = np.zeros((n, timing.substeps))
-        self._block_y = np.zeros((n, timing.substeps))
-        self.out = StepArrays(
-            features=np.zeros((n, len(FEATURES))),
-            reward_terms=np.zeros((n, len(REWARD_TERMS))),
-            reward=np.zeros(n),
-            outcome=np.zeros(n, dtype=np.int64),
-            terminated=np.zeros(n, dtype=bool),
-            push_force_n=np.zeros(n),
-            verbal_cue=np.zeros(n),
+        self.generators = np.zeros((n, 4), dtype=np.uint64)
+        self.cmd = np.zeros((n, CMD_COLUMNS))
+        self.cmd[:, CMD_ACTIVE] = 1.0
+        self.obs = np.zeros((n, n_obs), dtype=np.float32)
+        self._outcome = np.zeros(n, dtype=np.int64)
+        self._terminated = np.zeros(n, dtype=bool)
+        self._out = StepArrays(
+            features=self.report[:, : len(FEATURES)],
+            reward_terms=self.report[:, R_TERMS:R_REWARD],
+            reward=self.report[:, R_REWARD],
+            outcome=self._outcome,
+            terminated=self._terminated,
+            push_force_n=self.report[:, R_PUSH],
+            verbal_cue=self.report[:, F_VERBAL],
         )
+        self._all = np.arange(n, dtype=np.int64)
+        self._draws = np.zeros((n, _D_NORMALS + len(varied)))
         self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
+        # With a multiple-model estimator the observation waits for its probabilities.
+        consts[_C_BUILD_OBS] = 1.0 if self.mm is None else 0.0
 
     def _make_multiple_model(self, options: dict[str, Any]) -> Any:
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
@@ -306,7 +763,25 @@ class SitToStandCore:
         except TypeError as exc:  # an unknown option name
             raise ValueError(f"estimator_options for {self.estimator!r}: {exc}") from None
 
+    @property
+    def out(self) -> StepArrays:
+        """What the last step or reset produced, as :class:`StepArrays` (views; outcome and terminated refreshed)."""
+        np.copyto(self._outcome, self.report[:, R_OUTCOME], casting="unsafe")
+        np.copyto(self._terminated, (self._outcome >= Outcome.SUCCESS) & (self._outcome <= Outcome.PREMATURE))
+        return self._out
+
+    @property
+    def persona_index(self) -> NDArray[np.int64]:
+        """(N,) index into ``personas`` of each env's current persona."""
+        return self.report[:, R_PERSONA].astype(np.int64)
+
     # --- episodes -------------------------------------------------------------
+
+    def set_rng(self, i: int, rng: np.random.Generator) -> None:
+        """Make ``rng`` env ``i``'s source of randomness (kept for its following episodes)."""
+        if self.rngs[i] is not rng:
+            self.generators[i] = bit_generator_row(rng)
+            self.rngs[i] = rng
 
     def reset_env(
         self, i: int, rng: np.random.Generator, persona_index: int | None = None, initial_xi: int | None = None
@@ -319,63 +794,48 @@ class SitToStandCore:
             persona_index: Use this persona (index into ``personas``) instead of drawing one.
             initial_xi: Start at this cooperativeness instead of drawing it.
         """
-        self.rngs[i] = rng
-        # The same draws happen whatever is fixed, so fixing one thing shifts nothing else.
-        drawn = int(rng.integers(len(self.personas)))
-        k = drawn if persona_index is None else persona_index
-        persona = self.personas[k]
-        person = sample_person(persona, rng, vary=self.realism.person_variation).with_realism(self.realism)
-        coop = person.cooperativeness
-        u = rng.random()
-        xi = -1 if u < coop.initial_p_uncooperative else (1 if u > 1.0 - coop.initial_p_cooperative else 0)
-        if initial_xi is not None:
-            xi = initial_xi
-        # People sit a little differently: a few millimetres of initial lean.
-        x0 = float(rng.normal(0.0, 0.005))
-        self.persona_index[i] = k
-        self.params[i] = pack_person(person, self.timing)
-        self.person[i] = initial_state_row(xi, x0)
-        self.delay_push[i] = 0.0
-        self.delay_verbal[i] = 0.0
-        self.cursor[i] = self.normals.shape[1]  # discard buffered noise: a new stream follows
-        self.env[i] = 0.0
-        self.nominal[i] = self._persona_nominal[k]
-        prior = self._nominal_prior
-        self.m[i] = [x0, 0.0, x0, 0.0]
-        self.P[i] = np.diag(
-            [
-                self.nominal[i, -1],
-                prior.initial_velocity_std_m_per_s**2,
-                prior.initial_intention_std_m**2,
-                prior.initial_cooperativeness_std**2,
-            ]
+        self.set_rng(i, rng)
+        self.reset_envs(self._all[i : i + 1], persona_index, initial_xi)
+
+    def reset_envs(
+        self, indices: NDArray[np.int64], persona_index: int | None = None, initial_xi: int | None = None
+    ) -> None:
+        """Start new episodes in envs ``indices`` (int64 array), each drawing from its own generator.
+
+        The same draws happen whatever is fixed, so fixing the persona or ``initial_xi``
+        shifts nothing else in the random stream.
+        """
+        count = indices.shape[0]
+        if count == 0:
+            return
+        draws = self._draws[:count]
+        override = _NO_OVERRIDE if persona_index is None else persona_index
+        failed = _draw_reset(indices, self.generators, len(self.personas), override, draws)
+        if failed >= 0:
+            raise RuntimeError(f"env {failed} has no random generator; call reset_env(i, rng) or set_rng first")
+        # The variation factors exp(std * z) with NumPy's exp, not a compiled one: NumPy's SIMD
+        # exp can differ in the last bit, and the person must equal sample_person's exactly.
+        factors = draws[:, _D_NORMALS:]
+        std = self._variation_std
+        if std is None:
+            std = self._persona_variation_std[draws[:, _D_PERSONA].astype(np.int64)][:, None]
+        np.multiply(factors, std, out=factors)
+        np.exp(factors, out=factors)
+        _reset_rows(
+            indices,
+            _NO_OVERRIDE if initial_xi is None else initial_xi,
+            draws,
+            self.persona_table,
+            self.state,
+            self.obs,
+            self.consts,
         )
-        self.judge[i] = 0.0
-        self.judge[i, J_SINCE_ONSET] = self.timing.episode_s
-        f = self.out.features[i]
-        f[:] = 0.0
-        f[F_POS] = x0
-        f[F_X_HAT] = x0
-        f[F_ETA_HAT] = x0
-        f[F_XI_STD] = prior.initial_cooperativeness_std
-        f[F_SINCE_ONSET] = self.timing.episode_s
-        f[F_TRUE_XI] = xi
         if self.mm is not None:
             # The persona (and so the nominal model) may change from episode to episode.
-            self.mm.nominal[i] = self.nominal[i]
-            self.mm.reset([i], x0)
-            f[F_P_M1 : F_P_P1 + 1] = self.mm.probabilities[i]
-        self.out.terminated[i] = False
-        self.out.outcome[i] = Outcome.NONE
-
-    def _refill(self) -> None:
-        need = self.cursor + self.per_step > self.normals.shape[1]
-        for i in np.flatnonzero(need):
-            rng = self.rngs[i]
-            if rng is None:
-                raise RuntimeError(f"env {i} was stepped before it was reset")
-            self.normals[i] = rng.standard_normal(self.normals.shape[1])
-            self.cursor[i] = 0
+            self.mm.nominal[indices] = self.nominal[indices]
+            self.mm.reset(indices, draws[:, _D_LEAN])
+            self.report[indices, F_P_M1 : F_P_P1 + 1] = self.mm.probabilities[indices]
+            _observe(indices, self.state, self.obs, self.consts)
 
     # --- stepping -------------------------------------------------------------
 
@@ -383,51 +843,52 @@ class SitToStandCore:
         self, push_force_n: NDArray[np.float64], verbal_cue: NDArray[np.float64], lift: NDArray[np.bool_]
     ) -> StepArrays:
         """Advance every env by one agent action (already decoded and validated)."""
-        self._refill()
-        out = self.out
-        _advance(
-            lift,
-            push_force_n,
-            verbal_cue,
-            self.person,
-            self.params,
-            self.delay_push,
-            self.delay_verbal,
-            self.normals,
-            self.cursor,
-            self.env,
-            self.m,
-            self.P,
-            self.nominal,
-            self.judge,
-            out.features,
-            out.outcome,
-            self._block_cp,
-            self._block_cv,
-            self._block_y,
-            self.timing.substeps,
-            self.cues.verbal_duration_s,
-            self.judgment.delay_s,
-            self.judgment.threshold,
-            self.lift.success_lean_m,
-            self.lift.upright_m,
-            self.timing.episode_s,
-        )
+        cmd = self.cmd
+        cmd[:, CMD_PUSH] = push_force_n
+        cmd[:, CMD_VERBAL] = verbal_cue
+        cmd[:, CMD_LIFT] = lift
+        cmd[:, CMD_ACTIVE] = 1.0
+        self.step_commands(cmd)
+        return self.out
+
+    def step_commands(self, cmd: NDArray[np.float64]) -> None:
+        """Advance the active envs by one agent action; results land in ``report`` and ``obs``.
+
+        Args:
+            cmd: (N, 4) float64 C-contiguous rows ``[push_force_n, verbal_cue, lift, active]``
+                (decoded and validated); envs with ``active == 0`` are left untouched.
+        """
+        failed = _advance(cmd, self.state, self.generators, self.obs, self.consts)
+        if failed >= 0:
+            raise RuntimeError(f"env {failed} was stepped before it was reset")
         if self.mm is not None:
             probs = self.mm.run(self._block_cp, self._block_cv, self._block_y)
-            out.features[:, F_P_M1 : F_P_P1 + 1] = probs[:, -1]
-        w = self.reward_weights
-        terms = out.reward_terms
-        terms[:, 0] = np.where(out.outcome == Outcome.SUCCESS, w.success, 0.0)
-        terms[:, 1] = np.where(out.outcome == Outcome.UNSAFE, -w.unsafe, 0.0)
-        terms[:, 2] = np.where(out.outcome == Outcome.PREMATURE, -w.premature, 0.0)
-        terms[:, 3] = np.where(lift, 0.0, -w.time_per_s * self.timing.action_period_s)
-        terms[:, 4] = -w.force_per_n_s * self.env[:, E_IMPULSE]
-        np.sum(terms, axis=1, out=out.reward)
-        np.copyto(out.terminated, lift)
-        np.copyto(out.push_force_n, np.where(lift, 0.0, push_force_n))
-        np.copyto(out.verbal_cue, self.env[:, E_VERBAL_VALUE])
-        return out
+            self.report[:, F_P_M1 : F_P_P1 + 1] = probs[:, -1]
+            _observe(self._all, self.state, self.obs, self.consts)
+
+    # --- pickling -----------------------------------------------------------------
+    # ``generators`` holds raw addresses of the generators' C states and ``person``, ``P``,
+    # ``report`` ... are views into ``state``: a pickled copy would go on drawing from (and
+    # advancing) the original's generators -- or freed memory in another process -- and its
+    # views would no longer alias ``state``. So a copy is rebuilt by the constructor and
+    # refilled with the saved values (tests/coop_gym/test_determinism.py).
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The saved values; ``generators`` is left out (rebuilt from ``rngs``)."""
+        return {k: v for k, v in self.__dict__.items() if k != "generators"}
+
+    def __setstate__(self, saved: dict[str, Any]) -> None:
+        """Rebuild the arrays and their views, then copy the saved values into them."""
+        self.__init__(*saved["_init_args"])  # type: ignore[misc]
+        for name, value in saved.items():
+            current = self.__dict__.get(name)
+            if isinstance(value, np.ndarray) and isinstance(current, np.ndarray) and current.shape == value.shape:
+                np.copyto(current, value)
+            elif not (dataclasses.is_dataclass(current) and not isinstance(current, type)):
+                self.__dict__[name] = value  # keep rebuilt holders of views (e.g. ``out``)
+        for i, rng in enumerate(self.rngs):
+            if rng is not None:
+                self.generators[i] = bit_generator_row(rng)
 
     def true_state(self, i: int) -> dict[str, float]:
         """The hidden truth of env ``i``, for ``info``."""
@@ -438,3 +899,50 @@ class SitToStandCore:
             "true_eta_m": float(s[S_ETA]),
             "true_xi": int(s[S_XI]),
         }
+
+
+# Outcome codes the kernels write, checked against the enum they stand for.
+assert (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE, Outcome.TIMEOUT) == (1, 2, 3, 4)
+
+
+def _flush_kernel_cache_if_dependencies_changed() -> None:
+    """Drop the kernels' cached machine code when the model or filter sources change.
+
+    Numba's on-disk cache watches only this file, but the kernels compile in the person
+    (``coop_gym.model.dynamics``), the filter and the judgment: after an edit there, the
+    env would keep simulating the old maths. A hash of those sources, kept beside the
+    cache, detects the edit.
+    """
+    from coop_gym.model import dynamics
+    from estimator import judgment, kalman
+
+    digest = hashlib.sha256()
+    for module in (dynamics, kalman, judgment):
+        with open(inspect.getsourcefile(module) or "", "rb") as source:
+            digest.update(source.read())
+    kernels: tuple[Any, ...] = (
+        _advance,
+        _reset_rows,
+        _draw_reset,
+        _observe,
+        _observe_row,
+        _standard_normal,
+        _random,
+        _integers,
+    )
+    try:
+        stamp = os.path.join(kernels[0]._cache.cache_path, "core-kernels.dependencies.sha256")
+        previous = None
+        if os.path.exists(stamp):
+            with open(stamp) as f:
+                previous = f.read().strip()
+        if previous != digest.hexdigest():
+            for kernel in kernels:
+                kernel._cache.flush()
+            with open(stamp, "w") as f:
+                f.write(digest.hexdigest())
+    except (AttributeError, OSError):  # another Numba layout or a read-only cache: compile as usual
+        pass
+
+
+_flush_kernel_cache_if_dependencies_changed()

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, ClassVar, SupportsFloat
 
 import gymnasium as gym
@@ -19,18 +21,41 @@ from coop_gym.envs.config import (
     RewardWeights,
     as_dataclass,
 )
-from coop_gym.envs.core import FEATURES, REWARD_TERMS, SitToStandCore
+from coop_gym.envs.core import (
+    CMD_LIFT,
+    CMD_PUSH,
+    CMD_VERBAL,
+    F_ELAPSED,
+    F_JUDGMENT,
+    F_P_M1,
+    F_VERBAL,
+    F_XI_HAT,
+    F_XI_STD,
+    FEATURES,
+    R_OUTCOME,
+    R_PUSH,
+    R_REWARD,
+    R_TRUE_X,
+    R_TRUE_XI,
+    REPORT_COLUMNS,
+    REWARD_TERMS,
+    SitToStandCore,
+)
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas
 from estimator.judgment import ThresholdJudgment
 
 __all__ = [
     "FEATURE_BOUNDS",
+    "SitToStandConfig",
     "SitToStandEnv",
     "action_space_for",
     "decode_actions",
     "observation_features",
     "observation_space_for",
+    "parse_reset_options",
+    "render_state_for",
+    "report_info",
 ]
 
 # Observation bounds per feature (low, high); observations are clipped into them.
@@ -139,17 +164,258 @@ def decode_actions(
         return push, verbal, a[:, 2] > 0.0
     if np.any(a != np.round(a)):
         raise ValueError(f"{action_type} action must be integers, got {actions!r}")
-    idx = a.astype(np.int64)
+    # Range checked on the floats, before the int cast (1e300 would overflow it).
     if action_type == "discrete":
-        if np.any(idx < 0) or np.any(idx >= N_FLAT_ACTIONS):
+        if np.any(a < 0) or np.any(a >= N_FLAT_ACTIONS):
             raise ValueError(f"discrete action must be in [0, {N_FLAT_ACTIONS - 1}], got {actions!r}")
-        idx = np.stack(np.unravel_index(idx, (3, 3, 2)), axis=1)
-    elif np.any(idx < 0) or np.any(idx >= np.array([3, 3, 2])):
+        idx = np.stack(np.unravel_index(a.astype(np.int64), (3, 3, 2)), axis=1)
+    elif np.any(a < 0) or np.any(a >= np.array([3, 3, 2])):
         raise ValueError(
             f"multidiscrete action must be [push 0..2, verbal 0..2, lift 0..1], got {np.asarray(actions).tolist()!r}"
         )
+    else:
+        idx = a.astype(np.int64)
     push = np.array([0.0, soft, firm])[idx[:, 0]]
     return push, _VERBAL_FROM_INDEX[idx[:, 1]], idx[:, 2] == 1
+
+
+_OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)
+
+
+@dataclass(frozen=True)
+class SitToStandConfig:
+    """Validated constructor arguments shared by the single env and the vector env.
+
+    Build it with :meth:`from_arguments` (the env kwargs; bad values raise ``ValueError``
+    naming the argument); :meth:`make_core` then builds the batched simulation.
+
+    Attributes:
+        personas: The personas episodes are drawn from.
+        observation_mode, action_type, estimator: See :data:`OBSERVATION_MODES`,
+            :data:`ACTION_TYPES`, :data:`ESTIMATORS`.
+        realism, reward, lift, judgment, timing, cues: The settings dataclasses.
+        estimator_options: Keyword arguments of the multiple-model estimator.
+        render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
+    """
+
+    personas: tuple[Persona, ...]
+    observation_mode: str
+    action_type: str
+    estimator: str
+    realism: Realism
+    reward: RewardWeights
+    lift: LiftCriteria
+    judgment: ThresholdJudgment
+    timing: Timing
+    cues: Cues
+    estimator_options: dict[str, Any] | None
+    render_mode: str | None
+
+    @classmethod
+    def from_arguments(
+        cls,
+        personas: str | Persona | Sequence[str | Persona] = "train",
+        observation_mode: str = "belief",
+        action_type: str = "multidiscrete",
+        estimator: str = "kalman",
+        realism: Realism | dict[str, Any] | None = None,
+        reward: RewardWeights | dict[str, Any] | None = None,
+        lift: LiftCriteria | dict[str, Any] | None = None,
+        judgment: ThresholdJudgment | dict[str, Any] | None = None,
+        timing: Timing | dict[str, Any] | None = None,
+        cues: Cues | dict[str, Any] | None = None,
+        estimator_options: dict[str, Any] | None = None,
+        render_mode: str | None = None,
+        render_modes: Sequence[str] = ("human", "rgb_array"),
+    ) -> SitToStandConfig:
+        """Validate the env arguments (see :class:`SitToStandEnv`, "Arguments")."""
+        _check_choice("observation_mode", observation_mode, OBSERVATION_MODES)
+        _check_choice("action_type", action_type, ACTION_TYPES)
+        _check_choice("estimator", estimator, ESTIMATORS)
+        if render_mode is not None and render_mode not in render_modes:
+            raise ValueError(f"render_mode must be None or one of {list(render_modes)}, got {render_mode!r}")
+        if estimator_options is not None and not isinstance(estimator_options, dict):
+            raise ValueError(f"estimator_options must be a dict or None, got {type(estimator_options).__name__}")
+        if estimator_options and estimator == "kalman":
+            raise ValueError(
+                f"estimator_options {sorted(estimator_options)} are for the multiple-model estimators; "
+                "estimator='kalman' takes none"
+            )
+        return cls(
+            personas=resolve_personas(personas),
+            observation_mode=observation_mode,
+            action_type=action_type,
+            estimator=estimator,
+            realism=as_dataclass(Realism, realism, "realism"),
+            reward=as_dataclass(RewardWeights, reward, "reward"),
+            lift=as_dataclass(LiftCriteria, lift, "lift"),
+            judgment=as_dataclass(ThresholdJudgment, judgment, "judgment"),
+            timing=as_dataclass(Timing, timing, "timing"),
+            cues=as_dataclass(Cues, cues, "cues"),
+            estimator_options=estimator_options,
+            render_mode=render_mode,
+        )
+
+    @property
+    def features(self) -> tuple[str, ...]:
+        """The observation's feature names, in order."""
+        return observation_features(self.observation_mode, self.estimator)
+
+    def observation_space(self) -> spaces.Box:
+        """The observation space of one env."""
+        return observation_space_for(self.features, self.timing.episode_s)
+
+    def action_space(self) -> spaces.Space[Any]:
+        """The action space of one env."""
+        return action_space_for(self.action_type)
+
+    def make_core(self, n_envs: int) -> SitToStandCore:
+        """The batched simulation of ``n_envs`` envs, building this observation."""
+        space = self.observation_space()
+        return SitToStandCore(
+            n_envs,
+            self.personas,
+            self.timing,
+            self.cues,
+            self.realism,
+            self.lift,
+            self.reward,
+            self.judgment,
+            self.estimator,
+            self.estimator_options,
+            observation_index=tuple(FEATURES.index(f) for f in self.features),
+            observation_low=space.low.astype(np.float64),
+            observation_high=space.high.astype(np.float64),
+        )
+
+    def command_table(self) -> NDArray[np.float64]:
+        """(18, 1, 4) core commands ``[push_force_n, verbal_cue, lift, active]`` of each flat discrete action."""
+        push, verbal, lift = decode_actions(np.arange(N_FLAT_ACTIONS), "discrete", self.cues, N_FLAT_ACTIONS)
+        table = np.stack([push, verbal, lift.astype(np.float64), np.ones(N_FLAT_ACTIONS)], axis=1)
+        return np.ascontiguousarray(table[:, None, :])
+
+
+def parse_reset_options(options: dict[str, Any] | None, personas: Sequence[Persona]) -> tuple[int | None, int | None]:
+    """Validate ``reset(options=...)``: ``persona`` (a name of this env's) and ``initial_xi``.
+
+    Returns:
+        ``(persona_index, initial_xi)``, each None when not fixed.
+    """
+    if not options:
+        return None, None
+    if not isinstance(options, dict):
+        raise ValueError(f"reset options must be a dict, got {type(options).__name__}")
+    unknown = sorted(set(options) - {"persona", "initial_xi"})
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; known: ['initial_xi', 'persona']")
+    persona_index = None
+    if "persona" in options:
+        names = [p.name for p in personas]
+        if options["persona"] not in names:
+            raise ValueError(f"reset option persona={options['persona']!r} is not one of this env's {names}")
+        persona_index = names.index(options["persona"])
+    xi = options.get("initial_xi")
+    if xi is not None and (isinstance(xi, bool) or xi not in (-1, 0, 1)):
+        raise ValueError(f"reset option initial_xi must be -1, 0 or 1, got {xi!r}")
+    return persona_index, None if xi is None else int(xi)
+
+
+def report_info(r: list[float], persona_names: Sequence[str], probabilities: bool) -> dict[str, Any]:
+    """The single env's ``info`` dict from one row of ``SitToStandCore.report`` (as a list).
+
+    Args:
+        r: ``core.report[i].tolist()`` (one ``tolist()`` reads every value at once).
+        persona_names: Names of the env's personas, by index.
+        probabilities: Add ``xi_probabilities`` (a multiple-model estimator runs).
+    """
+    # Unpacked by position (checked against REPORT_COLUMNS at import): one bytecode
+    # instead of ~25 indexed look-ups on the hot path.
+    (
+        _pos,
+        _force,
+        verbal,
+        _since,
+        _x_hat,
+        _xdot_hat,
+        _eta_hat,
+        xi_hat,
+        _xi_std,
+        judgment,
+        elapsed,
+        p_uncoop,
+        p_unresp,
+        p_coop,
+        _true_xi_feature,
+        success,
+        unsafe,
+        premature,
+        time_term,
+        force_term,
+        _reward,
+        outcome,
+        push,
+        true_x,
+        true_xdot,
+        true_eta,
+        true_xi,
+        persona,
+    ) = r
+    info: dict[str, Any] = {
+        "true_x_m": true_x,
+        "true_xdot_m_per_s": true_xdot,
+        "true_eta_m": true_eta,
+        "true_xi": int(true_xi),
+        "persona": persona_names[int(persona)],
+        "outcome": _OUTCOME_LABELS[int(outcome)],
+        "judgment": int(judgment),
+        "xi_estimate": xi_hat,
+        "push_force_n": push,
+        "verbal_cue": int(verbal),
+        "elapsed_s": elapsed,
+    }
+    if probabilities:
+        info["xi_probabilities"] = np.array([p_uncoop, p_unresp, p_coop])
+    info["reward_terms"] = {
+        "success": success,
+        "unsafe": unsafe,
+        "premature": premature,
+        "time": time_term,
+        "force": force_term,
+    }
+    return info
+
+
+def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, stepped: bool) -> Any:
+    """A :class:`coop_gym.envs.rendering.RenderState` of env ``i`` of ``core``.
+
+    Args:
+        core: The simulation.
+        i: Env index.
+        outcome: The env's current :class:`Outcome` code.
+        lift: Whether the env's last action lifted.
+        stepped: False right after a reset (no push is drawn then).
+    """
+    from coop_gym.envs.rendering import RenderState
+
+    r = core.report[i]
+    probs = None
+    if core.mm is not None:
+        probs = (float(r[F_P_M1]), float(r[F_P_M1 + 1]), float(r[F_P_M1 + 2]))
+    return RenderState(
+        time_s=float(r[F_ELAPSED]),
+        shoulder_position_m=float(r[R_TRUE_X]),
+        push_force_n=float(r[R_PUSH]) if stepped else 0.0,
+        verbal_cue=int(r[F_VERBAL]),
+        xi_estimate=float(r[F_XI_HAT]),
+        xi_std=float(r[F_XI_STD]),
+        threshold=float(core.judgment.threshold),
+        judgment=int(r[F_JUDGMENT]),
+        true_xi=int(r[R_TRUE_XI]),
+        outcome=_OUTCOME_LABELS[outcome] if outcome != Outcome.NONE else None,
+        probabilities=probs,
+        lift=lift,
+        success_lean_m=float(core.lift.success_lean_m),
+    )
 
 
 class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
@@ -239,8 +505,13 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
     ## Vectorized environment
 
     ``gymnasium.make_vec("CoopGym/SitToStand-v0", num_envs=N)`` builds the natively
-    batched :class:`coop_gym.envs.vector.SitToStandVectorEnv`; env ``i`` seeded ``s + i``
-    matches a single env seeded ``s + i``.
+    batched :class:`coop_gym.envs.vector.SitToStandVectorEnv` (one compiled call steps all
+    ``N``; ``autoreset_mode`` next-step, same-step or disabled); env ``i`` seeded ``s + i``
+    matches a single env seeded ``s + i``, across autoresets too. For Stable-Baselines3,
+    ``agents.sb3_vec.make_sb3_vec_env(id, N, seed)`` wraps it as an SB3 ``VecEnv``.
+
+    Random stream: a reset draws ``integers``, the person's variation normals, ``random``
+    and one normal from ``self.np_random``; each non-lift step then draws 25 standard normals.
 
     ## Version History
 
@@ -258,7 +529,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         ['force', 'premature', 'success', 'time', 'unsafe']
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # type: ignore[misc]
 
     def __init__(
         self,
@@ -276,37 +547,43 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         render_mode: str | None = None,
     ) -> None:
         """Create the env; see the class docstring for the arguments."""
-        _check_choice("observation_mode", observation_mode, OBSERVATION_MODES)
-        _check_choice("action_type", action_type, ACTION_TYPES)
-        _check_choice("estimator", estimator, ESTIMATORS)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        config = SitToStandConfig.from_arguments(
+            personas,
+            observation_mode,
+            action_type,
+            estimator,
+            realism,
+            reward,
+            lift,
+            judgment,
+            timing,
+            cues,
+            estimator_options,
+            render_mode,
+            self.metadata["render_modes"],
+        )
+        self.config = config
         self.render_mode = render_mode
         self.observation_mode = observation_mode
         self.action_type = action_type
-        self.personas = resolve_personas(personas)
-        self.timing: Timing = as_dataclass(Timing, timing, "timing")
-        self.cues: Cues = as_dataclass(Cues, cues, "cues")
-        self.core = SitToStandCore(
-            1,
-            self.personas,
-            self.timing,
-            self.cues,
-            as_dataclass(Realism, realism, "realism"),
-            as_dataclass(LiftCriteria, lift, "lift"),
-            as_dataclass(RewardWeights, reward, "reward"),
-            as_dataclass(ThresholdJudgment, judgment, "judgment"),
-            estimator,
-            estimator_options,
-        )
-        self.features = observation_features(observation_mode, estimator)
-        self._feature_index = np.array([FEATURES.index(f) for f in self.features])
-        self.observation_space = observation_space_for(self.features, self.timing.episode_s)
-        self.action_space = action_space_for(action_type)
-        self._low = self.observation_space.low.astype(np.float64)
-        self._high = self.observation_space.high.astype(np.float64)
+        self.personas = config.personas
+        self.timing = config.timing
+        self.cues = config.cues
+        self.core = config.make_core(1)
+        self.features = config.features
+        self.observation_space = config.observation_space()  # type: ignore[assignment]
+        self.action_space = config.action_space()
+        # Hot-path views and tables, built once (each step reads them instead of recomputing).
+        self._cmd_table = config.command_table()
+        self._cmd_row = self.core.cmd[0]
+        self._obs_row = self.core.obs[0]
+        self._report_row = self.core.report[0]
+        self._persona_names = tuple(p.name for p in self.personas)
+        self._firm_push_n = float(self.cues.firm_push_n)
+        self._has_mm = self.core.mm is not None
         self._needs_reset = True
-        self._outcome = Outcome.NONE
+        self._stepped = False
+        self._outcome = int(Outcome.NONE)
         self._renderer: Any = None
         self._last_lift = False
 
@@ -316,14 +593,15 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         """Start an episode; ``options`` may fix ``persona`` (a name) and ``initial_xi``."""
-        persona_index, initial_xi = self._reset_options(options)
+        persona_index, initial_xi = parse_reset_options(options, self.personas)
         super().reset(seed=seed)
         self.core.reset_env(0, self.np_random, persona_index, initial_xi)
         self._needs_reset = False
-        self._outcome = Outcome.NONE
+        self._stepped = False
+        self._outcome = int(Outcome.NONE)
         self._last_lift = False
-        obs = self._observation()
-        info = self._info(reward_terms=None)
+        obs = self._obs_row.copy()
+        info = report_info(self._report_row.tolist(), self._persona_names, self._has_mm)
         if self.render_mode == "human":
             self.render()
         return obs, info
@@ -332,24 +610,19 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         """Apply one action for 0.1 s (5 simulation steps) or lift."""
         if self._needs_reset:
             raise RuntimeError("SitToStandEnv.step() called before reset() or after the episode ended; call reset()")
-        push, verbal, lift = decode_actions(
-            np.asarray(action)[None] if np.ndim(action) > 0 or self.action_type != "discrete" else [action],
-            self.action_type,
-            self.cues,
-            1,
-        )
-        out = self.core.step(push, verbal, lift)
-        self._outcome = Outcome(int(out.outcome[0]))
-        self._last_lift = bool(lift[0])
-        terminated = bool(out.terminated[0])
-        if terminated:
-            self._needs_reset = True
-        terms = {name: float(out.reward_terms[0, k]) for k, name in enumerate(REWARD_TERMS)}
-        obs = self._observation()
-        info = self._info(reward_terms=terms)
+        self.core.step_commands(self._command(action))
+        r = self._report_row.tolist()
+        self._outcome = outcome = int(r[R_OUTCOME])
+        # Only a lift ends an episode from inside the env (the time limit is TimeLimit's).
+        terminated = outcome in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE)
+        self._last_lift = terminated
+        self._needs_reset = terminated
+        self._stepped = True
+        obs = self._obs_row.copy()
+        info = report_info(r, self._persona_names, self._has_mm)
         if self.render_mode == "human":
             self.render()
-        return obs, float(out.reward[0]), terminated, False, info
+        return obs, r[R_REWARD], terminated, False, info
 
     def render(self) -> NDArray[np.uint8] | None:
         """Draw the person, the cues, the estimate gauge and the true ``xi``."""
@@ -372,76 +645,77 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
             self._renderer.close()
             self._renderer = None
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle without the renderer (pygame objects) and the row views into the core."""
+        state = {k: v for k, v in self.__dict__.items() if k not in ("_cmd_row", "_obs_row", "_report_row")}
+        state["_renderer"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore, re-pointing the row views at the unpickled core (which rebuilds itself)."""
+        self.__dict__.update(state)
+        self._cmd_row = self.core.cmd[0]
+        self._obs_row = self.core.obs[0]
+        self._report_row = self.core.report[0]
+
     # --- helpers ----------------------------------------------------------------
 
     def render_state(self) -> Any:
         """A :class:`coop_gym.envs.rendering.RenderState` snapshot of the current step."""
-        from coop_gym.envs.rendering import RenderState
+        return render_state_for(self.core, 0, self._outcome, self._last_lift, self._stepped)
 
-        f = self.core.out.features[0]
-        truth = self.core.true_state(0)
-        probs = None
-        if self.core.mm is not None:
-            probs = (
-                float(f[FEATURES.index("p_uncooperative")]),
-                float(f[FEATURES.index("p_unresponsive")]),
-                float(f[FEATURES.index("p_cooperative")]),
-            )
-        return RenderState(
-            time_s=float(f[FEATURES.index("elapsed_s")]),
-            shoulder_position_m=truth["true_x_m"],
-            push_force_n=float(self.core.out.push_force_n[0]) if not self._needs_reset or self._outcome else 0.0,
-            verbal_cue=int(f[FEATURES.index("verbal_cue")]),
-            xi_estimate=float(f[FEATURES.index("xi_hat")]),
-            xi_std=float(f[FEATURES.index("xi_std")]),
-            threshold=float(self.core.judgment.threshold),
-            judgment=int(f[FEATURES.index("judgment")]),
-            true_xi=truth["true_xi"],
-            outcome=self._outcome.label if self._outcome != Outcome.NONE else None,
-            probabilities=probs,
-            lift=self._last_lift,
-            success_lean_m=float(self.core.lift.success_lean_m),
-        )
+    def _command(self, action: Any) -> NDArray[np.float64]:
+        """Validate one action and return its (1, 4) command for the core.
 
-    def _reset_options(self, options: dict[str, Any] | None) -> tuple[int | None, int | None]:
-        """Validate ``reset(options=...)``: ``persona`` (a name of this env's) and ``initial_xi``."""
-        if not options:
-            return None, None
-        if not isinstance(options, dict):
-            raise ValueError(f"reset options must be a dict, got {type(options).__name__}")
-        unknown = sorted(set(options) - {"persona", "initial_xi"})
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {unknown}; known: ['initial_xi', 'persona']")
-        persona_index = None
-        if "persona" in options:
-            names = [p.name for p in self.personas]
-            if options["persona"] not in names:
-                raise ValueError(f"reset option persona={options['persona']!r} is not one of this env's {names}")
-            persona_index = names.index(options["persona"])
-        xi = options.get("initial_xi")
-        if xi is not None and (isinstance(xi, bool) or xi not in (-1, 0, 1)):
-            raise ValueError(f"reset option initial_xi must be -1, 0 or 1, got {xi!r}")
-        return persona_index, xi
+        The common cases (what ``action_space.sample()`` and SB3's ``predict`` give) are
+        checked with plain Python on the action's values; anything else goes through
+        :func:`decode_actions`, which accepts the same actions and names what is wrong.
+        """
+        kind = self.action_type
+        if kind == "multidiscrete":
+            if type(action) is np.ndarray and action.shape == (3,) and action.dtype.kind in "iu":
+                push, verbal, lift = action.tolist()
+                if 0 <= push <= 2 and 0 <= verbal <= 2 and 0 <= lift <= 1:
+                    return self._cmd_table[(push * 3 + verbal) * 2 + lift]  # type: ignore[no-any-return]
+        elif kind == "discrete":
+            if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and 0 <= action < N_FLAT_ACTIONS:
+                return self._cmd_table[int(action)]  # type: ignore[no-any-return]
+        elif type(action) is np.ndarray and action.shape == (3,) and action.dtype.kind == "f":
+            a_push, a_verbal, a_lift = action.tolist()
+            if all(math.isfinite(a) and -1.0 - 1e-6 <= a <= 1.0 + 1e-6 for a in (a_push, a_verbal, a_lift)):
+                row = self._cmd_row
+                # As decode_actions: push (a0 + 1) / 2 * firm, verbal in thirds, lift when a2 > 0.
+                row[CMD_PUSH] = (min(max(a_push, -1.0), 1.0) + 1.0) * 0.5 * self._firm_push_n
+                row[CMD_VERBAL] = -1.0 if a_verbal < -1.0 / 3.0 else (1.0 if a_verbal > 1.0 / 3.0 else 0.0)
+                row[CMD_LIFT] = 1.0 if a_lift > 0.0 else 0.0
+                return self.core.cmd
+        # A list, not np.asarray(action)[None]: decode_actions names what is wrong with a ragged one.
+        push_n, verbal_cue, lift_flag = decode_actions([action], kind, self.cues, 1)
+        cmd = self.core.cmd
+        cmd[0, CMD_PUSH] = push_n[0]
+        cmd[0, CMD_VERBAL] = verbal_cue[0]
+        cmd[0, CMD_LIFT] = 1.0 if lift_flag[0] else 0.0
+        return cmd
 
-    def _observation(self) -> NDArray[np.float32]:
-        f = self.core.out.features[0, self._feature_index]
-        return np.clip(f, self._low, self._high).astype(np.float32)
 
-    def _info(self, reward_terms: dict[str, float] | None) -> dict[str, Any]:
-        core = self.core
-        f = core.out.features[0]
-        info: dict[str, Any] = core.true_state(0)
-        info["persona"] = core.personas[int(core.persona_index[0])].name
-        info["outcome"] = self._outcome.label
-        info["judgment"] = int(f[FEATURES.index("judgment")])
-        info["xi_estimate"] = float(f[FEATURES.index("xi_hat")])
-        info["push_force_n"] = float(core.out.push_force_n[0]) if reward_terms is not None else 0.0
-        info["verbal_cue"] = int(f[FEATURES.index("verbal_cue")])
-        info["elapsed_s"] = float(f[FEATURES.index("elapsed_s")])
-        if core.mm is not None:
-            info["xi_probabilities"] = f[FEATURES.index("p_uncooperative") : FEATURES.index("p_cooperative") + 1].copy()
-        info["reward_terms"] = reward_terms if reward_terms is not None else dict.fromkeys(REWARD_TERMS, 0.0)
-        return info
+# report_info unpacks report rows by position.
+assert REPORT_COLUMNS == (
+    *FEATURES,
+    "reward_success",
+    "reward_unsafe",
+    "reward_premature",
+    "reward_time",
+    "reward_force",
+    "reward",
+    "outcome",
+    "push_force_n",
+    "true_x_m",
+    "true_xdot_m_per_s",
+    "true_eta_m",
+    "true_xi",
+    "persona_index",
+), "REPORT_COLUMNS changed: update report_info"
+assert REWARD_TERMS == ("success", "unsafe", "premature", "time", "force"), "update report_info"
 
 
 def _check_choice(name: str, value: Any, choices: Sequence[str]) -> None:

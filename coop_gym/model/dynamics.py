@@ -27,7 +27,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 from numpy.typing import NDArray
 
@@ -44,6 +43,7 @@ __all__ = [
     "pack_person",
     "person_substep",
     "simulate",
+    "zoh_coefficients",
     "zoh_matrices",
 ]
 
@@ -159,17 +159,65 @@ def zoh_matrices(damping_rate_per_s: float, voluntary_gain_per_s2: float, dt_s: 
 
     With ``s = [x, xdot]`` and scalar input ``u = k1*eta + k2*c_p + w_x`` [m/s^2],
     ``ds/dt = F s + G u``, ``F = [[0, 1], [-k1, -lambda1]]``, ``G = [0, 1]``. Van Loan:
-    ``expm([[F, G], [0, 0]] dt) = [[Ad, Bd], [0, 1]]``.
+    ``expm([[F, G], [0, 0]] dt) = [[Ad, Bd], [0, 1]]`` (computed by :func:`zoh_coefficients`).
 
     Returns:
         (2, 3) array ``[Ad | Bd]``.
     """
-    block = np.zeros((3, 3))
-    block[0, 1] = 1.0
-    block[1, 0] = -voluntary_gain_per_s2
-    block[1, 1] = -damping_rate_per_s
-    block[1, 2] = 1.0
-    return np.asarray(scipy.linalg.expm(block * dt_s)[:2, :], dtype=np.float64)
+    a00, a01, a10, a11, b0, b1 = zoh_coefficients(float(damping_rate_per_s), float(voluntary_gain_per_s2), float(dt_s))
+    return np.array([[a00, a01, b0], [a10, a11, b1]])
+
+
+@njit(cache=True)
+def zoh_coefficients(
+    damping_rate_per_s: float, voluntary_gain_per_s2: float, dt_s: float
+) -> tuple[float, float, float, float, float, float]:
+    """``(a00, a01, a10, a11, b0, b1)`` of :func:`zoh_matrices`, compiled so kernels can call it.
+
+    ``expm`` of the (3, 3) Van Loan block by scaling and squaring a Taylor series: the
+    block is halved until its 1-norm is at most 1/2, summed to 18 terms (truncation below
+    1e-22 relative) and squared back. It agrees with ``scipy.linalg.expm`` to ~1e-15;
+    scipy's BLAS calls cost 10 us to milliseconds (thread contention) per episode reset.
+    """
+    # The block is [[0, dt, 0], [-k1 dt, -lambda1 dt, dt], [0, 0, 0]]. Its powers keep a zero
+    # last row and its exponential the last row [0, 0, 1], so only the top two rows (six
+    # numbers) are carried: no arrays, nothing allocated.
+    a = dt_s
+    b = -voluntary_gain_per_s2 * dt_s
+    c = -damping_rate_per_s * dt_s
+    d = dt_s
+    norm = max(abs(b), abs(a) + abs(c), abs(d))  # largest column sum
+    squarings = 0
+    while norm > 0.5 and squarings < 64:  # the cap stops the loop on inf/NaN gains
+        norm *= 0.5
+        squarings += 1
+    scale = 0.5**squarings
+    a *= scale
+    b *= scale
+    c *= scale
+    d *= scale
+    # Taylor: E = sum_k T_k with T_0 = I and T_k = T_(k-1) M / k.
+    e00, e01, e02, e10, e11, e12 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0
+    t00, t01, t02, t10, t11, t12 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0
+    for k in range(1, 19):
+        t00, t01, t02 = t01 * b / k, (t00 * a + t01 * c) / k, t01 * d / k
+        t10, t11, t12 = t11 * b / k, (t10 * a + t11 * c) / k, t11 * d / k
+        e00 += t00
+        e01 += t01
+        e02 += t02
+        e10 += t10
+        e11 += t11
+        e12 += t12
+    for _ in range(squarings):
+        e00, e01, e02, e10, e11, e12 = (
+            e00 * e00 + e01 * e10,
+            e00 * e01 + e01 * e11,
+            e00 * e02 + e01 * e12 + e02,
+            e10 * e00 + e11 * e10,
+            e10 * e01 + e11 * e11,
+            e10 * e02 + e11 * e12 + e12,
+        )
+    return e00, e01, e10, e11, e02, e12
 
 
 def pack_person(person: PersonParams, timing: Timing, hold_xi: bool = False) -> NDArray[np.float64]:
@@ -351,7 +399,9 @@ def person_substep(
     if push_seen >= p[P_TOUCH] or verbal_seen != 0.0:
         eta += xi * (p[P_K3] * push_seen + p[P_K4] * verbal_seen) * dt
     else:
-        eta -= p[P_RELAX] * eta * dt
+        # Euler step, capped: with rate*dt > 2 it would overshoot and diverge (relaxation
+        # 100/s at dt 0.1 s is valid); a full relaxation in one step is the stable limit.
+        eta -= min(p[P_RELAX] * dt, 1.0) * eta
     eta += p[P_ETA_STD] * z[1]
     if p[P_SATURATE] > 0.5:
         eta = min(max(eta, p[P_ETA_MIN]), p[P_ETA_MAX])

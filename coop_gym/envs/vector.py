@@ -1,0 +1,436 @@
+"""The natively batched sit-to-stand environment (``gymnasium.make_vec``)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from numpy.typing import NDArray
+
+from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
+from coop_gym.envs.core import (
+    CMD_ACTIVE,
+    CMD_LIFT,
+    CMD_PUSH,
+    CMD_VERBAL,
+    F_ELAPSED,
+    F_JUDGMENT,
+    F_P_M1,
+    F_P_P1,
+    F_VERBAL,
+    F_XI_HAT,
+    R_OUTCOME,
+    R_PERSONA,
+    R_PUSH,
+    R_REWARD,
+    R_TERMS,
+    R_TRUE_ETA,
+    R_TRUE_X,
+    R_TRUE_XDOT,
+    R_TRUE_XI,
+    REWARD_TERMS,
+)
+from coop_gym.envs.sit_to_stand import SitToStandConfig, decode_actions, parse_reset_options, render_state_for
+from coop_gym.model.params import Cues, Realism, Timing
+from coop_gym.model.personas import Persona
+from estimator.judgment import ThresholdJudgment
+
+__all__ = ["SitToStandVectorEnv"]
+
+_OUTCOME_LABELS = np.array([o.label for o in Outcome], dtype=object)
+
+
+class SitToStandVectorEnv(VectorEnv):
+    r"""``N`` sit-to-stand episodes stepped by one compiled call: :class:`SitToStandEnv`, batched.
+
+    The same simulation core as the single env (see its docstring for the task, the
+    spaces, the rewards and the episode end), with ``N`` envs instead of one. Env ``i``
+    reset with seed ``s + i`` (``reset(seed=s)``) plays exactly what a single env reset
+    with seed ``s + i`` plays under the same actions, across autoresets too.
+
+    ## Arguments
+
+    ``gymnasium.make_vec(id, num_envs=N, autoreset_mode=..., **env_kwargs)`` (or the class
+    directly): ``num_envs``; every :class:`SitToStandEnv` keyword; ``max_episode_steps``
+    (truncation, inside this env; default 30 s of steps, what ``make_vec`` passes from the
+    registration); ``autoreset_mode``: an ``AutoresetMode`` or its value:
+
+    * ``NEXT_STEP`` (default): the step after an episode ends resets that env instead of
+      stepping it (reward 0, not done, the reset observation and info);
+    * ``SAME_STEP``: the env is reset on the step that ends its episode; the final
+      observation and info are in ``infos["final_obs"]`` / ``infos["final_info"]`` (with
+      ``_final_obs`` / ``_final_info`` masks);
+    * ``DISABLED``: finished envs must be reset by the caller with
+      ``reset(options={"reset_mask": mask})``; stepping them raises.
+
+    ## Reset
+
+    ``reset(seed=None | int | list, options=None)``: an int seeds env ``i`` with ``seed + i``
+    (``gymnasium.utils.seeding.np_random``); a list gives each env its seed (``None``: keep
+    its generator). ``options["reset_mask"]`` (bool array of shape ``(N,)``) resets only
+    those envs; ``options["persona"]`` / ``options["initial_xi"]`` apply to every env reset.
+
+    ## Infos
+
+    A dict of arrays with ``_key`` masks, as Gymnasium's vector envs return:
+    ``true_x_m``, ``true_xdot_m_per_s``, ``true_eta_m``, ``true_xi``, ``persona`` (names),
+    ``persona_index``, ``outcome`` (labels as in the single env), ``outcome_code``
+    (:class:`Outcome` ints), ``judgment``, ``xi_estimate``, ``push_force_n``, ``verbal_cue``,
+    ``elapsed_s``, ``reward_terms`` (a dict of arrays) and, with a multiple-model estimator,
+    ``xi_probabilities`` (N, 3).
+
+    ## Rendering
+
+    ``render()`` draws env 0 (``"rgb_array"``: returns its frame).
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import coop_gym
+        >>> envs = gym.make_vec("CoopGym/SitToStand-v0", num_envs=4)
+        >>> obs, infos = envs.reset(seed=0)
+        >>> obs.shape, obs.dtype
+        ((4, 11), dtype('float32'))
+        >>> obs, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
+        >>> rewards.shape, sorted(infos["reward_terms"])[:2]
+        ((4,), ['_force', '_premature'])
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {  # type: ignore[misc]
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 10,
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
+    }
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        personas: str | Persona | Sequence[str | Persona] = "train",
+        observation_mode: str = "belief",
+        action_type: str = "multidiscrete",
+        estimator: str = "kalman",
+        realism: Realism | dict[str, Any] | None = None,
+        reward: RewardWeights | dict[str, Any] | None = None,
+        lift: LiftCriteria | dict[str, Any] | None = None,
+        judgment: ThresholdJudgment | dict[str, Any] | None = None,
+        timing: Timing | dict[str, Any] | None = None,
+        cues: Cues | dict[str, Any] | None = None,
+        estimator_options: dict[str, Any] | None = None,
+        render_mode: str | None = None,
+        max_episode_steps: int | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+    ) -> None:
+        """Create ``num_envs`` envs; see the class docstring and :class:`SitToStandEnv`."""
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
+        config = SitToStandConfig.from_arguments(
+            personas,
+            observation_mode,
+            action_type,
+            estimator,
+            realism,
+            reward,
+            lift,
+            judgment,
+            timing,
+            cues,
+            estimator_options,
+            render_mode,
+            self.metadata["render_modes"],
+        )
+        if max_episode_steps is None:
+            max_episode_steps = config.timing.max_episode_steps
+        if isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer)):
+            raise ValueError(f"max_episode_steps must be a positive int or None, got {max_episode_steps!r}")
+        if max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be a positive int or None, got {max_episode_steps!r}")
+        self.autoreset_mode = _autoreset_mode(autoreset_mode)
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}  # type: ignore[misc]
+        self.config = config
+        self.num_envs = n = int(num_envs)
+        self.max_episode_steps = int(max_episode_steps)
+        self.render_mode = render_mode
+        self.observation_mode = observation_mode
+        self.action_type = action_type
+        self.personas = config.personas
+        self.timing = config.timing
+        self.cues = config.cues
+        self.features = config.features
+        self.core = config.make_core(n)
+        self.single_observation_space = config.observation_space()
+        self.single_action_space = config.action_space()
+        self.observation_space = batch_space(self.single_observation_space, n)
+        self.action_space = batch_space(self.single_action_space, n)
+        self._persona_names = np.array([p.name for p in self.personas], dtype=object)
+        # [push, verbal, lift] of each flat discrete action.
+        self._flat_commands = config.command_table()[:, 0, :CMD_ACTIVE].copy()
+        self._episode_steps = np.zeros(n, dtype=np.int64)
+        self._done = np.zeros(n, dtype=bool)  # finished, waiting for an (auto)reset
+        self._started = np.zeros(n, dtype=bool)  # reset at least once
+        self._all = np.arange(n, dtype=np.int64)
+        self._renderer: Any = None
+        self._env0_stepped = False
+        self._env0_lift = False
+
+    # --- Gymnasium vector API ---------------------------------------------------
+
+    def reset(
+        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        """Reset all envs, or those of ``options["reset_mask"]``; see the class docstring."""
+        seeds = self._seed_list(seed)
+        if options is not None and not isinstance(options, dict):  # before dict(): a str would fail there, unclearly
+            raise ValueError(f"reset options must be a dict, got {type(options).__name__}")
+        options = dict(options) if options else {}
+        mask = self._reset_mask(options.pop("reset_mask", None))
+        persona_index, initial_xi = parse_reset_options(options, self.personas)
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            super().reset(seed=int(seed))  # the vector env's own np_random, as Gymnasium's envs do
+        indices = self._all[mask]
+        core = self.core
+        for i in indices:
+            if seeds[i] is not None:
+                core.set_rng(int(i), seeding.np_random(seeds[i])[0])
+            elif core.rngs[i] is None:
+                core.set_rng(int(i), seeding.np_random(None)[0])
+        core.reset_envs(indices, persona_index, initial_xi)
+        self._episode_steps[mask] = 0
+        self._done[mask] = False
+        self._started[mask] = True
+        if mask[0]:
+            self._env0_stepped = False
+            self._env0_lift = False
+        obs = core.obs.copy()
+        infos = self._infos(core.report, mask)
+        if self.render_mode == "human":
+            self.render()
+        return obs, infos
+
+    def step(
+        self, actions: Any
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
+        """Apply one action per env for 0.1 s (or lift), with the autoreset of ``autoreset_mode``."""
+        obs, rewards, terminated, truncated, final = self.step_rows(actions)
+        infos = self._infos(self.core.report, None)
+        if final is not None:
+            done, last_obs, last_report = final
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            for i in np.flatnonzero(done):
+                final_obs[i] = last_obs[i]
+            infos["final_obs"] = final_obs
+            infos["_final_obs"] = done.copy()
+            infos["final_info"] = self._infos(last_report, done)
+            infos["_final_info"] = done.copy()
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terminated, truncated, infos
+
+    def step_rows(
+        self, actions: Any
+    ) -> tuple[
+        NDArray[np.float32],
+        NDArray[np.float64],
+        NDArray[np.bool_],
+        NDArray[np.bool_],
+        tuple[NDArray[np.bool_], NDArray[np.float32], NDArray[np.float64]] | None,
+    ]:
+        """:meth:`step` without building the info dicts (for adapters that build their own).
+
+        Returns:
+            ``(obs, rewards, terminated, truncated, final)``; the infos' values are the rows
+            of ``self.core.report`` (:data:`~coop_gym.envs.core.REPORT_COLUMNS`). ``final`` is
+            None unless envs ended and were reset on this step (``SAME_STEP``); then it is
+            ``(done, last_obs, last_report)``, observations and report rows from before the
+            reset (rows of other envs are stale).
+        """
+        if not self._started.all():
+            never = np.flatnonzero(~self._started).tolist()
+            raise RuntimeError(f"step() called before reset(): envs {never} were never reset; call reset()")
+        self._write_commands(actions)
+        core = self.core
+        mode = self.autoreset_mode
+        pending = self._done
+        if mode == AutoresetMode.DISABLED and pending.any():
+            raise RuntimeError(
+                f"envs {np.flatnonzero(pending).tolist()} finished their episodes and autoreset is disabled; "
+                'reset them with reset(options={"reset_mask": mask}) before stepping'
+            )
+        # NEXT_STEP: the envs that finished last step are reset now instead of stepped.
+        stepped = ~pending
+        cmd = core.cmd
+        cmd[:, CMD_ACTIVE] = stepped
+        core.step_commands(cmd)
+        self._episode_steps += stepped
+        if stepped[0]:
+            self._env0_stepped = True
+            self._env0_lift = bool(cmd[0, CMD_LIFT] > 0.5)
+        report = core.report
+        rewards = np.where(stepped, report[:, R_REWARD], 0.0)
+        # A lift always ends the episode (success, unsafe or premature); nothing else terminates.
+        terminated = stepped & (cmd[:, CMD_LIFT] > 0.5)
+        truncated = stepped & (self._episode_steps >= self.max_episode_steps)
+        done = terminated | truncated
+        final = None
+        if mode == AutoresetMode.NEXT_STEP:
+            self._reset_finished(pending)
+            self._done = done
+        elif mode == AutoresetMode.SAME_STEP:
+            if done.any():
+                final = (done, core.obs.copy(), report.copy())
+                self._reset_finished(done)
+        else:
+            self._done = done
+        return core.obs.copy(), rewards, terminated, truncated, final
+
+    def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]
+        """Draw env 0 (``"rgb_array"``: return its frame)."""
+        if self.render_mode is None:
+            gym.logger.warn('render() called without a render_mode; e.g. gym.make_vec(id, render_mode="rgb_array")')
+            return None
+        from coop_gym.envs.rendering import SitToStandRenderer
+
+        if self._renderer is None:
+            self._renderer = SitToStandRenderer()
+        outcome = int(self.core.report[0, R_OUTCOME])
+        state = render_state_for(self.core, 0, outcome, self._env0_lift, self._env0_stepped)
+        if self.render_mode == "rgb_array":
+            return self._renderer.render_rgb(state)  # type: ignore[no-any-return]
+        self._renderer.render_human(state, self.metadata["render_fps"])
+        return None
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Close the window, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # --- helpers ----------------------------------------------------------------
+
+    def _write_commands(self, actions: Any) -> None:
+        """Validate the batch of actions and write their cues into the core's command rows.
+
+        Integer arrays of the right shape and range (what ``action_space.sample()`` and SB3
+        give) take a table look-up; anything else goes through :func:`decode_actions`, which
+        names what is wrong.
+        """
+        n = self.num_envs
+        cmd = self.core.cmd
+        kind = self.action_type
+        a = actions
+        if type(a) is np.ndarray and a.dtype.kind in "iu" and kind != "continuous":
+            try:
+                if kind == "multidiscrete" and a.shape == (n, 3):
+                    # One C call checks every range and flattens (ValueError when out of range).
+                    cmd[:, :CMD_ACTIVE] = self._flat_commands[np.ravel_multi_index(a.T, (3, 3, 2))]
+                    return
+                if kind == "discrete" and a.shape == (n,):
+                    cmd[:, :CMD_ACTIVE] = self._flat_commands[np.ravel_multi_index((a,), (len(self._flat_commands),))]
+                    return
+            except (ValueError, TypeError):
+                pass  # out of range or an unusual integer type: decode_actions decides and names the problem
+        push, verbal, lift = decode_actions(actions, kind, self.cues, n)
+        cmd[:, CMD_PUSH] = push
+        cmd[:, CMD_VERBAL] = verbal
+        cmd[:, CMD_LIFT] = lift
+
+    def _reset_finished(self, mask: NDArray[np.bool_]) -> None:
+        """Autoreset the envs of ``mask``, each continuing its own generator."""
+        if mask.any():
+            self.core.reset_envs(self._all[mask])
+            self._episode_steps[mask] = 0
+            if mask[0]:
+                self._env0_stepped = False
+                self._env0_lift = False
+        self._done = np.zeros(self.num_envs, dtype=bool)
+
+    def _seed_list(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
+        n = self.num_envs
+        if seed is None:
+            return [None] * n
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            if seed < 0:
+                raise ValueError(f"seed must be a non-negative int, got {seed!r}")
+            return [int(seed) + i for i in range(n)]
+        if isinstance(seed, (str, bytes)) or not isinstance(seed, (Sequence, np.ndarray)):
+            raise ValueError(f"seed must be None, an int or a list of {n} ints/None, got {seed!r}")
+        seeds = list(seed)
+        if len(seeds) != n:
+            raise ValueError(f"a list of seeds must have num_envs={n} entries, got {len(seeds)}")
+        for s in seeds:
+            if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
+                raise ValueError(f"each seed must be a non-negative int or None, got {s!r}")
+        return [None if s is None else int(s) for s in seeds]
+
+    def _reset_mask(self, mask: Any) -> NDArray[np.bool_]:
+        n = self.num_envs
+        if mask is None:
+            return np.ones(n, dtype=bool)
+        if not isinstance(mask, np.ndarray):
+            raise TypeError(f'options["reset_mask"] must be a numpy array, got {type(mask).__name__}')
+        if mask.dtype != np.bool_:
+            raise TypeError(f'options["reset_mask"] must have dtype bool, got {mask.dtype}')
+        if mask.shape != (n,):
+            raise ValueError(f'options["reset_mask"] must have shape ({n},), got {mask.shape}')
+        if not mask.any():
+            raise ValueError('options["reset_mask"] must select at least one env')
+        return mask.copy()
+
+    def _infos(self, report: NDArray[np.float64], mask: NDArray[np.bool_] | None) -> dict[str, Any]:
+        """Infos of the envs of ``mask`` (default all) from report rows, Gymnasium style.
+
+        Entries of envs outside the mask are zero (``None`` for labels), as Gymnasium's
+        ``_add_info`` leaves them.
+        """
+        n = self.num_envs
+        r = report
+        outcome = r[:, R_OUTCOME].astype(np.int64)
+        persona = r[:, R_PERSONA].astype(np.int64)
+        values: dict[str, NDArray[Any]] = {
+            "true_x_m": r[:, R_TRUE_X].copy(),
+            "true_xdot_m_per_s": r[:, R_TRUE_XDOT].copy(),
+            "true_eta_m": r[:, R_TRUE_ETA].copy(),
+            "true_xi": r[:, R_TRUE_XI].astype(np.int64),
+            "persona": self._persona_names[persona],
+            "persona_index": persona,
+            "outcome": _OUTCOME_LABELS[outcome],
+            "outcome_code": outcome,
+            "judgment": r[:, F_JUDGMENT].astype(np.int64),
+            "xi_estimate": r[:, F_XI_HAT].copy(),
+            "push_force_n": r[:, R_PUSH].copy(),
+            "verbal_cue": r[:, F_VERBAL].astype(np.int64),
+            "elapsed_s": r[:, F_ELAPSED].copy(),
+        }
+        if self.core.mm is not None:
+            values["xi_probabilities"] = r[:, F_P_M1 : F_P_P1 + 1].copy()
+        terms = {name: r[:, R_TERMS + k].copy() for k, name in enumerate(REWARD_TERMS)}
+        if mask is None:
+            mask = np.ones(n, dtype=bool)
+        elif not mask.all():
+            outside = ~mask
+            for array in (*values.values(), *terms.values()):
+                array[outside] = None if array.dtype == object else 0
+        infos: dict[str, Any] = {}
+        for key, array in values.items():
+            infos[key] = array
+            infos[f"_{key}"] = mask.copy()
+        reward_terms: dict[str, Any] = {}
+        for key, array in terms.items():
+            reward_terms[key] = array
+            reward_terms[f"_{key}"] = mask.copy()
+        infos["reward_terms"] = reward_terms
+        infos["_reward_terms"] = mask.copy()
+        return infos
+
+
+def _autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
+    if isinstance(value, AutoresetMode):
+        return value
+    for mode in AutoresetMode:
+        if value in (mode.value, mode.name):
+            return mode
+    choices = [m.value for m in AutoresetMode] + [m.name for m in AutoresetMode]
+    raise ValueError(f"autoreset_mode must be an AutoresetMode or one of {choices}, got {value!r}")
