@@ -40,9 +40,9 @@ def test_every_id_passes_gymnasium_and_sb3_checkers_without_warnings(env_id: str
 def test_every_id_has_a_time_limit_and_steps(env_id: str) -> None:
     env = gym.make(env_id)
     assert env.spec is not None and env.spec.max_episode_steps == coop_gym.Timing().max_episode_steps
-    obs, info = env.reset(seed=0)
+    obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(obs)
-    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
     assert env.observation_space.contains(obs)
     assert isinstance(reward, float) and isinstance(terminated, bool) and isinstance(truncated, bool)
 
@@ -148,7 +148,13 @@ def test_observation_modes_hold_the_documented_features() -> None:
     raw = gym.make("CoopGym/SitToStandRaw-v0").unwrapped
     oracle = gym.make("CoopGym/SitToStandOracle-v0").unwrapped
     assert belief.features == FEATURES[:11]
-    assert raw.features == ("measured_position_m", "measured_force_n", "verbal_cue", "time_since_cue_onset_s", "elapsed_s")
+    assert raw.features == (
+        "measured_position_m",
+        "measured_force_n",
+        "verbal_cue",
+        "time_since_cue_onset_s",
+        "elapsed_s",
+    )
     assert oracle.features[-1] == "true_xi"
     obs, info = oracle.reset(seed=3)
     assert obs[-1] == info["true_xi"]
@@ -239,6 +245,15 @@ def test_reset_options_fix_persona_and_initial_xi() -> None:
 
 def test_env_docstring_documents_every_section() -> None:
     doc = coop_gym.SitToStandEnv.__doc__ or ""
-    for section in ("Description", "Action Space", "Observation Space", "Rewards", "Starting State", "Episode End",
-                    "Arguments", "Vectorized environment", "Version History"):
+    for section in (
+        "Description",
+        "Action Space",
+        "Observation Space",
+        "Rewards",
+        "Starting State",
+        "Episode End",
+        "Arguments",
+        "Vectorized environment",
+        "Version History",
+    ):
         assert f"## {section}" in doc

@@ -24,7 +24,14 @@ from coop_gym.model.dynamics import (
     simulate,
 )
 from coop_gym.model.params import Biomechanics, Cooperativeness, Intention, PersonParams, Realism, Timing
-from coop_gym.model.personas import PERSONAS, TEST_PERSONAS, TRAIN_PERSONAS, get_persona, resolve_personas, sample_person
+from coop_gym.model.personas import (
+    PERSONAS,
+    TEST_PERSONAS,
+    TRAIN_PERSONAS,
+    get_persona,
+    resolve_personas,
+    sample_person,
+)
 
 TIMING = Timing()
 IDEAL = PersonParams().with_realism(Realism.off())
@@ -117,7 +124,9 @@ def test_uncooperative_person_stiffens_against_a_push() -> None:
     for xi in (-1, 1):
         # Hold eta at 0 by giving no intention gain so only the direct push acts.
         person = dataclasses.replace(stiff, intention=dataclasses.replace(stiff.intention, push_gain_m_per_s_n=0.0))
-        traj = simulate(person, np.full(500, 30.0), np.zeros(500), np.random.default_rng(0), initial_xi=xi, hold_xi=True)
+        traj = simulate(
+            person, np.full(500, 30.0), np.zeros(500), np.random.default_rng(0), initial_xi=xi, hold_xi=True
+        )
         leans[xi] = traj.true_state[-1, 0]
     factor = stiff.biomechanics.stiffness_factor_uncooperative
     assert leans[-1] == pytest.approx(factor * leans[1], rel=1e-9)
@@ -233,7 +242,7 @@ def test_initial_probabilities_must_not_exceed_one() -> None:
 
 
 def test_unknown_persona_raises_listing_known_ones() -> None:
-    with pytest.raises(ValueError, match="unknown persona 'grumpy'.*typical"):
+    with pytest.raises(ValueError, match=r"unknown persona 'grumpy'.*typical"):
         get_persona("grumpy")
     with pytest.raises(ValueError, match="personas must be"):
         resolve_personas([])
