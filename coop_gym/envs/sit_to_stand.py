@@ -613,8 +613,10 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self.core.step_commands(self._command(action))
         r = self._report_row.tolist()
         self._outcome = outcome = int(r[R_OUTCOME])
-        # Only a lift ends an episode from inside the env (the time limit is TimeLimit's).
+        # A lift terminates. The episode clock of ``timing`` truncates (the registered
+        # TimeLimit agrees with it for the default timing; a custom ``timing`` is honoured too).
         terminated = outcome in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE)
+        truncated = outcome == Outcome.TIMEOUT
         self._last_lift = terminated
         self._needs_reset = terminated
         self._stepped = True
@@ -622,7 +624,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         info = report_info(r, self._persona_names, self._has_mm)
         if self.render_mode == "human":
             self.render()
-        return obs, r[R_REWARD], terminated, False, info
+        return obs, r[R_REWARD], terminated, truncated, info
 
     def render(self) -> NDArray[np.uint8] | None:
         """Draw the person, the cues, the estimate gauge and the true ``xi``."""

@@ -272,7 +272,9 @@ class SitToStandVectorEnv(VectorEnv):
         rewards = np.where(stepped, report[:, R_REWARD], 0.0)
         # A lift always ends the episode (success, unsafe or premature); nothing else terminates.
         terminated = stepped & (cmd[:, CMD_LIFT] > 0.5)
-        truncated = stepped & (self._episode_steps >= self.max_episode_steps)
+        # Truncated by the step limit or by the episode clock of ``timing``, whichever comes first.
+        clock_out = report[:, R_OUTCOME] == Outcome.TIMEOUT
+        truncated = stepped & ~terminated & ((self._episode_steps >= self.max_episode_steps) | clock_out)
         done = terminated | truncated
         final = None
         if mode == AutoresetMode.NEXT_STEP:
