@@ -72,8 +72,7 @@ from coop_gym.model.dynamics import (
     zoh_coefficients,
 )
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
-from coop_gym.model.personas import _VARIED as _VARIED_PARAMETERS  # which fields sample_person varies
-from coop_gym.model.personas import Persona
+from coop_gym.model.personas import VARIED_PARAMETERS, Persona
 from estimator.judgment import J_JUDGMENT, J_SINCE_ONSET, JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
 from estimator.kalman import NOMINAL_COLUMNS, kalman_step, nominal_row
 from estimator.nominal import STATE_DIM, NominalModel
@@ -676,7 +675,7 @@ class SitToStandCore:
             table[k, _PT_XI_CUTS] = coop.initial_p_uncooperative
             table[k, _PT_XI_CUTS + 1] = 1.0 - coop.initial_p_cooperative
         self.persona_table = table
-        varied = [PARAM_COLUMNS.index(name) for names in _VARIED_PARAMETERS.values() for name in names]
+        varied = [PARAM_COLUMNS.index(name) for names in VARIED_PARAMETERS.values() for name in names]
         stds = {p.variation_relative_std for p in personas}
         # One shared std (the usual case) broadcasts from a 1-element array (cheaper for a ufunc
         # than a Python float); else each reset env takes its persona's.

@@ -20,6 +20,7 @@ __all__ = [
     "PERSONAS",
     "TEST_PERSONAS",
     "TRAIN_PERSONAS",
+    "VARIED_PARAMETERS",
     "Persona",
     "get_persona",
     "resolve_personas",
@@ -187,7 +188,8 @@ def _bad_persona(spec: object) -> tuple[Persona, ...]:
 
 
 # Gains and traits that vary from person to person (log-normally, so they keep their sign).
-_VARIED: dict[str, tuple[str, ...]] = {
+# The env core applies the same variation in compiled code from this table.
+VARIED_PARAMETERS: dict[str, tuple[str, ...]] = {
     "biomechanics": ("damping_rate_per_s", "voluntary_gain_per_s2", "push_compliance_m_per_s2_n"),
     "intention": ("push_gain_m_per_s_n", "verbal_gain_m_per_s"),
     "cooperativeness": ("persuadability", "startle_sensitivity"),
@@ -200,12 +202,13 @@ def sample_person(persona: Persona, rng: np.random.Generator, vary: bool = True)
     The same number of random draws is made whether or not ``vary`` is set, so turning
     variation off does not shift the rest of an episode's random stream.
     """
-    factors = np.exp(rng.standard_normal(sum(len(v) for v in _VARIED.values())) * persona.variation_relative_std)
+    n_varied = sum(len(v) for v in VARIED_PARAMETERS.values())
+    factors = np.exp(rng.standard_normal(n_varied) * persona.variation_relative_std)
     if not vary:
         return persona.params
     levels: dict[str, object] = {}
     k = 0
-    for level, names in _VARIED.items():
+    for level, names in VARIED_PARAMETERS.items():
         base = getattr(persona.params, level)
         changes = {}
         for name in names:

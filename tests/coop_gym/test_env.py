@@ -262,15 +262,16 @@ def test_env_docstring_documents_every_section() -> None:
 def test_a_custom_episode_length_truncates_on_the_envs_own_clock() -> None:
     env = gym.make("CoopGym/SitToStand-v0", timing={"episode_s": 10.0})
     env.reset(seed=0)
-    for step in range(1, 301):
+    steps, terminated, truncated = 0, False, False
+    while not (terminated or truncated) and steps < 300:
         _, _, terminated, truncated, info = env.step([0, 0, 0])
-        if terminated or truncated:
-            break
-    assert truncated and step == 100 and info["outcome"] == "timeout"
+        steps += 1
+    assert truncated and steps == 100 and info["outcome"] == "timeout"
     envs = gym.make_vec("CoopGym/SitToStand-v0", num_envs=2, timing={"episode_s": 10.0})
     envs.reset(seed=0)
-    for step in range(1, 301):
-        _, _, terminated, truncated, _ = envs.step(np.zeros((2, 3), dtype=np.int64))
-        if truncated.any() or terminated.any():
-            break
-    assert truncated.all() and step == 100
+    steps, done = 0, np.zeros(2, dtype=bool)
+    while not done.any() and steps < 300:
+        _, _, terminated_v, truncated_v, _ = envs.step(np.zeros((2, 3), dtype=np.int64))
+        done = terminated_v | truncated_v
+        steps += 1
+    assert truncated_v.all() and steps == 100

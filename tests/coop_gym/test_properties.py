@@ -155,7 +155,7 @@ def dataclass_values(draw: st.DrawFn, cls: type, shrink: float = 1.0) -> dict[st
     return out
 
 
-# Fields multiplied by exp(N(0, sigma)) per episode (coop_gym.model.personas._VARIED).
+# Fields multiplied by exp(N(0, sigma)) per episode (coop_gym.model.personas.VARIED_PARAMETERS).
 VARIED: dict[type, tuple[str, ...]] = {
     Biomechanics: ("damping_rate_per_s", "voluntary_gain_per_s2", "push_compliance_m_per_s2_n"),
     Intention: ("push_gain_m_per_s_n", "verbal_gain_m_per_s"),
