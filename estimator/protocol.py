@@ -101,6 +101,8 @@ XI_VALUES: tuple[int, int, int] = (-1, 0, 1)
 """Row/column order of every confusion table: uncooperative, unresponsive, cooperative."""
 
 XI_NAMES: tuple[str, str, str] = ("uncooperative", "unresponsive", "cooperative")
+XI_SHORT: tuple[str, str, str] = ("uncoop.", "unresp.", "coop.")
+"""Column labels for narrow tables and plot ticks."""
 
 PHYSICAL_CUES: tuple[str, str, str] = ("none", "soft", "hard")
 VERBAL_CUES: tuple[str, str, str] = ("none", "back", "forward")
@@ -1029,7 +1031,7 @@ def format_tables(summary: dict[str, Any], paper: PaperResults = PAPER_RESULTS) 
         "Table II  P(estimated | requested)",
         "Table III P(requested | estimated)",
     )
-    head = "".join(f"{n[:7]:>8s}" for n in XI_NAMES)
+    head = "".join(f"{n:>8s}" for n in XI_SHORT)
     lines = [
         f"estimator: {summary['estimator']}, seed {summary['seed']}, {summary['n_subjects']} subjects x "
         f"{summary['n_trials']} trials (simulated)  |  paper: 4 real subjects x 25 trials",
@@ -1089,10 +1091,10 @@ def format_aggregate(agg: dict[str, Any], paper: PaperResults = PAPER_RESULTS) -
         ("Table II  P(estimated | requested)", "p_estimated_given_requested", p_req, True),
         ("Table III P(requested | estimated)", "p_requested_given_estimated", p_est, True),
     )
-    head = "".join(f"{n[:7]:>15s}" for n in XI_NAMES)
+    head = "".join(f"{n:>15s}" for n in XI_SHORT)
     lines = [f"estimator: {agg['estimator']}, {len(agg['seeds'])} seeds (mean +/- std over seeds)  |  paper: real"]
     for title, key, theirs, pct in blocks:
-        paper_head = "".join(f"{n[:7]:>8s}" for n in XI_NAMES)
+        paper_head = "".join(f"{n:>8s}" for n in XI_SHORT)
         lines += ["", f"{title}   [simulated | paper]", f"{'requested':>14s}{head}   |{paper_head}"]
         mean = np.array(agg[f"{key}_mean"], dtype=np.float64)
         std = np.array(agg[f"{key}_std"], dtype=np.float64)
@@ -1234,8 +1236,8 @@ def plot_confusion(summary: dict[str, Any], path: str, paper: PaperResults = PAP
                 v = rates[r, c]
                 txt = f"{int(conf[r, c])}\n{_pct(v)}"
                 ax.text(c, r, txt, ha="center", va="center", color="white" if v > 0.5 else "black", fontsize=9)
-        ax.set_xticks(range(3), [n[:7] for n in XI_NAMES])
-        ax.set_yticks(range(3), [n[:7] for n in XI_NAMES])
+        ax.set_xticks(range(3), list(XI_SHORT))
+        ax.set_yticks(range(3), list(XI_SHORT))
         ax.set_xlabel("estimated")
         ax.set_ylabel("requested")
         ax.set_title(f"{title}\nBA {100 * balanced_accuracy(conf):.1f}%", fontsize=10)
