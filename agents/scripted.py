@@ -1,0 +1,479 @@
+"""Scripted baselines: random, lift-at-once, push-then-lift, the handbook caregiver, the oracle.
+
+Every agent follows SB3's ``predict(obs, state, episode_start, deterministic) -> (actions,
+state)`` (:class:`agents.base.Agent`), batched over a leading env axis; a single
+unbatched observation gives a single action. Features are found by *name* in the
+env's feature list (``env.unwrapped.features``), never by position, so the same agent
+runs on every observation mode and estimator that provides what it reads.
+
+Per-env memory (phase and phase timers) lives in a :class:`PhaseState`. It is returned
+as the ``state`` of ``predict``; pass it back to keep the episode going. When the caller
+passes ``state=None`` (the usual ``action, _ = agent.predict(obs)`` loop) the agent
+keeps the memory itself. Memory is reset for every env marked in ``episode_start``
+and for every observation whose ``elapsed_s`` is 0 (the first of an episode).
+
+Example:
+    >>> import gymnasium as gym
+    >>> import coop_gym
+    >>> env = gym.make("CoopGym/SitToStand-v0")
+    >>> agent = HandbookCaregiver.for_env(env)
+    >>> obs, _ = env.reset(seed=0)
+    >>> action, state = agent.predict(obs)
+    >>> action.tolist()  # first step: explain ("lean forward"), no push, no lift
+    [0, 2, 0]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.base import (
+    LIFT,
+    PUSH_FIRM,
+    PUSH_NONE,
+    PUSH_SOFT,
+    VERBAL_FORWARD,
+    VERBAL_NONE,
+    WAIT,
+    action_type_of,
+    encode_actions,
+    features_of,
+    require_features,
+)
+from coop_gym.envs.config import ACTION_TYPES, LiftCriteria
+from coop_gym.envs.sit_to_stand import observation_features
+from estimator.judgment import ThresholdJudgment
+
+__all__ = [
+    "SCRIPTED_AGENTS",
+    "HandbookCaregiver",
+    "HandbookSettings",
+    "LiftAtOnceAgent",
+    "OracleAgent",
+    "OracleSettings",
+    "PhaseState",
+    "PushThenLiftAgent",
+    "PushThenLiftSettings",
+    "RandomAgent",
+    "ScriptedAgent",
+    "make_scripted",
+]
+
+_EPS_S = 1e-6  # slack on clock comparisons: elapsed time is a float sum of 0.1 s steps
+_DEFAULT_LEAN_M = LiftCriteria().success_lean_m
+_JUDGMENT_DELAY_S = ThresholdJudgment().delay_s
+
+
+@dataclass
+class PhaseState:
+    """Per-env memory of a scripted agent (mutable arrays of shape (N,)).
+
+    Attributes:
+        phase: Current phase (meaning depends on the agent).
+        phase_start_s: Episode time at which the phase began [s].
+        count: A per-phase counter (e.g. pushes since the last explanation).
+        flag: A per-phase flag (e.g. the explanation has been spoken).
+    """
+
+    phase: NDArray[np.int64]
+    phase_start_s: NDArray[np.float64]
+    count: NDArray[np.int64]
+    flag: NDArray[np.bool_]
+
+    @classmethod
+    def zeros(cls, n_envs: int) -> PhaseState:
+        """Fresh memory for ``n_envs`` envs."""
+        return cls(
+            np.zeros(n_envs, dtype=np.int64),
+            np.zeros(n_envs),
+            np.zeros(n_envs, dtype=np.int64),
+            np.zeros(n_envs, dtype=bool),
+        )
+
+    @property
+    def n_envs(self) -> int:
+        """Number of envs this memory covers."""
+        return int(self.phase.shape[0])
+
+    def copy(self) -> PhaseState:
+        """An independent copy (``predict`` never mutates the state it is given)."""
+        return PhaseState(self.phase.copy(), self.phase_start_s.copy(), self.count.copy(), self.flag.copy())
+
+    def enter(self, mask: NDArray[np.bool_], phase: int, now_s: NDArray[np.float64]) -> None:
+        """Move the envs in ``mask`` to ``phase``, starting its clock now."""
+        self.phase[mask] = phase
+        self.phase_start_s[mask] = now_s[mask]
+        self.flag[mask] = False
+
+
+class ScriptedAgent:
+    """Base class: batching, feature lookup, per-env memory and action encoding.
+
+    Subclasses set :attr:`name` and :attr:`needs` (the features they read) and implement
+    :meth:`_decide`.
+
+    Args:
+        features: Names of the observation's features, in order (``env.unwrapped.features``
+            or :func:`coop_gym.envs.sit_to_stand.observation_features`). Default: the
+            belief observation of the paper's Kalman filter.
+        action_type: ``"multidiscrete"`` (default), ``"discrete"`` or ``"continuous"``.
+        seed: Seed of the agent's own random generator (only :class:`RandomAgent` draws).
+    """
+
+    name: ClassVar[str] = "scripted"
+    needs: ClassVar[tuple[str, ...]] = ("elapsed_s",)
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+    ) -> None:
+        """Check that the observation provides what the agent reads."""
+        if action_type not in ACTION_TYPES:
+            raise ValueError(f"action_type must be one of {list(ACTION_TYPES)}, got {action_type!r}")
+        self.features = tuple(features) if features is not None else observation_features("belief", "kalman")
+        self.action_type = action_type
+        self.columns = require_features(self.features, self.needs, type(self).__name__)
+        self.rng = np.random.default_rng(seed)
+        self._memory: PhaseState | None = None
+
+    @classmethod
+    def for_env(cls, env: Any, **kwargs: Any) -> ScriptedAgent:
+        """Build the agent for a (single or vector) coop_gym env: its features and action type."""
+        return cls(features_of(env), action_type_of(env), **kwargs)
+
+    def reset(self) -> None:
+        """Forget the memory kept for ``state=None`` callers."""
+        self._memory = None
+
+    def predict(
+        self,
+        observation: Any,
+        state: PhaseState | None = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[NDArray[Any], PhaseState]:
+        """Actions for a batch of observations (SB3's protocol).
+
+        Args:
+            observation: (N, F) batch or a single (F,) observation.
+            state: The :class:`PhaseState` returned by the previous call, or None to use the
+                memory the agent keeps itself.
+            episode_start: (N,) bools, True where an episode has just begun (memory reset).
+            deterministic: Ignored by the scripted agents except :class:`RandomAgent`'s
+                documented behaviour (it always samples).
+
+        Returns:
+            ``(actions, state)``: (N, ...) actions of the agent's action type (unbatched if
+            ``observation`` was), and the memory to pass back.
+        """
+        obs = np.asarray(observation, dtype=np.float64)
+        single = obs.ndim == 1
+        if single:
+            obs = obs[None]
+        if obs.ndim != 2 or obs.shape[1] != len(self.features):
+            raise ValueError(
+                f"{type(self).__name__}.predict: observation has shape {np.shape(observation)}; expected "
+                f"(N, {len(self.features)}) or ({len(self.features)},) for features {list(self.features)}"
+            )
+        if not np.all(np.isfinite(obs)):
+            raise ValueError(f"{type(self).__name__}.predict: observation contains NaN or inf")
+        n = obs.shape[0]
+        memory = state if state is not None else self._memory
+        fresh = memory is None or memory.n_envs != n
+        memory = PhaseState.zeros(n) if fresh or memory is None else memory.copy()
+        now = obs[:, self.columns["elapsed_s"]]
+        starts = np.full(n, fresh) | (now <= _EPS_S)
+        if episode_start is not None:
+            mask = np.asarray(episode_start, dtype=bool).reshape(-1)
+            if mask.shape != (n,):
+                raise ValueError(f"episode_start has {mask.shape[0]} entries for {n} observations")
+            starts |= mask
+        if np.any(starts):
+            memory.enter(starts, 0, now)
+            memory.count[starts] = 0
+        push, verbal, lift = self._decide(obs, memory, now)
+        self._memory = memory
+        actions = encode_actions(push, verbal, lift, self.action_type)
+        return (actions[0] if single else actions), memory
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        raise NotImplementedError
+
+    def _column(self, obs: NDArray[np.float64], feature: str) -> NDArray[np.float64]:
+        return obs[:, self.columns[feature]]
+
+
+class RandomAgent(ScriptedAgent):
+    """Uniformly random cues and lift decision every step (seeded; ignores ``deterministic``).
+
+    Lifting with probability 1/2 each step, it usually lifts within the first steps: the
+    floor every other agent must clear.
+    """
+
+    name = "random"
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        n = obs.shape[0]
+        draws = self.rng.integers(0, (3, 3, 2), size=(n, 3))
+        return draws[:, 0], draws[:, 1], draws[:, 2]
+
+
+class LiftAtOnceAgent(ScriptedAgent):
+    """Lifts on the very first step, without any cue: what a robot unaware of the mind does."""
+
+    name = "lift_at_once"
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        n = obs.shape[0]
+        return np.full(n, PUSH_NONE), np.full(n, VERBAL_NONE), np.full(n, LIFT)
+
+
+@dataclass(frozen=True)
+class PushThenLiftSettings:
+    """Settings of :class:`PushThenLiftAgent`.
+
+    Attributes:
+        lean_m: Lift once the shoulder is estimated at least this far forward [m].
+        escalate_after_s: Push gently this long, then firmly until leaning [s].
+    """
+
+    lean_m: float = _DEFAULT_LEAN_M
+    escalate_after_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _check_range("PushThenLiftSettings.lean_m", self.lean_m, 0.0, 1.0)
+        _check_range("PushThenLiftSettings.escalate_after_s", self.escalate_after_s, 0.0, 3600.0)
+
+
+class PushThenLiftAgent(ScriptedAgent):
+    """Pushes until the person leans, then lifts -- ignoring the mental state (paper §I/§II).
+
+    A gentle push first, then a firm one if the person has not leant after
+    ``escalate_after_s``. No explanation is given and cooperativeness is never checked,
+    so a frail person, whom a firm push moves a long way whatever they think, is lifted
+    while resisting: the paper's failure scenario. Reads the filter's ``x_hat_m`` when
+    the observation has it, else the measured shoulder position.
+    """
+
+    name = "push_then_lift"
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+        settings: PushThenLiftSettings | None = None,
+    ) -> None:
+        """See :class:`ScriptedAgent`; ``settings`` default to :class:`PushThenLiftSettings`."""
+        super().__init__(features, action_type, seed)
+        self.settings = settings or PushThenLiftSettings()
+        self.lean_feature = "x_hat_m" if "x_hat_m" in self.features else "measured_position_m"
+        self.columns |= require_features(self.features, (self.lean_feature,), type(self).__name__)
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        n = obs.shape[0]
+        leaning = self._column(obs, self.lean_feature) >= self.settings.lean_m
+        pushed_long = now - memory.phase_start_s >= self.settings.escalate_after_s - _EPS_S
+        push = np.where(pushed_long, PUSH_FIRM, PUSH_SOFT)
+        return np.where(leaning, PUSH_NONE, push), np.full(n, VERBAL_NONE), np.where(leaning, LIFT, WAIT)
+
+
+@dataclass(frozen=True)
+class HandbookSettings:
+    """Settings of :class:`HandbookCaregiver` (defaults follow the paper's §II and §IV).
+
+    Attributes:
+        lean_m: Lift only once the filter's shoulder estimate is at least this far forward
+            [m]: the centre of mass over the feet (``LiftCriteria.success_lean_m``) plus a
+            small margin for estimation error.
+        pause_s: Silence before each gentle push [s], so the push is a fresh cue onset and
+            earns its own judgment (the judgment samples ``xi_hat`` a fixed delay after a
+            cue's *onset*).
+        judge_after_s: Push this long before reading the judgment [s] (the paper's 0.75 s
+            sampling delay).
+        pushes_per_explanation: Unresponsive push-and-judge rounds before explaining again
+            (the explanation must still be fresh when the push comes).
+        lean_patience_s: After a cooperative judgment, keep pushing gently and encouraging
+            this long for the lean [s]; then re-check cooperativeness with a fresh push.
+    """
+
+    lean_m: float = _DEFAULT_LEAN_M + 0.01
+    pause_s: float = 0.1
+    judge_after_s: float = _JUDGMENT_DELAY_S
+    pushes_per_explanation: int = 2
+    lean_patience_s: float = 4.0
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _check_range("HandbookSettings.lean_m", self.lean_m, 0.0, 1.0)
+        _check_range("HandbookSettings.pause_s", self.pause_s, 0.0, 60.0)
+        _check_range("HandbookSettings.judge_after_s", self.judge_after_s, 0.0, 60.0)
+        _check_range("HandbookSettings.lean_patience_s", self.lean_patience_s, 0.0, 3600.0)
+        if isinstance(self.pushes_per_explanation, bool) or not isinstance(self.pushes_per_explanation, int):
+            raise ValueError(
+                f"HandbookSettings.pushes_per_explanation must be an int, got {self.pushes_per_explanation!r}"
+            )
+        if self.pushes_per_explanation < 1:
+            raise ValueError(f"HandbookSettings.pushes_per_explanation must be >= 1, got {self.pushes_per_explanation}")
+
+
+class HandbookCaregiver(ScriptedAgent):
+    """The caregiving handbook of paper §II, run on the paper's thresholded judgment (§IV).
+
+    1. **Explain** -- say "lean forward" (one utterance) before touching the person.
+    2. **Pause** briefly, then **push gently** on the upper back: a fresh cue onset, so
+       the filter's judgment is made for this push 0.75 s later.
+    3. **Judge**: cooperative -> keep the gentle push and encourage ("lean forward")
+       until the shoulder estimate shows the lean, then **lift**; unresponsive -> push
+       again (after a pause), re-explaining every ``pushes_per_explanation`` rounds;
+       uncooperative -> **re-explain** before touching again. A lean that does not come
+       within ``lean_patience_s`` is re-judged with a fresh push.
+
+    It lifts only while its latest judgment is cooperative *and* the estimated lean
+    reaches ``lean_m``; otherwise it keeps guiding to the end and gives up by waiting,
+    never by lifting unsafely. It never uses a firm push (startles) or "lean back"
+    (confuses).
+    """
+
+    name = "handbook"
+    needs = ("elapsed_s", "verbal_cue", "x_hat_m", "judgment")
+    EXPLAIN, PAUSE, PUSH, LEAN = 0, 1, 2, 3
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+        settings: HandbookSettings | None = None,
+    ) -> None:
+        """See :class:`ScriptedAgent`; ``settings`` default to :class:`HandbookSettings`."""
+        super().__init__(features, action_type, seed)
+        self.settings = settings or HandbookSettings()
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        s = self.settings
+        silent = self._column(obs, "verbal_cue") == 0.0
+        judgment = self._column(obs, "judgment")
+        leaning = self._column(obs, "x_hat_m") >= s.lean_m
+        age = now - memory.phase_start_s
+        phase = memory.phase.copy()  # transitions are decided on the phase at the start of the step
+
+        # Explain: the utterance has been spoken (flag) and has finished playing.
+        done_explaining = (phase == self.EXPLAIN) & memory.flag & silent
+        memory.enter(done_explaining, self.PAUSE, now)
+        memory.count[done_explaining] = 0
+        # Pause: a real silence (no push, nothing playing) so the next push is a new onset.
+        done_pausing = (phase == self.PAUSE) & (age >= s.pause_s - _EPS_S) & silent
+        memory.enter(done_pausing, self.PUSH, now)
+        # Push: the judgment for this push's onset is in.
+        judged = (phase == self.PUSH) & (age >= s.judge_after_s - _EPS_S)
+        cooperative = judged & (judgment > 0.5)
+        uncooperative = judged & (judgment < -0.5)
+        unresponsive = judged & ~cooperative & ~uncooperative
+        memory.count[unresponsive] += 1
+        again = unresponsive & (memory.count < s.pushes_per_explanation)
+        memory.enter(cooperative, self.LEAN, now)
+        memory.enter(again, self.PAUSE, now)
+        memory.enter(uncooperative | (unresponsive & ~again), self.EXPLAIN, now)
+        # Lean: the lean did not come; re-judge with a fresh push.
+        impatient = (phase == self.LEAN) & (age >= s.lean_patience_s - _EPS_S) & ~leaning
+        memory.enter(impatient, self.PAUSE, now)
+
+        phase = memory.phase
+        lift = (phase == self.LEAN) & leaning & (judgment > 0.5)
+        speak = (phase == self.EXPLAIN) & ~memory.flag & silent
+        memory.flag |= speak
+        encourage = (phase == self.LEAN) & silent & ~lift
+        push = np.where(((phase == self.PUSH) | (phase == self.LEAN)) & ~lift, PUSH_SOFT, PUSH_NONE)
+        verbal = np.where(speak | encourage, VERBAL_FORWARD, VERBAL_NONE)
+        return push, verbal, np.where(lift, LIFT, WAIT)
+
+
+@dataclass(frozen=True)
+class OracleSettings:
+    """Settings of :class:`OracleAgent`.
+
+    Attributes:
+        lean_m: Lift once cooperative and the shoulder estimate is at least this far
+            forward [m] (``LiftCriteria.success_lean_m`` plus a margin for estimation error).
+    """
+
+    lean_m: float = _DEFAULT_LEAN_M + 0.01
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        _check_range("OracleSettings.lean_m", self.lean_m, 0.0, 1.0)
+
+
+class OracleAgent(ScriptedAgent):
+    """Sees the true ``xi`` (the oracle observation's ``true_xi``): an upper bound.
+
+    Lifts exactly when the person is cooperative and leaning enough; otherwise explains
+    ("lean forward", repeated whenever silent, so the explanation is always fresh) and
+    pushes gently -- the combination that turns people cooperative fastest without
+    startling them.
+    """
+
+    name = "oracle"
+    needs = ("elapsed_s", "verbal_cue", "x_hat_m", "true_xi")
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+        settings: OracleSettings | None = None,
+    ) -> None:
+        """See :class:`ScriptedAgent`; the default features are the oracle observation's."""
+        super().__init__(
+            features if features is not None else observation_features("oracle", "kalman"), action_type, seed
+        )
+        self.settings = settings or OracleSettings()
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        cooperative = self._column(obs, "true_xi") > 0.5
+        lift = cooperative & (self._column(obs, "x_hat_m") >= self.settings.lean_m)
+        silent = self._column(obs, "verbal_cue") == 0.0
+        push = np.where(lift, PUSH_NONE, PUSH_SOFT)
+        verbal = np.where(silent & ~lift, VERBAL_FORWARD, VERBAL_NONE)
+        return push, verbal, np.where(lift, LIFT, WAIT)
+
+
+SCRIPTED_AGENTS: dict[str, type[ScriptedAgent]] = {
+    cls.name: cls for cls in (RandomAgent, LiftAtOnceAgent, PushThenLiftAgent, HandbookCaregiver, OracleAgent)
+}
+"""Scripted agents by name."""
+
+
+def make_scripted(
+    name: str, features: Sequence[str] | None = None, action_type: str = "multidiscrete", seed: int | None = None
+) -> ScriptedAgent:
+    """Build a scripted agent by name (see :data:`SCRIPTED_AGENTS`)."""
+    if name not in SCRIPTED_AGENTS:
+        raise ValueError(f"unknown scripted agent {name!r}; known: {', '.join(SCRIPTED_AGENTS)}")
+    return SCRIPTED_AGENTS[name](features, action_type, seed)
+
+
+def _check_range(name: str, value: Any, low: float, high: float) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
+        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")

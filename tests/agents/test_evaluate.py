@@ -1,0 +1,213 @@
+"""The one evaluation path: same seeded episodes for every agent, metrics, CLI, files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import coop_gym  # noqa: F401
+from agents.evaluate import (
+    OUTCOMES,
+    EpisodeRecord,
+    EvaluationResult,
+    env_kwargs_for,
+    evaluate,
+    main,
+    vector_env_available,
+    wilson_interval,
+    write_csv,
+)
+from agents.scripted import HandbookCaregiver, OracleAgent
+
+
+def test_wilson_interval_known_values():
+    assert wilson_interval(0, 10) == pytest.approx((0.0, 0.2775), abs=1e-4)
+    assert wilson_interval(10, 10) == pytest.approx((0.7225, 1.0), abs=1e-4)
+    low, high = wilson_interval(30, 100)
+    assert low == pytest.approx(0.2189, abs=1e-4) and high == pytest.approx(0.3958, abs=1e-4)
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+
+
+def test_episode_k_is_the_env_seeded_seed_plus_k():
+    result = evaluate("handbook", personas="test", episodes=12, seed=40, n_envs=5)
+    assert [r.episode for r in result.records] == list(range(12))
+    assert [r.seed for r in result.records] == list(range(40, 52))
+    env = gym.make("CoopGym/SitToStand-v0", personas=["frail", "forgetful"])
+    assert [r.persona for r in result.records] == [env.reset(seed=40 + k)[1]["persona"] for k in range(12)]
+    assert sum(result.count(o) for o in OUTCOMES) == 12
+
+
+def test_same_episodes_whatever_the_agent_or_batch():
+    a = evaluate("handbook", personas="all", episodes=14, seed=3, n_envs=1)
+    b = evaluate("handbook", personas="all", episodes=14, seed=3, n_envs=6)
+    assert a.records == b.records  # n_envs only changes speed
+    oracle = evaluate("oracle", personas="all", episodes=14, seed=3, n_envs=4)
+    assert [r.persona for r in oracle.records] == [r.persona for r in a.records]
+    assert oracle.env_kwargs["observation_mode"] == "oracle"
+
+
+def test_oracle_variant_plays_the_same_episodes():
+    """The oracle's env differs only in what it observes: same seed and actions, same person and truth."""
+    belief = gym.make("CoopGym/SitToStand-v0", personas="test")
+    oracle = gym.make("CoopGym/SitToStand-v0", personas="test", observation_mode="oracle")
+    rng = np.random.default_rng(0)
+    for seed in range(3):
+        b_obs, b_info = belief.reset(seed=seed)
+        o_obs, o_info = oracle.reset(seed=seed)
+        assert b_info["persona"] == o_info["persona"] and b_info["true_xi"] == o_info["true_xi"]
+        for _ in range(40):
+            action = [int(rng.integers(3)), int(rng.integers(3)), 0]
+            b_obs, _, _, _, b_info = belief.step(action)
+            o_obs, _, _, _, o_info = oracle.step(action)
+            assert np.array_equal(b_obs, o_obs[:-1]) and o_obs[-1] == o_info["true_xi"]
+            assert b_info["true_x_m"] == o_info["true_x_m"] and b_info["true_xi"] == o_info["true_xi"]
+
+
+@pytest.mark.skipif(not vector_env_available(), reason="coop_gym.envs.vector not available yet")
+def test_vector_and_single_env_backends_agree():
+    for name in ("handbook", "push_then_lift"):
+        single = evaluate(name, personas="test", episodes=20, seed=5, n_envs=8, backend="single")
+        vector = evaluate(name, personas="test", episodes=20, seed=5, n_envs=8, backend="vector")
+        assert vector.backend == "vector" and single.backend == "single"
+        assert single.records == vector.records
+
+
+def test_metrics_of_known_agents():
+    lift = evaluate("lift_at_once", personas="test", episodes=10, seed=0)
+    assert lift.unsafe_rate == 1.0 and lift.mean_time_to_lift_s == 0.0 and lift.mean_cues == 0.0
+    assert lift.mean_return == pytest.approx(-2.0) and lift.std_return == pytest.approx(0.0)
+    hb = evaluate("handbook", personas="test", episodes=10, seed=0)
+    assert hb.success_rate >= 0.9 and hb.unsafe_rate == 0.0
+    assert hb.peak_force_n == pytest.approx(10.0)  # gentle pushes only
+    assert 0.0 < hb.mean_force_n < 10.0 and hb.mean_cues >= 2  # an explanation and a push at least
+    assert hb.mean_time_to_lift_s > 1.0
+    summary = hb.summary()
+    for key in ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate", "mean_return", "mean_time_to_lift_s"):
+        assert key in summary
+    json.dumps(summary)
+    split = hb.by_persona()
+    assert sum(s.episodes for s in split.values()) == 10 and set(split) <= {"frail", "forgetful"}
+
+
+def test_records_match_a_hand_rollout():
+    result = evaluate("handbook", personas="typical", episodes=1, seed=7)
+    env = gym.make("CoopGym/SitToStand-v0", personas="typical")
+    agent = HandbookCaregiver.for_env(env)
+    obs, _ = env.reset(seed=7)
+    total, steps, forces = 0.0, 0, []
+    while True:
+        action, _ = agent.predict(obs)
+        obs, reward, terminated, truncated, info = env.step(action)
+        total += reward
+        steps += 1
+        forces.append(info["push_force_n"])
+        if terminated or truncated:
+            break
+    record = result.records[0]
+    assert record.outcome == info["outcome"] and record.steps == steps
+    assert record.episode_return == pytest.approx(total)
+    assert record.peak_force_n == max(forces)
+    assert record.duration_s == pytest.approx(info["elapsed_s"])
+
+
+def test_agent_objects_and_mismatches():
+    env = gym.make("CoopGym/SitToStandOracle-v0")
+    oracle = OracleAgent.for_env(env)
+    result = evaluate(oracle, personas="test", episodes=4, env_kwargs={"observation_mode": "oracle"}, name="o")
+    assert result.agent == "o" and result.success_rate == 1.0
+    with pytest.raises(ValueError, match="features"):
+        evaluate(oracle, personas="test", episodes=2)  # belief env: no true_xi column
+    with pytest.raises(ValueError, match="unknown agent"):
+        evaluate("nurse", episodes=2)
+    with pytest.raises(ValueError, match="episodes"):
+        evaluate("handbook", episodes=0)
+    with pytest.raises(ValueError, match="persona"):
+        evaluate("handbook", personas="grumpy", episodes=2)
+    assert env_kwargs_for("handbook", "CoopGym/SitToStandRaw-v0") == {"observation_mode": "belief"}
+    assert env_kwargs_for("handbook", "CoopGym/SitToStand-v0") == {}
+
+
+def test_cli_json_has_the_keys(capsys):
+    assert main(["--agent", "handbook", "--episodes", "6", "--json", "--personas", "frail"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    for key in ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate", "mean_return", "mean_time_to_lift_s"):
+        assert key in payload
+    assert payload["episodes"] == 6 and payload["personas"] == ["frail"]
+
+
+def test_cli_compare_writes_csv_json_and_plot(tmp_path, capsys):
+    csv_path, plot_path, json_path = tmp_path / "r.csv", tmp_path / "r.png", tmp_path / "r.json"
+    argv = ["--compare", "lift_at_once,handbook,oracle", "--episodes", "5", "--csv", str(csv_path)]
+    argv += ["--plot", str(plot_path), "--json-out", str(json_path), "--by-persona"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "handbook" in out and "oracle" in out and "by persona" in out
+    lines = csv_path.read_text().splitlines()
+    assert len(lines) == 4 and lines[0].startswith("agent,")
+    assert plot_path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    saved = json.loads(json_path.read_text())
+    assert [r["agent"] for r in saved["results"]] == ["lift_at_once", "handbook", "oracle"]
+    assert len(saved["results"][0]["episode_records"]) == 5
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        [],
+        ["--agent", "nurse"],
+        ["--agent", "handbook", "--episodes", "0"],
+        ["--agent", "handbook", "--personas", "grumpy"],
+        ["--agent", "handbook", "--env", "CoopGym/Nope-v0"],
+        ["--agent", "handbook", "--seed", "-1"],
+        ["--agent", "handbook", "--episodes", "many"],
+    ],
+)
+def test_cli_usage_errors_exit_2(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert "error" in capsys.readouterr().err
+
+
+def test_cli_subprocess_json_and_bad_flag():
+    ok = subprocess.run(
+        [sys.executable, "-m", "agents.evaluate", "--agent", "oracle", "--episodes", "3", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert ok.returncode == 0, ok.stderr
+    assert json.loads(ok.stdout)["success_rate"] == 1.0
+    bad = subprocess.run(
+        [sys.executable, "-m", "agents.evaluate", "--agent", "handbook", "--bogus"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert bad.returncode == 2 and "--bogus" in bad.stderr
+
+
+def test_write_csv_and_empty_rates(tmp_path):
+    record = EpisodeRecord(0, 0, "frail", "timeout", -0.4, 300, 30.0, 0.0, 0.0, 0.0, 0, 0)
+    result = EvaluationResult("idle", "CoopGym/SitToStand-v0", ("frail",), 0, (record,))
+    assert result.timeout_rate == 1.0 and np.isnan(result.mean_time_to_lift_s)
+    assert result.summary()["mean_time_to_lift_s"] is None
+    path = write_csv([result], tmp_path / "x.csv")
+    assert "timeout_rate" in path.read_text().splitlines()[0]
+    with pytest.raises(ValueError, match="outcome"):
+        result.rate("crashed")
+
+
+def test_cli_unwritable_output_exits_2_before_the_work(tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    for flag in ("--csv", "--json-out", "--plot"):
+        with pytest.raises(SystemExit) as exc:
+            main(["--agent", "handbook", flag, str(blocker / "sub" / "out.x")])
+        assert exc.value.code == 2
+        assert "a_file is not a folder" in capsys.readouterr().err

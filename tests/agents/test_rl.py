@@ -1,0 +1,162 @@
+"""Learned agents: tiny learn() smoke runs, save/load round trips, hyperparameters and Zoo files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import coop_gym  # noqa: F401
+from agents.evaluate import evaluate
+from agents.hyperparams import (
+    ALGORITHMS,
+    DEFAULT_ENV_IDS,
+    HYPERPARAMS,
+    ZOO_ALGO_NAMES,
+    TrainingConfig,
+    hyperparams_for,
+    zoo_yaml,
+)
+from agents.rl import (
+    AGENT_FILE,
+    MODEL_FILE,
+    VECNORMALIZE_FILE,
+    SB3Agent,
+    _renamed,
+    load_agent,
+    make_model,
+    make_train_env,
+    save_agent,
+)
+
+torch.set_num_threads(1)
+
+# Small rollouts so learn(64) is quick; everything else is the real default config.
+_TINY = {
+    "ppo": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
+    "recurrent_ppo": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
+    "dqn": {"learning_starts": 16, "buffer_size": 1000, "batch_size": 16, "train_freq": 4},
+}
+
+
+def tiny_model(algo, seed=0, n_envs=2):
+    config = hyperparams_for(algo)
+    env = make_train_env(config.env_id, n_envs, seed, normalize=config.normalize, backend="dummy")
+    return config, env, make_model(config, env, seed, overrides=_TINY[algo])
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_learn_64_smoke_and_save_load_round_trip(algo, tmp_path):
+    config, env, model = tiny_model(algo)
+    model.learn(64)
+    assert model.num_timesteps >= 64
+    save_agent(model, tmp_path, algo=algo, env_id=config.env_id)
+    assert (tmp_path / MODEL_FILE).exists() and (tmp_path / AGENT_FILE).exists()
+    assert (tmp_path / VECNORMALIZE_FILE).exists() == config.normalize
+
+    agent = load_agent(tmp_path)
+    assert agent.algo == algo and agent.env_id == config.env_id
+    live = SB3Agent(model, algo, config.env_id, agent.obs_normalizer)
+    # Same observations -> identical deterministic actions, also through recurrent state.
+    probe = gym.make(config.env_id)
+    obs = np.stack([probe.reset(seed=s)[0] for s in range(3)])
+    state_a = state_b = None
+    starts = np.ones(3, dtype=bool)
+    for _ in range(5):
+        a, state_a = agent.predict(obs, state_a, starts, deterministic=True)
+        b, state_b = live.predict(obs, state_b, starts, deterministic=True)
+        assert np.array_equal(a, b)
+        assert all(probe.action_space.contains(x) for x in a)
+        starts = np.zeros(3, dtype=bool)
+    env.close()
+
+
+def test_saved_normalisation_is_applied(tmp_path):
+    config, env, model = tiny_model("ppo")
+    model.learn(64)
+    save_agent(model, tmp_path, algo="ppo", env_id=config.env_id)
+    agent = load_agent(tmp_path / MODEL_FILE)
+    vec_normalize = env  # make_train_env puts VecNormalize outermost
+    obs = np.stack([gym.make(config.env_id).reset(seed=s)[0] for s in range(4)])
+    assert np.allclose(agent.normalize(obs), vec_normalize.normalize_obs(obs), atol=1e-6)
+    assert agent.normalize(obs[0]).shape == obs[0].shape
+    env.close()
+
+
+def test_recurrent_agent_evaluates_with_its_lstm_state(tmp_path):
+    config, env, model = tiny_model("recurrent_ppo")
+    model.learn(64)
+    save_agent(model, tmp_path, algo="recurrent_ppo", env_id=config.env_id)
+    agent = load_agent(tmp_path)
+    a = evaluate(agent, config.env_id, "test", episodes=4, seed=0, n_envs=2)
+    b = evaluate(agent, config.env_id, "test", episodes=4, seed=0, n_envs=2)
+    assert a.records == b.records and a.episodes == 4
+    env.close()
+
+
+def test_load_agent_errors(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        load_agent(tmp_path / "nothing.zip")
+    bad = tmp_path / "model.zip"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="could not load"):
+        load_agent(bad)
+
+
+def test_hyperparams_are_consistent():
+    for algo in ALGORITHMS:
+        config = hyperparams_for(algo)
+        assert config.env_id == DEFAULT_ENV_IDS[algo] and config.env_id in gym.registry
+        assert config.personas == "train"
+        for env_id, cfg in HYPERPARAMS[algo].items():
+            assert env_id in gym.registry and cfg.algo == algo
+    other = hyperparams_for("ppo", "CoopGym/SitToStandMM-v0")
+    assert other.env_id == "CoopGym/SitToStandMM-v0" and other.algo_kwargs == hyperparams_for("ppo").algo_kwargs
+    with pytest.raises(ValueError, match="unknown algorithm"):
+        hyperparams_for("a2c")
+    with pytest.raises(ValueError, match="n_envs"):
+        TrainingConfig("ppo", "CoopGym/SitToStand-v0", 0, 10, "MlpPolicy", False)
+
+
+def test_zoo_files_are_generated_from_hyperparams():
+    import yaml
+
+    folder = Path(__file__).resolve().parents[2] / "agents" / "zoo"
+    for algo in ALGORITHMS:
+        path = folder / f"{ZOO_ALGO_NAMES[algo]}.yml"
+        assert path.read_text() == zoo_yaml(algo), f"{path} is stale: run agents.hyperparams.write_zoo_files()"
+        loaded = yaml.safe_load(path.read_text())
+        config = hyperparams_for(algo)
+        entry = loaded[config.env_id]
+        assert entry["n_envs"] == config.n_envs and entry["policy"] == config.policy
+        assert entry["env_kwargs"] == {"personas": "train"}
+        for key, value in config.algo_kwargs.items():
+            assert entry[key] == value
+
+
+def test_tensorboard_keys_follow_cleanrl():
+    assert _renamed("rollout/ep_rew_mean") == "charts/episodic_return"
+    assert _renamed("train/value_loss") == "losses/value_loss"
+    assert _renamed("time/fps") == "charts/SPS"
+    assert _renamed("time/iterations") is None
+    assert _renamed("eval/success_rate") == "eval/success_rate"
+
+
+def test_make_train_env_validates():
+    with pytest.raises(ValueError, match="n_envs"):
+        make_train_env("CoopGym/SitToStand-v0", 0, 0)
+    with pytest.raises(ValueError, match="backend"):
+        make_train_env("CoopGym/SitToStand-v0", 1, 0, backend="subproc")
+
+
+def test_algorithm_is_read_from_a_bare_zip(tmp_path):
+    """Without agent.json (e.g. an RL Zoo run) the algorithm comes from the saved policy class."""
+    for algo in ("recurrent_ppo", "dqn"):
+        _, env, model = tiny_model(algo)
+        model.save(tmp_path / f"{algo}.zip")
+        agent = load_agent(tmp_path / f"{algo}.zip")
+        assert agent.algo == algo and type(agent.model) is type(model) and agent.env_id is None
+        env.close()

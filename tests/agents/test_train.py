@@ -1,0 +1,146 @@
+"""train.py end to end with a tiny budget: run folder, loadable model, resume, eval-only, usage errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = ["--timesteps", "256", "--n-envs", "2", "--eval-episodes", "8", "--eval-points", "1", "--no-progress"]
+
+
+def run_train(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "train.py"), *argv],
+        capture_output=True,
+        text=True,
+        timeout=1200,
+        cwd=cwd,
+    )
+
+
+@pytest.fixture(scope="module")
+def first_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("runs")
+    proc = run_train(*TINY, "--out", str(out), cwd=out)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (run_dir,) = out.iterdir()
+    return run_dir
+
+
+def test_run_folder_is_complete_and_the_model_loads(first_run):
+    assert first_run.name.startswith("CoopGym-SitToStand-v0__ppo__0__")
+    for name in ("COMPLETE", "results.json", "model.zip", "vecnormalize.pkl", "agent.json", "eval.json", "eval.csv"):
+        assert (first_run / name).exists(), name
+    for name in ("learning_curve.png", "outcome_rates.png"):
+        assert (first_run / name).read_bytes()[:4] == b"\x89PNG"
+    assert any((first_run / "tb").iterdir())  # TensorBoard events
+    results = json.loads((first_run / "results.json").read_text())
+    agents = [r["agent"] for r in results["evaluation"]["results"]]
+    assert agents == ["ppo (learned)", "random", "lift_at_once", "push_then_lift", "handbook", "oracle"]
+    assert all(r["episodes"] == 8 and r["personas"] == ["frail", "forgetful"] for r in results["evaluation"]["results"])
+    assert set(results["verdict"]) >= {"higher_success_than_handbook", "no_more_unsafe_than_handbook"}
+    assert results["training"]["timesteps"] >= 256
+
+    from agents.rl import load_agent
+
+    agent = load_agent(first_run)
+    again = load_agent(first_run / "model.zip")
+    obs = np.zeros((3, 11), dtype=np.float32)
+    assert np.array_equal(agent.predict(obs)[0], again.predict(obs)[0])
+
+
+def test_resume_continues_the_step_count(first_run, tmp_path):
+    import train
+
+    before = json.loads((first_run / "agent.json").read_text())["num_timesteps"]
+    assert train.main([*TINY, "--resume", str(first_run), "--baselines", "", "--out", str(tmp_path)]) == 0
+    (run_dir,) = tmp_path.iterdir()
+    info = json.loads((run_dir / "agent.json").read_text())
+    results = json.loads((run_dir / "results.json").read_text())
+    assert info["num_timesteps"] == before + results["training"]["timesteps"]
+    assert results["training"]["timesteps"] >= 256 and results["training"]["resumed_from"] == str(first_run)
+    assert (run_dir / "vecnormalize.pkl").exists()  # the statistics travel with the resumed model
+
+
+def test_eval_only_in_process(first_run, tmp_path, capsys):
+    import train
+
+    model = str(first_run / "model.zip")
+    code = train.main(
+        ["--eval-only", "--model", model, "--eval-episodes", "4", "--baselines", "handbook", "--out", str(tmp_path)]
+    )
+    assert code == 0
+    (run_dir,) = tmp_path.iterdir()
+    results = json.loads((run_dir / "results.json").read_text())
+    assert [r["agent"] for r in results["evaluation"]["results"]] == ["ppo (learned)", "handbook"]
+    assert (run_dir / "COMPLETE").exists() and not (run_dir / "model.zip").exists()
+    assert "handbook" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--algo", "sac"],
+        ["--eval-only"],
+        ["--timesteps", "0"],
+        ["--eval-episodes", "0"],
+        ["--env", "CoopGym/Nope-v0"],
+        ["--eval-personas", "grumpy"],
+        ["--baselines", "handbook,nurse"],
+        ["--resume", "/no/such/run"],
+        ["--model", "x.zip"],
+        ["--timesteps", "lots"],
+    ],
+)
+def test_usage_errors_exit_2(argv, capsys):
+    import train
+
+    with pytest.raises(SystemExit) as exc:
+        train.parse_args(argv)
+    assert exc.value.code == 2
+    assert "error" in capsys.readouterr().err
+
+
+def test_bad_flag_subprocess_exits_2_and_help_shows_field_docs(tmp_path):
+    bad = run_train("--algo", "sac", cwd=tmp_path)
+    assert bad.returncode == 2 and "--algo" in bad.stderr
+    assert not any(tmp_path.iterdir())  # nothing written for a usage error
+    import train
+
+    help_text = train._build_parser().format_help()
+    assert "continue training a saved model" in help_text and "--eval-episodes" in help_text
+    assert "--no-progress" in help_text
+
+
+def test_unwritable_out_exits_2(tmp_path, capsys):
+    import train
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    with pytest.raises(SystemExit) as exc:
+        train.parse_args(["--out", str(blocker / "runs")])
+    assert exc.value.code == 2 and "a_file is not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_default_run_beats_the_handbook_on_held_out_personas(tmp_path):
+    """The quality bar (SPEC): `python train.py` on defaults, 1000 held-out episodes, within 15 minutes."""
+    import time
+
+    started = time.perf_counter()
+    proc = run_train("--out", str(tmp_path), "--no-progress", cwd=tmp_path)
+    wall_s = time.perf_counter() - started
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (run_dir,) = tmp_path.iterdir()
+    results = json.loads((run_dir / "results.json").read_text())
+    assert results["evaluation"]["episodes"] >= 1000 and results["evaluation"]["personas"] == "test"
+    verdict = results["verdict"]
+    assert verdict["higher_success_than_handbook"], verdict
+    assert verdict["no_more_unsafe_than_handbook"], verdict
+    assert wall_s < 15 * 60
