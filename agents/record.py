@@ -42,6 +42,7 @@ import coop_gym
 from agents.base import Agent, action_type_of, features_of
 from agents.scripted import SCRIPTED_AGENTS, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
+from coop_gym.cli import positive_int as _positive_int
 
 __all__ = [
     "DEFAULT_ENV_ID",
@@ -349,15 +350,6 @@ def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
                 f"the model's {attr} {expected} does not match the env's {actual}; pass the env id it was trained on"
             )
 
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
 
 
 def _int(text: str) -> int:

@@ -46,6 +46,7 @@ import gymnasium as gym
 import numpy as np
 
 import coop_gym
+from coop_gym.cli import positive_int as _positive_int
 
 ENV_ID = "CoopGym/SitToStand-v0"
 CARTPOLE_ID = "CartPole-v1"
@@ -292,15 +293,6 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
         },
     }
 
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
-    return value
 
 
 def _table(report: dict[str, Any]) -> str:

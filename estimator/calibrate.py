@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from coop_gym.cli import positive_int as _positive_int
+from coop_gym.cli import seed as _seed
 from estimator.judgment import ThresholdJudgment
 from estimator.protocol import (
     ESTIMATORS,
@@ -155,24 +157,6 @@ def format_sweep(sweep: dict[str, dict[str, list[float]]], delays_s: Sequence[fl
     return "\n".join(lines)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
-
-
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {value}")
-    return value
 
 
 def main(argv: Sequence[str] | None = None) -> int:

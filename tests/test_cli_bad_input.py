@@ -117,8 +117,8 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("estimator.protocol", "unknown persona", ["--personas", "nobody"], r"nobody"),
     ("estimator.protocol", "plot not png", ["--plot", "trace.txt"], r"plot paths must end in \.png"),
     ("bench/run.py", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
-    ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: must be a positive integer, got '0'"),
-    ("bench/run.py", "repeats not a number", ["--repeats", "few"], r"--repeats: must be a positive integer, got 'few'"),
+    ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
+    ("bench/run.py", "repeats not a number", ["--repeats", "few"], r"--repeats: expected a positive integer, got 'few'"),  # noqa: E501
 ]
 
 # Bad output paths: found only when the results are written, unless checked up front. The
