@@ -28,7 +28,6 @@ import argparse
 import csv
 import json
 import math
-import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -43,6 +42,7 @@ from numpy.typing import NDArray
 import coop_gym  # registers the env ids
 from agents.base import Agent, action_type_of, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
+from coop_gym.cli import output_path_problem
 from coop_gym.envs.config import Outcome
 from coop_gym.model.personas import resolve_personas
 
@@ -784,29 +784,6 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--json-out", help="write the summaries and episode records to this JSON file")
     parser.add_argument("--plot", help="write a bar chart of outcome rates per agent to this PNG file")
     return parser
-
-
-def output_path_problem(path: str | Path, folder: bool = False) -> str | None:
-    """Why ``path`` (a file, or with ``folder`` a folder) cannot be written, or None if it can.
-
-    Checked before any work starts, so a bad output path fails in a second, not after a run:
-    the nearest existing ancestor must be a writable folder (missing folders are created later).
-    """
-    target = Path(path)
-    if folder and target.exists() and not target.is_dir():
-        return f"{target} exists and is not a folder"
-    if not folder and target.is_dir():
-        return f"{target} is a folder, not a file"
-    ancestor = target if folder else target.parent
-    while not ancestor.exists():
-        if ancestor.parent == ancestor:
-            break
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        return f"cannot create {target}: {ancestor} is not a folder"
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        return f"cannot create {target}: {ancestor} is not writable"
-    return None
 
 
 def _personas_arg(text: str) -> str | list[str]:

@@ -69,6 +69,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr
 
+from coop_gym.cli import output_path_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
 from coop_gym.envs.core import nominal_model_for
@@ -1288,6 +1289,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     for path in (args.plot, args.plot_confusion):
         if path is not None and not path.lower().endswith(".png"):
             parser.error(f"plot paths must end in .png, got {path!r}")
+        # Checked before the experiment runs, so a bad path fails at once, not after the work.
+        problem = output_path_problem(path) if path is not None else None
+        if problem:
+            parser.error(problem)
     summaries = []
     first: tuple[ExperimentData, EstimateResult] | None = None
     for seed in range(args.seed, args.seed + args.seeds):

@@ -163,17 +163,11 @@ def test_bad_flag_exits_2_naming_the_problem(cli: str, argv: list[str], match: s
     assert re.search(match, err), f"stderr does not name the problem: {err!r}"
 
 
-_LATE_XFAIL = pytest.mark.xfail(
-    strict=True,
-    reason="reported: output paths are only tried when written (estimator.protocol --plot: after the work), "
-    "a traceback instead of exit 2",
-)
-_LATE_FIXED = {"train.py", "agents.evaluate"}  # check --out / --csv / --json-out / --plot up front
-
-
 @pytest.mark.parametrize(
     ("cli", "argv", "match"),
-    [pytest.param(c[0], c[2], c[3], marks=() if c[0] in _LATE_FIXED else _LATE_XFAIL) for c in LATE_CASES],
+    # Every CLI checks its output paths before any work (train.py --out, evaluate --csv/--json-out/--plot,
+    # protocol --plot/--plot-confusion).
+    [pytest.param(c[0], c[2], c[3]) for c in LATE_CASES],
     ids=[f"{c[0]}: {c[1]}" for c in LATE_CASES],
 )
 def test_bad_output_path_exits_2_before_the_work(cli: str, argv: list[str], match: str, tmp_path: Path) -> None:
