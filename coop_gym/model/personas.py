@@ -8,6 +8,7 @@ so generalisation can be measured.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -210,10 +211,14 @@ def sample_person(persona: Persona, rng: np.random.Generator, vary: bool = True)
     k = 0
     for level, names in VARIED_PARAMETERS.items():
         base = getattr(persona.params, level)
-        changes = {}
+        # The field ranges check what a user hands in; a person drawn around a persona at
+        # the edge of a range may lie just beyond it (a positive gain times a log-normal
+        # factor stays positive and finite). So the varied copy is not re-validated -- the
+        # env core's compiled reset does the same -- rather than raising on some seeds.
+        varied = copy.copy(base)
         for name in names:
-            changes[name] = float(getattr(base, name) * factors[k])
+            object.__setattr__(varied, name, float(getattr(base, name) * factors[k]))
             k += 1
-        levels[level] = dataclasses.replace(base, **changes)
+        levels[level] = varied
     # Hearing is a bounded 0..1 fraction, so it stays at the persona's value.
     return dataclasses.replace(persona.params, **levels)  # type: ignore[arg-type]

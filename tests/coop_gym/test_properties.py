@@ -384,15 +384,13 @@ def test_person_variation_near_a_bound_keeps_reset_working() -> None:
             check_step(env, obs, reward, info, f"seed {seed}")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ValueError,
-    reason="bug: sample_person varies a field out of its validated range and raises (the env core does not)",
-)
 def test_sample_person_near_a_bound_does_not_raise() -> None:
     persona = Persona("edge", "damping at its upper bound", PersonParams(Biomechanics(damping_rate_per_s=100.0)), 0.15)
-    for seed in range(20):
-        sample_person(persona, np.random.default_rng(seed))
+    dampings = [
+        sample_person(persona, np.random.default_rng(seed)).biomechanics.damping_rate_per_s for seed in range(20)
+    ]
+    assert max(dampings) > 100.0 > min(dampings)  # varied around the bound, beyond it on some seeds
+    assert all(np.isfinite(dampings))
 
 
 def teardown_module() -> None:
