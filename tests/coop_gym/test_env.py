@@ -275,3 +275,19 @@ def test_a_custom_episode_length_truncates_on_the_envs_own_clock() -> None:
         done = terminated_v | truncated_v
         steps += 1
     assert truncated_v.all() and steps == 100
+
+
+def test_core_step_library_api_matches_the_env_step() -> None:
+    # SitToStandCore.step (decoded cues) is the library entry point beside the env's step.
+    env = gym.make("CoopGym/SitToStand-v0")
+    twin = gym.make("CoopGym/SitToStand-v0")
+    env.reset(seed=7)
+    twin.reset(seed=7)
+    cues = coop_gym.Cues()
+    for action in ([1, 2, 0], [1, 0, 0], [2, 0, 0], [0, 0, 1]):
+        obs, reward, terminated, _, _ = env.step(action)
+        push = np.array([(0.0, cues.soft_push_n, cues.firm_push_n)[action[0]]])
+        verbal = np.array([(0.0, -1.0, 1.0)[action[1]]])
+        out = twin.unwrapped.core.step(push, verbal, np.array([action[2] == 1]))
+        assert np.array_equal(twin.unwrapped.core.obs[0], obs)
+        assert out.reward[0] == reward and bool(out.terminated[0]) == terminated
