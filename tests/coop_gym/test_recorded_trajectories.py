@@ -1,0 +1,173 @@
+"""Recorded trajectories: every registered ``-v0`` id must keep behaving exactly as recorded.
+
+A change of dynamics, observation or reward gets a new ``-vN``; the old ids stay bit-identical.
+This test replays fixed action sequences (drawn from their own seeded generator, not from the
+spaces, so a Gymnasium upgrade cannot change them) through each ``-v0`` id, single env and the
+native vector env, and compares observations, rewards, termination, truncation and every info
+value to the recording in ``data/recorded_v0.npz`` exactly.
+
+Re-record (only when a change is *meant* to alter ``-v0``, which the versioning rule forbids)::
+
+    COOP_GYM_RECORD=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import coop_gym  # noqa: F401  (registers the ids)
+
+DATA = Path(__file__).parent / "data" / "recorded_v0.npz"
+V0_IDS = (
+    "CoopGym/SitToStand-v0",
+    "CoopGym/SitToStandRaw-v0",
+    "CoopGym/SitToStandOracle-v0",
+    "CoopGym/SitToStandDiscrete-v0",
+    "CoopGym/SitToStandContinuous-v0",
+    "CoopGym/SitToStandMM-v0",
+    "CoopGym/SitToStandIMM-v0",
+    "CoopGym/SitToStandHeldOut-v0",
+)
+SINGLE_SEEDS = (0, 3, 11)
+SINGLE_STEPS = 400  # crosses several episode ends (lifts and a 300-step truncation)
+VECTOR_SEED = 5
+VECTOR_ENVS = 4
+VECTOR_STEPS = 200
+
+
+def _actions(env_id: str, seed: int, shape: tuple[int, ...]) -> Any:
+    """A fixed action sequence: mostly pushes and "lean forward", a lift now and then."""
+    rng = np.random.default_rng(10_000 + seed)
+    push = rng.choice(3, size=shape, p=[0.35, 0.45, 0.2])
+    verbal = rng.choice(3, size=shape, p=[0.55, 0.1, 0.35])
+    # Seed 11 almost never lifts, so its episodes run into the 300-step truncation.
+    lift = (rng.random(shape) < (0.001 if seed == 11 else 0.025)).astype(np.int64)
+    if "Discrete-" in env_id:
+        return np.ravel_multi_index((push, verbal, lift), (3, 3, 2)).astype(np.int64)
+    if "Continuous-" in env_id:
+        jitter = rng.uniform(-0.2, 0.2, size=(*shape, 2))
+        columns = [push - 1.0 + jitter[..., 0] * (push == 1), verbal - 1.0 + jitter[..., 1], 2.0 * lift - 1.0]
+        return np.clip(np.stack(columns, axis=-1), -1.0, 1.0).astype(np.float32)
+    return np.stack([push, verbal, lift], axis=-1).astype(np.int64)
+
+
+def _flatten(info: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in info.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _as_array(values: list[Any]) -> np.ndarray:
+    array = np.asarray(values)
+    if array.dtype == object:  # labels of masked-out vector entries are None
+        array = np.asarray(["<none>" if v is None else v for v in array.ravel()]).reshape(array.shape)
+    return array
+
+
+def _record_single(env_id: str, seed: int) -> dict[str, np.ndarray]:
+    env = gym.make(env_id)
+    actions = _actions(env_id, seed, (SINGLE_STEPS,))
+    obs, info = env.reset(seed=seed)
+    rows: dict[str, list[Any]] = {"obs": [obs], "reward": [], "terminated": [], "truncated": []}
+    infos: dict[str, list[Any]] = {f"info.{k}": [] for k in _flatten(info)}
+    for t in range(SINGLE_STEPS):
+        obs, reward, terminated, truncated, info = env.step(actions[t])
+        rows["obs"].append(obs)
+        rows["reward"].append(reward)
+        rows["terminated"].append(terminated)
+        rows["truncated"].append(truncated)
+        for key, value in _flatten(info).items():
+            infos.setdefault(f"info.{key}", []).append(value)
+        if terminated or truncated:
+            obs, _ = env.reset()
+            rows["obs"].append(obs)
+    env.close()
+    return {k: _as_array(v) for k, v in {**rows, **infos}.items()}
+
+
+def _record_vector(env_id: str) -> dict[str, np.ndarray]:
+    envs = gym.make_vec(env_id, num_envs=VECTOR_ENVS, vectorization_mode="vector_entry_point")
+    actions = _actions(env_id, VECTOR_SEED, (VECTOR_STEPS, VECTOR_ENVS))
+    obs, _ = envs.reset(seed=VECTOR_SEED)
+    rows: dict[str, list[Any]] = {"obs": [obs], "reward": [], "terminated": [], "truncated": []}
+    infos: dict[str, list[Any]] = {}
+    for t in range(VECTOR_STEPS):
+        obs, reward, terminated, truncated, info = envs.step(actions[t])
+        rows["obs"].append(obs)
+        rows["reward"].append(reward)
+        rows["terminated"].append(terminated)
+        rows["truncated"].append(truncated)
+        for key, value in _flatten(info).items():
+            infos.setdefault(f"info.{key}", []).append(np.asarray(value).copy())
+    envs.close()
+    return {k: _as_array(v) for k, v in {**rows, **infos}.items()}
+
+
+def _cases() -> list[tuple[str, str, int | None]]:
+    cases: list[tuple[str, str, int | None]] = []
+    for env_id in V0_IDS:
+        cases += [(env_id, "single", seed) for seed in SINGLE_SEEDS]
+        cases.append((env_id, "vector", None))
+    return cases
+
+
+def _key(env_id: str, kind: str, seed: int | None) -> str:
+    return f"{env_id}|{kind}|{seed}"
+
+
+def _record(env_id: str, kind: str, seed: int | None) -> dict[str, np.ndarray]:
+    return _record_single(env_id, seed) if kind == "single" and seed is not None else _record_vector(env_id)
+
+
+def _record_all() -> None:
+    arrays: dict[str, np.ndarray] = {}
+    for env_id, kind, seed in _cases():
+        for name, array in _record(env_id, kind, seed).items():
+            arrays[f"{_key(env_id, kind, seed)}|{name}"] = array
+    DATA.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(DATA, **arrays)
+
+
+if os.environ.get("COOP_GYM_RECORD") == "1":  # pragma: no cover - re-recording is a deliberate act
+    _record_all()
+
+
+@pytest.fixture(scope="module")
+def recording() -> dict[str, np.ndarray]:
+    with np.load(DATA, allow_pickle=False) as data:
+        return {name: data[name] for name in data.files}
+
+
+@pytest.mark.parametrize(("env_id", "kind", "seed"), _cases(), ids=lambda v: str(v))
+def test_v0_trajectory_is_bit_identical_to_the_recording(
+    recording: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None
+) -> None:
+    prefix = f"{_key(env_id, kind, seed)}|"
+    expected = {name[len(prefix) :]: array for name, array in recording.items() if name.startswith(prefix)}
+    assert expected, f"no recording for {prefix}"
+    replayed = _record(env_id, kind, seed)
+    assert sorted(replayed) == sorted(expected), "the set of recorded quantities (info keys) changed"
+    for name, array in expected.items():
+        got = replayed[name]
+        assert got.shape == array.shape, f"{name}: shape {got.shape} != recorded {array.shape}"
+        assert got.dtype == array.dtype, f"{name}: dtype {got.dtype} != recorded {array.dtype}"
+        # Exact, NaN-aware: bit-identical is the contract, not "close".
+        assert np.array_equal(got, array, equal_nan=got.dtype.kind == "f"), f"{name} differs from the recording"
+
+
+def test_recording_covers_episode_ends(recording: dict[str, np.ndarray]) -> None:
+    # The recording must exercise lifts (termination) and the 300-step truncation, or it guards little.
+    terminated = sum(int(a.sum()) for n, a in recording.items() if n.endswith("|terminated"))
+    truncated = sum(int(a.sum()) for n, a in recording.items() if n.endswith("|truncated"))
+    assert terminated >= 20
+    assert truncated >= 1
