@@ -23,6 +23,15 @@ ENV_IDS: dict[str, dict[str, Any]] = {
     "CoopGym/SitToStandMM-v0": {"estimator": "multiple_model"},
     "CoopGym/SitToStandIMM-v0": {"estimator": "imm"},
     "CoopGym/SitToStandHeldOut-v0": {"personas": "test"},
+    # v1: difficulty levels (coop_gym.model.difficulty) and the safety-priced reward.
+    "CoopGym/SitToStandEasy-v1": {"difficulty": "easy"},
+    "CoopGym/SitToStandMedium-v1": {"difficulty": "medium"},
+    "CoopGym/SitToStandHard-v1": {"difficulty": "hard"},
+    "CoopGym/SitToStandHardRaw-v1": {"difficulty": "hard", "observation_mode": "raw"},
+    "CoopGym/SitToStandHardOracle-v1": {"difficulty": "hard", "observation_mode": "oracle"},
+    "CoopGym/SitToStandHardDiscrete-v1": {"difficulty": "hard", "action_type": "discrete"},
+    "CoopGym/SitToStandHardIMM-v1": {"difficulty": "hard", "estimator": "imm"},
+    "CoopGym/SitToStandHardHeldOut-v1": {"difficulty": "hard", "personas": "test"},
 }
 
 

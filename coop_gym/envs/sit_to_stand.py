@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -41,6 +42,7 @@ from coop_gym.envs.core import (
     REWARD_TERMS,
     SitToStandCore,
 )
+from coop_gym.model.difficulty import Difficulty, get_difficulty
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas
 from estimator.judgment import ThresholdJudgment
@@ -227,6 +229,8 @@ class SitToStandConfig:
         estimator_options: dict[str, Any] | None = None,
         render_mode: str | None = None,
         render_modes: Sequence[str] = ("human", "rgb_array"),
+        *,
+        difficulty: str | Difficulty | None = None,
     ) -> SitToStandConfig:
         """Validate the env arguments (see :class:`SitToStandEnv`, "Arguments")."""
         _check_choice("observation_mode", observation_mode, OBSERVATION_MODES)
@@ -241,8 +245,15 @@ class SitToStandConfig:
                 f"estimator_options {sorted(estimator_options)} are for the multiple-model estimators; "
                 "estimator='kalman' takes none"
             )
+        resolved = resolve_personas(personas)
+        if difficulty is not None:
+            # The level's knobs on every persona, and its reward unless one is given.
+            level = get_difficulty(difficulty)
+            resolved = tuple(dataclasses.replace(p, params=level.apply(p.params)) for p in resolved)
+            if reward is None:
+                reward = level.reward
         return cls(
-            personas=resolve_personas(personas),
+            personas=resolved,
             observation_mode=observation_mode,
             action_type=action_type,
             estimator=estimator,
@@ -545,6 +556,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         cues: Cues | dict[str, Any] | None = None,
         estimator_options: dict[str, Any] | None = None,
         render_mode: str | None = None,
+        difficulty: str | None = None,
     ) -> None:
         """Create the env; see the class docstring for the arguments."""
         config = SitToStandConfig.from_arguments(
@@ -561,8 +573,10 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
             estimator_options,
             render_mode,
             self.metadata["render_modes"],
+            difficulty=difficulty,
         )
         self.config = config
+        self.difficulty = difficulty
         self.render_mode = render_mode
         self.observation_mode = observation_mode
         self.action_type = action_type

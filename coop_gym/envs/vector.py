@@ -123,6 +123,7 @@ class SitToStandVectorEnv(VectorEnv):
         render_mode: str | None = None,
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        difficulty: str | None = None,
     ) -> None:
         """Create ``num_envs`` envs; see the class docstring and :class:`SitToStandEnv`."""
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
@@ -141,6 +142,7 @@ class SitToStandVectorEnv(VectorEnv):
             estimator_options,
             render_mode,
             self.metadata["render_modes"],
+            difficulty=difficulty,
         )
         if max_episode_steps is None:
             max_episode_steps = config.timing.max_episode_steps

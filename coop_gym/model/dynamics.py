@@ -89,6 +89,12 @@ PARAM_COLUMNS: tuple[str, ...] = (
     "position_noise_std_m",
     "force_noise_std_n",
     "hold_xi",
+    "passive_follow_rate_per_s",
+    "lapse_rate_per_s",
+    "refusal_rate_per_s",
+    "spontaneous_lean_rate_per_s",
+    "spontaneous_lean_m",
+    "pushed_lapse_rate_per_s",
 )
 (
     P_DT,
@@ -132,6 +138,12 @@ PARAM_COLUMNS: tuple[str, ...] = (
     P_POS_STD,
     P_FORCE_STD,
     P_HOLD_XI,
+    P_FOLLOW,
+    P_R_LAPSE,
+    P_R_REFUSAL,
+    P_R_SPONTANEOUS,
+    P_SPONTANEOUS_M,
+    P_R_PUSHED_LAPSE,
 ) = range(len(PARAM_COLUMNS))
 
 STATE_COLUMNS: tuple[str, ...] = (
@@ -279,6 +291,12 @@ def pack_person(person: PersonParams, timing: Timing, hold_xi: bool = False) -> 
         "position_noise_std_m": sensors.position_noise_std_m,
         "force_noise_std_n": sensors.force_noise_std_n,
         "hold_xi": 1.0 if hold_xi else 0.0,
+        "passive_follow_rate_per_s": intent.passive_follow_rate_per_s,
+        "lapse_rate_per_s": coop.lapse_rate_per_s,
+        "refusal_rate_per_s": coop.refusal_rate_per_s,
+        "spontaneous_lean_rate_per_s": intent.spontaneous_lean_rate_per_s,
+        "spontaneous_lean_m": intent.spontaneous_lean_m,
+        "pushed_lapse_rate_per_s": coop.pushed_lapse_rate_per_s,
     }
     return np.array([values[name] for name in PARAM_COLUMNS], dtype=np.float64)
 
@@ -339,6 +357,10 @@ def cooperativeness_rates(
             down += p[P_R_DRIFT]
     if xi > 0.5:
         up = 0.0
+        # Willingness is not absorbing: it lapses (see also the refusal jump in person_substep).
+        down += p[P_R_LAPSE]
+        if push_force_n >= p[P_TOUCH]:
+            down += p[P_R_PUSHED_LAPSE]
     if xi < -0.5:
         down = 0.0
     return up, down
@@ -403,21 +425,37 @@ def person_substep(
         # 100/s at dt 0.1 s is valid); a full relaxation in one step is the stable limit.
         eta -= min(p[P_RELAX] * dt, 1.0) * eta
     eta += p[P_ETA_STD] * z[1]
+    if p[P_FOLLOW] > 0.0 and abs(xi) < 0.5:
+        # A passive (unresponsive) person's intention follows the body: bent forward by a
+        # push, a weak trunk stays bent instead of pulling back upright (capped as above).
+        eta += min(p[P_FOLLOW] * dt, 1.0) * (s[S_X] - eta)
     if p[P_SATURATE] > 0.5:
         eta = min(max(eta, p[P_ETA_MIN]), p[P_ETA_MAX])
     s[S_ETA] = eta
 
+    # Looking ready while not ready: an unresponsive person left waiting (idle) now and then
+    # leans forward on their own. The chain's uniform decides it from the top of [0, 1) (the chain's jumps
+    # come from the bottom), so the person still draws 5 normals per step.
+    if p[P_R_SPONTANEOUS] > 0.0 and abs(xi) < 0.5 and s[S_SINCE_CUE] >= p[P_IDLE_AFTER]:
+        if _normal_cdf(z[2]) >= math.exp(-p[P_R_SPONTANEOUS] * dt):
+            s[S_ETA] = max(s[S_ETA], p[P_SPONTANEOUS_M])
+
     # eq. 8: one exact step of the cue-driven chain, rates held over dt.
     if p[P_HOLD_XI] < 0.5:
         up, down = cooperativeness_rates(p, xi, push_force_n, verbal_cue, s[S_SINCE_EXPLAIN], s[S_SINCE_CUE])
-        total = up + down
+        refuse = p[P_R_REFUSAL] if xi > 0.5 else 0.0
+        total = up + down + refuse
         if total > 0.0:
             leave = 1.0 - math.exp(-total * dt)
             uniform = _normal_cdf(z[2])
             if uniform < leave * up / total:
                 s[S_XI] = xi + 1.0
             elif uniform < leave:
-                s[S_XI] = xi - 1.0
+                # A sudden refusal jumps from +1 straight to -1.
+                if refuse > 0.0 and uniform >= leave * (up + down) / total:
+                    s[S_XI] = -1.0
+                else:
+                    s[S_XI] = xi - 1.0
 
 
 @njit(cache=True)

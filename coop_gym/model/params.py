@@ -110,6 +110,17 @@ class Intention:
         max_m: Furthest the person can intend to lean forward [m].
         relaxation_rate_per_s: With no cue acting, ``eta`` relaxes toward upright (0) at
             this rate [1/s]; 0 = off.
+        passive_follow_rate_per_s: While unresponsive (``xi = 0``) the intention follows
+            the body toward where it was put, at this rate [1/s]: a weak trunk bent
+            forward by a push stays bent instead of pulling back upright (the paper's
+            first failure scenario, "bends forward under a push while not cooperative").
+            0 = off (the paper's model).
+        spontaneous_lean_rate_per_s: While unresponsive (``xi = 0``) and left waiting (no
+            cue for ``Cooperativeness.idle_after_s``) the person now and then leans forward on their own -- to look at their feet, to reach for a
+            stick -- at this rate [1/s]: looking ready while not ready (the paper's
+            second failure scenario). 0 = off.
+        spontaneous_lean_m: How far such a lean goes: the intention jumps forward to
+            at least this [m].
     """
 
     push_gain_m_per_s_n: float = 0.006
@@ -121,12 +132,18 @@ class Intention:
     min_m: float = -0.03
     max_m: float = 0.35
     relaxation_rate_per_s: float = 0.1
+    passive_follow_rate_per_s: float = 0.0
+    spontaneous_lean_rate_per_s: float = 0.0
+    spontaneous_lean_m: float = 0.2
 
     def __post_init__(self) -> None:
         """Validate ranges."""
         _validate_ranges(
             self,
             {
+                "passive_follow_rate_per_s": (0.0, 100.0),
+                "spontaneous_lean_rate_per_s": (0.0, 100.0),
+                "spontaneous_lean_m": (0.0, 1.0),
                 "push_gain_m_per_s_n": (0.0, 1.0),
                 "verbal_gain_m_per_s": (0.0, 10.0),
                 "noise_std_m_per_sqrt_s": (0.0, 1.0),
@@ -173,6 +190,13 @@ class Cooperativeness:
         initial_p_uncooperative: Probability that an episode starts at ``xi = -1``.
         initial_p_cooperative: Probability that an episode starts at ``xi = +1``
             (the rest start at 0).
+        lapse_rate_per_s: +1 -> 0 at any time: willingness lapses (attention wanders,
+            fatigue, doubt), so cooperation is not absorbing. 0 = off.
+        pushed_lapse_rate_per_s: +1 -> 0 while pushed (added to ``lapse_rate_per_s``): a
+            willing person pushed on stops leading the movement -- pushing too long wears
+            willingness down. 0 = off.
+        refusal_rate_per_s: +1 -> -1 at any time: a sudden refusal (pain, fear of
+            falling). The only jump of two levels. 0 = off.
     """
 
     explain_calm_rate_per_s: float = 0.6
@@ -194,6 +218,9 @@ class Cooperativeness:
     baseline: int = 0
     initial_p_uncooperative: float = 0.3
     initial_p_cooperative: float = 0.1
+    lapse_rate_per_s: float = 0.0
+    pushed_lapse_rate_per_s: float = 0.0
+    refusal_rate_per_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate ranges."""
@@ -201,6 +228,9 @@ class Cooperativeness:
         _validate_ranges(
             self,
             {
+                "lapse_rate_per_s": rate,
+                "pushed_lapse_rate_per_s": rate,
+                "refusal_rate_per_s": rate,
                 "explain_calm_rate_per_s": rate,
                 "words_alone_rate_per_s": rate,
                 "guided_push_rate_per_s": rate,
