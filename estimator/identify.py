@@ -39,6 +39,7 @@ import scipy.optimize
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from compiled.cache import guard_kernel_cache
 from estimator.kalman import NOMINAL_COLUMNS, nominal_row
 from estimator.multiple_model import N_MODES, _mean_step, _riccati_step
 from estimator.nominal import NominalModel
@@ -594,3 +595,6 @@ def simulate_nominal_trials(
         raise ValueError(f"initial_state must be 'prior' or 'rest', got {initial_state!r}")
     measured, _ = _simulate_batch(model, cp, cv, xi_steps, rng, start)
     return [Trial(cp[i], cv[i], measured[i], xi=int(xis[i]), dt_s=dt) for i in range(n_trials)]
+
+
+guard_kernel_cache(__name__)

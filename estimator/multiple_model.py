@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from compiled.cache import guard_kernel_cache
 from estimator.kalman import NOMINAL_COLUMNS, nominal_row
 from estimator.nominal import NominalModel
 
@@ -917,3 +918,6 @@ def sequential_judgment(
     at = np.clip(step, 0, None)
     judgment = np.where(any_hit, MODE_VALUES[np.argmax(p[np.arange(n), at], axis=-1)], 0)
     return judgment.astype(np.int64), step.astype(np.int64)
+
+
+guard_kernel_cache(__name__)

@@ -21,31 +21,26 @@ order -- at reset ``integers(n_personas)``, the person's variation normals, ``ra
 for the initial ``xi`` and ``normal(0, 5 mm)`` for the initial lean; then
 ``substeps x NORMALS_PER_SUBSTEP`` standard normals per non-lift step. So env ``i`` of a
 vector env seeded ``s`` and a single env seeded ``s + i`` see identical streams. The
-compiled kernels draw these through the generator's own C functions (NumPy's
-"extending via Numba" interface) with NumPy's algorithms (ziggurat normals, Lemire
-bounded integers), so the numbers are exactly those the ``Generator`` methods return
-(tests hold them equal), and the ``Generator`` object stays the single source of truth.
+compiled kernels draw these through the generator's own C functions with NumPy's
+algorithms (:mod:`compiled.rng`), so the numbers are exactly those the ``Generator``
+methods return and the ``Generator`` object stays the single source of truth.
+
+Numba caches the kernels on disk, keyed by every project source they compile in
+(:func:`compiled.cache.guard_kernel_cache`).
 """
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
-import hashlib
-import inspect
-import os
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.core.extending import intrinsic
-
-# NumPy's ziggurat tables, as Numba ships them for its own np.random.Generator support.
-from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
+from numba import njit
 from numpy.typing import NDArray
 
+from compiled.cache import guard_kernel_cache
+from compiled.rng import G_STATE, bit_generator_row, integers, random, standard_normal
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
@@ -206,9 +201,6 @@ _PT_NOMINAL = _PT_PARAMS + len(PARAM_COLUMNS)
 _PT_XI_CUTS = _PT_NOMINAL + len(NOMINAL_COLUMNS)
 _PT_WIDTH = _PT_XI_CUTS + 2
 
-# Columns of an env's bit-generator row: addresses of its C functions and of its state.
-_G_NEXT_UINT64, _G_NEXT_UINT32, _G_NEXT_DOUBLE, _G_STATE = range(4)
-
 INITIAL_LEAN_STD_M = 0.005
 """People sit a little differently: std of the initial forward lean [m]."""
 
@@ -258,127 +250,6 @@ class StepArrays:
     verbal_cue: NDArray[np.float64]
 
 
-# --- NumPy's random streams inside compiled code ---------------------------------
-# A bit generator exposes C functions taking its state pointer (``BitGenerator.ctypes``);
-# calling them advances the very state the Python ``Generator`` uses.
-
-
-def _call_uint64_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
-    sig = types.uint64(types.uint64, types.uint64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        function_type = ir.FunctionType(ir.IntType(64), (ir.IntType(8).as_pointer(),))
-        function = builder.inttoptr(args[0], function_type.as_pointer())
-        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
-
-    return sig, codegen
-
-
-_call_uint64: Any = intrinsic(_call_uint64_typing)
-
-
-def _call_uint32_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
-    sig = types.uint32(types.uint64, types.uint64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        function_type = ir.FunctionType(ir.IntType(32), (ir.IntType(8).as_pointer(),))
-        function = builder.inttoptr(args[0], function_type.as_pointer())
-        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
-
-    return sig, codegen
-
-
-_call_uint32: Any = intrinsic(_call_uint32_typing)
-
-
-def _call_double_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
-    sig = types.float64(types.uint64, types.uint64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        function_type = ir.FunctionType(ir.DoubleType(), (ir.IntType(8).as_pointer(),))
-        function = builder.inttoptr(args[0], function_type.as_pointer())
-        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
-
-    return sig, codegen
-
-
-_call_double: Any = intrinsic(_call_double_typing)
-
-
-_U1 = np.uint64(1)
-_U8 = np.uint64(8)
-_U32 = np.uint64(32)
-_BYTE = np.uint64(0xFF)
-_MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
-_LOW32 = np.uint64(0xFFFFFFFF)
-
-
-@njit(cache=True)
-def _random(g: NDArray[np.uint64]) -> float:
-    """``Generator.random()``: a double in [0, 1) from the bit generator ``g``."""
-    return _call_double(g[_G_NEXT_DOUBLE], g[_G_STATE])
-
-
-@njit(cache=True)
-def _standard_normal(g: NDArray[np.uint64]) -> float:
-    """``Generator.standard_normal()``: NumPy's 256-layer ziggurat, step for step."""
-    while True:
-        r = _call_uint64(g[_G_NEXT_UINT64], g[_G_STATE])
-        idx = r & _BYTE
-        r >>= _U8
-        sign = r & _U1
-        rabs = (r >> _U1) & _MANTISSA
-        x = rabs * wi_double[idx]
-        if sign:
-            x = -x
-        if rabs < ki_double[idx]:
-            return x
-        if idx == 0:
-            # The tail beyond the base layer.
-            while True:
-                xx = -ziggurat_nor_inv_r * np.log1p(-_random(g))
-                yy = -np.log1p(-_random(g))
-                if yy + yy > xx * xx:
-                    if (rabs >> _U8) & _U1:
-                        return -(ziggurat_nor_r + xx)
-                    return ziggurat_nor_r + xx
-        elif (fi_double[idx - 1] - fi_double[idx]) * _random(g) + fi_double[idx] < np.exp(-0.5 * x * x):
-            return x
-
-
-@njit(cache=True)
-def _integers(g: NDArray[np.uint64], high: int) -> int:
-    """``Generator.integers(high)`` for ``1 <= high < 2**32``: Lemire's bounded draw on 32 bits."""
-    span = np.uint64(high - 1)
-    if span == 0:
-        return 0
-    bound = span + _U1
-    m = np.uint64(_call_uint32(g[_G_NEXT_UINT32], g[_G_STATE])) * bound
-    leftover = m & _LOW32
-    if leftover < bound:
-        threshold = (_LOW32 - span) % bound
-        while leftover < threshold:
-            m = np.uint64(_call_uint32(g[_G_NEXT_UINT32], g[_G_STATE])) * bound
-            leftover = m & _LOW32
-    return int(m >> _U32)
-
-
-def bit_generator_row(rng: np.random.Generator) -> NDArray[np.uint64]:
-    """The addresses the kernels need to draw from ``rng`` (see :data:`_G_STATE` ...)."""
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"an env's random source must be a numpy.random.Generator, got {type(rng).__name__}")
-    c = rng.bit_generator.ctypes
-    return np.array(
-        [
-            ctypes.cast(c.next_uint64, ctypes.c_void_p).value,
-            ctypes.cast(c.next_uint32, ctypes.c_void_p).value,
-            ctypes.cast(c.next_double, ctypes.c_void_p).value,
-            c.state_address,
-        ],
-        dtype=np.uint64,
-    )
-
-
 # --- kernels --------------------------------------------------------------------
 # Few, packed arguments: dispatching a compiled call costs ~0.1 us per argument, as much
 # as a whole env step's arithmetic.
@@ -413,16 +284,16 @@ def _draw_reset(
     # The random draws of a reset in the documented order (draws row r is env indices[r]).
     # Returns -1, or the index of an env without a generator (nothing is drawn then).
     for r in range(indices.shape[0]):
-        if generators[indices[r], _G_STATE] == 0:
+        if generators[indices[r], G_STATE] == 0:
             return indices[r]
     for r in range(indices.shape[0]):
         g = generators[indices[r]]
-        drawn = _integers(g, n_personas)
+        drawn = integers(g, n_personas)
         draws[r, _D_PERSONA] = drawn if persona_override == _NO_OVERRIDE else persona_override
         for j in range(_D_NORMALS, draws.shape[1]):
-            draws[r, j] = _standard_normal(g)
-        draws[r, _D_UNIFORM] = _random(g)
-        draws[r, _D_LEAN] = 0.0 + INITIAL_LEAN_STD_M * _standard_normal(g)
+            draws[r, j] = standard_normal(g)
+        draws[r, _D_UNIFORM] = random(g)
+        draws[r, _D_LEAN] = 0.0 + INITIAL_LEAN_STD_M * standard_normal(g)
     return -1
 
 
@@ -508,7 +379,7 @@ def _advance(
     # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
     n_envs = cmd.shape[0]
     for i in range(n_envs):
-        if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, _G_STATE] == 0:
+        if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, G_STATE] == 0:
             return i
     substeps = int(consts[_C_SUBSTEPS])
     verbal_duration_s = consts[_C_VERBAL_S]
@@ -555,7 +426,7 @@ def _advance(
             for k in range(substeps):
                 cv = env[E_VERBAL_VALUE] if env[E_VERBAL_REMAINING] > 1e-9 else 0.0
                 for j in range(NORMALS_PER_SUBSTEP):
-                    z[j] = _standard_normal(g)
+                    z[j] = standard_normal(g)
                 person_substep(s, p, delay_push, delay_verbal, cp, cv, z)
                 pos, force = measure(s, p, cp, z[3], z[4])
                 kalman_step(m, P, nominal, force, cv, pos)
@@ -900,48 +771,4 @@ class SitToStandCore:
         }
 
 
-# Outcome codes the kernels write, checked against the enum they stand for.
-assert (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE, Outcome.TIMEOUT) == (1, 2, 3, 4)
-
-
-def _flush_kernel_cache_if_dependencies_changed() -> None:
-    """Drop the kernels' cached machine code when the model or filter sources change.
-
-    Numba's on-disk cache watches only this file, but the kernels compile in the person
-    (``coop_gym.model.dynamics``), the filter and the judgment: after an edit there, the
-    env would keep simulating the old maths. A hash of those sources, kept beside the
-    cache, detects the edit.
-    """
-    from coop_gym.model import dynamics
-    from estimator import judgment, kalman
-
-    digest = hashlib.sha256()
-    for module in (dynamics, kalman, judgment):
-        with open(inspect.getsourcefile(module) or "", "rb") as source:
-            digest.update(source.read())
-    kernels: tuple[Any, ...] = (
-        _advance,
-        _reset_rows,
-        _draw_reset,
-        _observe,
-        _observe_row,
-        _standard_normal,
-        _random,
-        _integers,
-    )
-    try:
-        stamp = os.path.join(kernels[0]._cache.cache_path, "core-kernels.dependencies.sha256")
-        previous = None
-        if os.path.exists(stamp):
-            with open(stamp) as f:
-                previous = f.read().strip()
-        if previous != digest.hexdigest():
-            for kernel in kernels:
-                kernel._cache.flush()
-            with open(stamp, "w") as f:
-                f.write(digest.hexdigest())
-    except (AttributeError, OSError):  # another Numba layout or a read-only cache: compile as usual
-        pass
-
-
-_flush_kernel_cache_if_dependencies_changed()
+guard_kernel_cache(__name__)
