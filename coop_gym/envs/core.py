@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
@@ -200,6 +201,29 @@ _PT_PARAMS = 0
 _PT_NOMINAL = _PT_PARAMS + len(PARAM_COLUMNS)
 _PT_XI_CUTS = _PT_NOMINAL + len(NOMINAL_COLUMNS)
 _PT_WIDTH = _PT_XI_CUTS + 2
+
+
+def check_outcome_codes(outcome: type[IntEnum]) -> None:
+    """Raise ``ValueError`` unless the enum's values are ``0 .. n-1`` in order.
+
+    The kernel writes outcome codes into a float report column and the envs index label
+    tables with them, so they must be small consecutive integers. An explicit check, not
+    an ``assert``: it must hold under ``python -O`` too.
+    """
+    codes = [int(member) for member in outcome]
+    if codes != list(range(len(codes))):
+        raise ValueError(f"{outcome.__name__} values must be 0 .. {len(codes) - 1} in order, got {codes}")
+
+
+check_outcome_codes(Outcome)
+# Outcome codes the kernel writes, from the enum (Numba freezes them into the machine code).
+_NONE = int(Outcome.NONE)
+_SUCCESS = int(Outcome.SUCCESS)
+_UNSAFE = int(Outcome.UNSAFE)
+_PREMATURE = int(Outcome.PREMATURE)
+_TIMEOUT = int(Outcome.TIMEOUT)
+_ENDED_BY_LIFT = np.array([member in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE) for member in Outcome])
+"""Indexed by outcome code: does the episode terminate (the robot lifted)?"""
 
 INITIAL_LEAN_STD_M = 0.005
 """People sit a little differently: std of the initial forward lean [m]."""
@@ -405,15 +429,15 @@ def _advance(
         cp = cmd[i, CMD_PUSH]
         lift = cmd[i, CMD_LIFT] > 0.5
         env[E_IMPULSE] = 0.0
-        result = 0
+        result = _NONE
         if lift:
             # The lift is judged on the true state at the moment it starts (§II).
             if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
-                result = 1  # Outcome.SUCCESS
+                result = _SUCCESS
             elif s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
-                result = 2  # Outcome.UNSAFE
+                result = _UNSAFE
             else:
-                result = 3  # Outcome.PREMATURE
+                result = _PREMATURE
             for k in range(substeps):
                 block[k] = 0.0
                 block[substeps + k] = 0.0
@@ -455,11 +479,11 @@ def _advance(
             f[F_ELAPSED] = env[E_ELAPSED]
             f[F_TRUE_XI] = s[S_XI]
             if env[E_ELAPSED] >= episode_s - 1e-9:
-                result = 4  # Outcome.TIMEOUT (truncation happens on this same step)
+                result = _TIMEOUT  # truncation happens on this same step
         # Named reward terms (RewardWeights), then their sum.
-        t_success = consts[_C_W_SUCCESS] if result == 1 else 0.0
-        t_unsafe = -consts[_C_W_UNSAFE] if result == 2 else 0.0
-        t_premature = -consts[_C_W_PREMATURE] if result == 3 else 0.0
+        t_success = consts[_C_W_SUCCESS] if result == _SUCCESS else 0.0
+        t_unsafe = -consts[_C_W_UNSAFE] if result == _UNSAFE else 0.0
+        t_premature = -consts[_C_W_PREMATURE] if result == _PREMATURE else 0.0
         t_time = 0.0 if lift else consts[_C_TIME_TERM]
         t_force = -consts[_C_W_FORCE] * env[E_IMPULSE]
         f[R_TERMS] = t_success
@@ -637,7 +661,7 @@ class SitToStandCore:
     def out(self) -> StepArrays:
         """What the last step or reset produced, as :class:`StepArrays` (views; outcome and terminated refreshed)."""
         np.copyto(self._outcome, self.report[:, R_OUTCOME], casting="unsafe")
-        np.copyto(self._terminated, (self._outcome >= Outcome.SUCCESS) & (self._outcome <= Outcome.PREMATURE))
+        np.take(_ENDED_BY_LIFT, self._outcome, out=self._terminated)
         return self._out
 
     @property
