@@ -393,6 +393,105 @@ def _reset_rows(
 
 
 @njit(cache=True)
+def _lift_outcome(s: NDArray[np.float64], consts: NDArray[np.float64]) -> int:
+    # The lift is judged on the true state at the moment it starts (§II).
+    if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
+        return _SUCCESS
+    if s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
+        return _UNSAFE
+    return _PREMATURE
+
+
+@njit(cache=True)
+def _simulate_action(
+    row: NDArray[np.float64],
+    cp: float,
+    verbal_request: float,
+    g: NDArray[np.uint64],
+    z: NDArray[np.float64],
+    consts: NDArray[np.float64],
+) -> int:
+    # One non-lift action of one env: cues -> person -> sensors -> filter -> judgment, x substeps,
+    # then the features. Returns the outcome: TIMEOUT at the end of the episode, else NONE.
+    substeps = int(consts[_C_SUBSTEPS])
+    episode_s = consts[_C_EPISODE_S]
+    s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+    env = row[_ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
+    m = row[_ST_MEAN : _ST_MEAN + STATE_DIM]
+    P = row[_ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
+    judge = row[_ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
+    nominal = row[_ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
+    p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
+    delay_push = row[_ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
+    delay_verbal = row[_ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
+    f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
+    block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
+    dt = p[P_DT]
+    # A verbal cue is an utterance of fixed length; one can't talk over oneself.
+    if env[E_VERBAL_REMAINING] <= 0.0 and verbal_request != 0.0:
+        env[E_VERBAL_VALUE] = verbal_request
+        env[E_VERBAL_REMAINING] = consts[_C_VERBAL_S]
+    for k in range(substeps):
+        cv = env[E_VERBAL_VALUE] if env[E_VERBAL_REMAINING] > 1e-9 else 0.0
+        for j in range(NORMALS_PER_SUBSTEP):
+            z[j] = standard_normal(g)
+        person_substep(s, p, delay_push, delay_verbal, cp, cv, z)
+        pos, force = measure(s, p, cp, z[3], z[4])
+        kalman_step(m, P, nominal, force, cv, pos)
+        judgment_substep(judge, cp > 0.0 or cv != 0.0, m[3], consts[_C_JUDGE_DELAY_S], consts[_C_JUDGE_THRESHOLD], dt)
+        block[k] = force
+        block[substeps + k] = cv
+        block[2 * substeps + k] = pos
+        env[E_VERBAL_REMAINING] -= dt
+        env[E_IMPULSE] += cp * dt
+        f[F_POS] = pos
+        f[F_FORCE] = force
+    if env[E_VERBAL_REMAINING] <= 1e-9:
+        env[E_VERBAL_REMAINING] = 0.0
+        env[E_VERBAL_VALUE] = 0.0
+    env[E_ELAPSED] += substeps * dt
+    f[F_VERBAL] = env[E_VERBAL_VALUE]
+    f[F_SINCE_ONSET] = min(judge[J_SINCE_ONSET], episode_s)
+    f[F_X_HAT] = m[0]
+    f[F_XDOT_HAT] = m[1]
+    f[F_ETA_HAT] = m[2]
+    f[F_XI_HAT] = m[3]
+    f[F_XI_STD] = np.sqrt(max(P[3, 3], 0.0))
+    f[F_JUDGMENT] = judge[J_JUDGMENT]
+    f[F_ELAPSED] = env[E_ELAPSED]
+    f[F_TRUE_XI] = s[S_XI]
+    if env[E_ELAPSED] >= episode_s - 1e-9:
+        return _TIMEOUT  # truncation happens on this same step
+    return _NONE
+
+
+@njit(cache=True)
+def _write_reward_and_truth(
+    row: NDArray[np.float64], result: int, lift: bool, cp: float, consts: NDArray[np.float64]
+) -> None:
+    # Named reward terms (RewardWeights), then their sum; the outcome, the push and the true state.
+    s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+    f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
+    t_success = consts[_C_W_SUCCESS] if result == _SUCCESS else 0.0
+    t_unsafe = -consts[_C_W_UNSAFE] if result == _UNSAFE else 0.0
+    t_premature = -consts[_C_W_PREMATURE] if result == _PREMATURE else 0.0
+    t_time = 0.0 if lift else consts[_C_TIME_TERM]
+    t_force = -consts[_C_W_FORCE] * row[_ST_CUES + E_IMPULSE]
+    f[R_TERMS] = t_success
+    f[R_TERMS + 1] = t_unsafe
+    f[R_TERMS + 2] = t_premature
+    f[R_TERMS + 3] = t_time
+    f[R_TERMS + 4] = t_force
+    f[R_REWARD] = t_success + t_unsafe + t_premature + t_time + t_force
+    f[R_OUTCOME] = result
+    f[R_PUSH] = 0.0 if lift else cp
+    f[R_TRUE_X] = s[S_X]
+    f[R_TRUE_XDOT] = s[S_XDOT]
+    f[R_TRUE_ETA] = s[S_ETA]
+    f[R_TRUE_XI] = s[S_XI]
+
+
+@njit(cache=True)
 def _advance(
     cmd: NDArray[np.float64],
     state: NDArray[np.float64],
@@ -406,98 +505,25 @@ def _advance(
         if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, G_STATE] == 0:
             return i
     substeps = int(consts[_C_SUBSTEPS])
-    verbal_duration_s = consts[_C_VERBAL_S]
-    episode_s = consts[_C_EPISODE_S]
     z = np.empty(NORMALS_PER_SUBSTEP)
     for i in range(n_envs):
         if cmd[i, CMD_ACTIVE] < 0.5:
             continue
         row = state[i]
-        s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
-        env = row[_ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
-        m = row[_ST_MEAN : _ST_MEAN + STATE_DIM]
-        P = row[_ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
-        judge = row[_ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
-        nominal = row[_ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
-        p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
-        delay_push = row[_ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
-        delay_verbal = row[_ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
-        f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
-        block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
-        g = generators[i]
-        dt = p[P_DT]
         cp = cmd[i, CMD_PUSH]
         lift = cmd[i, CMD_LIFT] > 0.5
-        env[E_IMPULSE] = 0.0
-        result = _NONE
+        row[_ST_CUES + E_IMPULSE] = 0.0
         if lift:
-            # The lift is judged on the true state at the moment it starts (§II).
-            if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
-                result = _SUCCESS
-            elif s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
-                result = _UNSAFE
-            else:
-                result = _PREMATURE
+            result = _lift_outcome(row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)], consts)
+            # The filter's input blocks hold still: no push, no cue, the last reading.
+            block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
             for k in range(substeps):
                 block[k] = 0.0
                 block[substeps + k] = 0.0
-                block[2 * substeps + k] = f[F_POS]
+                block[2 * substeps + k] = row[_ST_REPORT + F_POS]
         else:
-            # A verbal cue is an utterance of fixed length; one can't talk over oneself.
-            if env[E_VERBAL_REMAINING] <= 0.0 and cmd[i, CMD_VERBAL] != 0.0:
-                env[E_VERBAL_VALUE] = cmd[i, CMD_VERBAL]
-                env[E_VERBAL_REMAINING] = verbal_duration_s
-            for k in range(substeps):
-                cv = env[E_VERBAL_VALUE] if env[E_VERBAL_REMAINING] > 1e-9 else 0.0
-                for j in range(NORMALS_PER_SUBSTEP):
-                    z[j] = standard_normal(g)
-                person_substep(s, p, delay_push, delay_verbal, cp, cv, z)
-                pos, force = measure(s, p, cp, z[3], z[4])
-                kalman_step(m, P, nominal, force, cv, pos)
-                judgment_substep(
-                    judge, cp > 0.0 or cv != 0.0, m[3], consts[_C_JUDGE_DELAY_S], consts[_C_JUDGE_THRESHOLD], dt
-                )
-                block[k] = force
-                block[substeps + k] = cv
-                block[2 * substeps + k] = pos
-                env[E_VERBAL_REMAINING] -= dt
-                env[E_IMPULSE] += cp * dt
-                f[F_POS] = pos
-                f[F_FORCE] = force
-            if env[E_VERBAL_REMAINING] <= 1e-9:
-                env[E_VERBAL_REMAINING] = 0.0
-                env[E_VERBAL_VALUE] = 0.0
-            env[E_ELAPSED] += substeps * dt
-            f[F_VERBAL] = env[E_VERBAL_VALUE]
-            f[F_SINCE_ONSET] = min(judge[J_SINCE_ONSET], episode_s)
-            f[F_X_HAT] = m[0]
-            f[F_XDOT_HAT] = m[1]
-            f[F_ETA_HAT] = m[2]
-            f[F_XI_HAT] = m[3]
-            f[F_XI_STD] = np.sqrt(max(P[3, 3], 0.0))
-            f[F_JUDGMENT] = judge[J_JUDGMENT]
-            f[F_ELAPSED] = env[E_ELAPSED]
-            f[F_TRUE_XI] = s[S_XI]
-            if env[E_ELAPSED] >= episode_s - 1e-9:
-                result = _TIMEOUT  # truncation happens on this same step
-        # Named reward terms (RewardWeights), then their sum.
-        t_success = consts[_C_W_SUCCESS] if result == _SUCCESS else 0.0
-        t_unsafe = -consts[_C_W_UNSAFE] if result == _UNSAFE else 0.0
-        t_premature = -consts[_C_W_PREMATURE] if result == _PREMATURE else 0.0
-        t_time = 0.0 if lift else consts[_C_TIME_TERM]
-        t_force = -consts[_C_W_FORCE] * env[E_IMPULSE]
-        f[R_TERMS] = t_success
-        f[R_TERMS + 1] = t_unsafe
-        f[R_TERMS + 2] = t_premature
-        f[R_TERMS + 3] = t_time
-        f[R_TERMS + 4] = t_force
-        f[R_REWARD] = t_success + t_unsafe + t_premature + t_time + t_force
-        f[R_OUTCOME] = result
-        f[R_PUSH] = 0.0 if lift else cp
-        f[R_TRUE_X] = s[S_X]
-        f[R_TRUE_XDOT] = s[S_XDOT]
-        f[R_TRUE_ETA] = s[S_ETA]
-        f[R_TRUE_XI] = s[S_XI]
+            result = _simulate_action(row, cp, cmd[i, CMD_VERBAL], generators[i], z, consts)
+        _write_reward_and_truth(row, result, lift, cp, consts)
         if consts[_C_BUILD_OBS] > 0.5:
             _observe_row(row, obs[i], consts)
     return -1
@@ -557,9 +583,20 @@ class SitToStandCore:
         self.reward_weights = reward
         self.judgment = judgment
         self.estimator = estimator
+        self._nominal_prior = NominalModel()
+        varied = self._pack_personas()
+        index = tuple(range(len(FEATURES))) if observation_index is None else tuple(observation_index)
+        self.consts = _pack_consts(self, index, observation_low, observation_high, varied)
+        self._allocate(n, len(index), len(varied))
+        self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
+        # With a multiple-model estimator the observation waits for its probabilities.
+        self.consts[_C_BUILD_OBS] = 1.0 if self.mm is None else 0.0
+
+    def _pack_personas(self) -> list[int]:
+        """Fill ``persona_table`` and the variation stds; return the varied columns of a packed person."""
+        personas, timing, realism = self.personas, self.timing, self.realism
         # The filter's nominal model depends only on the persona: pack each once.
         self._persona_nominal = [nominal_row(nominal_model_for(p.params, timing)) for p in personas]
-        self._nominal_prior = prior = NominalModel()
         # Each persona packed once; a reset scales the varied gains (as sample_person does) and
         # recomputes the zero-order hold, instead of building and validating dataclasses.
         table = np.zeros((len(personas), _PT_WIDTH))
@@ -570,48 +607,16 @@ class SitToStandCore:
             table[k, _PT_XI_CUTS] = coop.initial_p_uncooperative
             table[k, _PT_XI_CUTS + 1] = 1.0 - coop.initial_p_cooperative
         self.persona_table = table
-        varied = [PARAM_COLUMNS.index(name) for names in VARIED_PARAMETERS.values() for name in names]
         stds = {p.variation_relative_std for p in personas}
         # One shared std (the usual case) broadcasts from a 1-element array (cheaper for a ufunc
         # than a Python float); else each reset env takes its persona's.
         self._variation_std = np.array([stds.pop()]) if len(stds) == 1 else None
         self._persona_variation_std = np.array([p.variation_relative_std for p in personas])
+        return [PARAM_COLUMNS.index(name) for names in VARIED_PARAMETERS.values() for name in names]
 
-        index = tuple(range(len(FEATURES))) if observation_index is None else tuple(observation_index)
-        n_obs = len(index)
-        template = initial_state_row(0, 0.0)
-        consts = np.zeros(_N_CONSTS + 3 * n_obs + len(varied) + len(template))
-        consts[_C_SUBSTEPS] = timing.substeps
-        consts[_C_VERBAL_S] = cues.verbal_duration_s
-        consts[_C_JUDGE_DELAY_S] = judgment.delay_s
-        consts[_C_JUDGE_THRESHOLD] = judgment.threshold
-        consts[_C_SUCCESS_LEAN_M] = lift.success_lean_m
-        consts[_C_UPRIGHT_M] = lift.upright_m
-        consts[_C_EPISODE_S] = timing.episode_s
-        consts[_C_W_SUCCESS] = reward.success
-        consts[_C_W_UNSAFE] = reward.unsafe
-        consts[_C_W_PREMATURE] = reward.premature
-        consts[_C_TIME_TERM] = -reward.time_per_s * timing.action_period_s
-        consts[_C_W_FORCE] = reward.force_per_n_s
-        consts[_C_VARY] = 1.0 if realism.person_variation else 0.0
-        consts[_C_XDOT_VAR] = prior.initial_velocity_std_m_per_s**2
-        consts[_C_ETA_VAR] = prior.initial_intention_std_m**2
-        consts[_C_XI_VAR] = prior.initial_cooperativeness_std**2
-        consts[_C_XI_STD] = prior.initial_cooperativeness_std
-        consts[_C_N_OBS] = n_obs
-        consts[_C_N_VARIED] = len(varied)
-        at = _N_CONSTS
-        consts[_C_OBS_AT] = at
-        consts[at : at + n_obs] = index
-        consts[at + n_obs : at + 2 * n_obs] = -np.inf if observation_low is None else observation_low
-        consts[at + 2 * n_obs : at + 3 * n_obs] = np.inf if observation_high is None else observation_high
-        consts[_C_VARIED_AT] = at = at + 3 * n_obs
-        consts[at : at + len(varied)] = varied
-        consts[_C_TEMPLATE_AT] = at = at + len(varied)
-        consts[at : at + len(template)] = template
-        self.consts = consts
-
-        substeps = timing.substeps
+    def _allocate(self, n: int, n_obs: int, n_varied: int) -> None:
+        """The packed per-env state with its views, the command rows and the output buffers."""
+        substeps = self.timing.substeps
         self.state = st = np.zeros((n, _ST_BLOCKS + 3 * substeps))
         self.person = st[:, _ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
         self.env = st[:, _ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
@@ -643,10 +648,7 @@ class SitToStandCore:
             verbal_cue=self.report[:, F_VERBAL],
         )
         self._all = np.arange(n, dtype=np.int64)
-        self._draws = np.zeros((n, _D_NORMALS + len(varied)))
-        self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
-        # With a multiple-model estimator the observation waits for its probabilities.
-        consts[_C_BUILD_OBS] = 1.0 if self.mm is None else 0.0
+        self._draws = np.zeros((n, _D_NORMALS + n_varied))
 
     def _make_multiple_model(self, options: dict[str, Any]) -> Any:
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
@@ -784,15 +786,48 @@ class SitToStandCore:
             if rng is not None:
                 self.generators[i] = bit_generator_row(rng)
 
-    def true_state(self, i: int) -> dict[str, float]:
-        """The hidden truth of env ``i``, for ``info``."""
-        s = self.person[i]
-        return {
-            "true_x_m": float(s[S_X]),
-            "true_xdot_m_per_s": float(s[S_XDOT]),
-            "true_eta_m": float(s[S_ETA]),
-            "true_xi": int(s[S_XI]),
-        }
+
+def _pack_consts(
+    core: SitToStandCore,
+    index: tuple[int, ...],
+    observation_low: NDArray[np.float64] | None,
+    observation_high: NDArray[np.float64] | None,
+    varied: list[int],
+) -> NDArray[np.float64]:
+    """The scalars the kernels read (``_C_*``), then the observation spec, varied columns and initial state row."""
+    timing, reward, prior = core.timing, core.reward_weights, core._nominal_prior
+    n_obs = len(index)
+    template = initial_state_row(0, 0.0)
+    consts = np.zeros(_N_CONSTS + 3 * n_obs + len(varied) + len(template))
+    consts[_C_SUBSTEPS] = timing.substeps
+    consts[_C_VERBAL_S] = core.cues.verbal_duration_s
+    consts[_C_JUDGE_DELAY_S] = core.judgment.delay_s
+    consts[_C_JUDGE_THRESHOLD] = core.judgment.threshold
+    consts[_C_SUCCESS_LEAN_M] = core.lift.success_lean_m
+    consts[_C_UPRIGHT_M] = core.lift.upright_m
+    consts[_C_EPISODE_S] = timing.episode_s
+    consts[_C_W_SUCCESS] = reward.success
+    consts[_C_W_UNSAFE] = reward.unsafe
+    consts[_C_W_PREMATURE] = reward.premature
+    consts[_C_TIME_TERM] = -reward.time_per_s * timing.action_period_s
+    consts[_C_W_FORCE] = reward.force_per_n_s
+    consts[_C_VARY] = 1.0 if core.realism.person_variation else 0.0
+    consts[_C_XDOT_VAR] = prior.initial_velocity_std_m_per_s**2
+    consts[_C_ETA_VAR] = prior.initial_intention_std_m**2
+    consts[_C_XI_VAR] = prior.initial_cooperativeness_std**2
+    consts[_C_XI_STD] = prior.initial_cooperativeness_std
+    consts[_C_N_OBS] = n_obs
+    consts[_C_N_VARIED] = len(varied)
+    at = _N_CONSTS
+    consts[_C_OBS_AT] = at
+    consts[at : at + n_obs] = index
+    consts[at + n_obs : at + 2 * n_obs] = -np.inf if observation_low is None else observation_low
+    consts[at + 2 * n_obs : at + 3 * n_obs] = np.inf if observation_high is None else observation_high
+    consts[_C_VARIED_AT] = at = at + 3 * n_obs
+    consts[at : at + len(varied)] = varied
+    consts[_C_TEMPLATE_AT] = at = at + len(varied)
+    consts[at : at + len(template)] = template
+    return consts
 
 
 guard_kernel_cache(__name__)
