@@ -104,12 +104,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.evaluate", "unknown backend", ["--agent", "random", "--backend", "gpu"], r"--backend: invalid choice"),
     ("experiment.protocol", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     ("experiment.protocol", "subjects 0", ["--subjects", "0"], r"--subjects: expected a positive integer, got 0"),
-    (
-        "experiment.protocol",
-        "trials not a number",
-        ["--trials", "x"],
-        r"--trials: expected a positive integer, got 'x'",
-    ),
+    ("experiment.protocol", "trials not a number", ["--trials", "x"], r"--trials: expected a positive integer, got 'x'"),  # noqa: E501
     ("experiment.protocol", "negative seed", ["--seed", "-1"], r"--seed: expected a non-negative integer seed"),
     ("experiment.protocol", "seeds 0", ["--seeds", "0"], r"--seeds: expected a positive integer, got 0"),
     (

@@ -31,6 +31,11 @@ def _variation_percent() -> tuple[float, ...]:
     return (100 * stds.pop(),)
 
 
+def _reward_weights() -> tuple[float, ...]:
+    w = RewardWeights()
+    return (w.success, w.unsafe, w.premature, w.time_per_s, w.force_per_n_s)
+
+
 def _max_episode_steps() -> tuple[float, ...]:
     steps = {gym.spec(env_id).max_episode_steps for env_id in coop_gym.ENV_IDS}
     assert len(steps) == 1
@@ -54,13 +59,7 @@ CASES: list[tuple[str, str, str, Callable[[], tuple[float, ...]]]] = [
         "readme-reward",
         README,
         r"\+(\d+) success, \u2212(\d+) unsafe, \u2212([\d.]+) premature, \u2212([\d.]+) per s, \u2212([\d.]+) per N·s",
-        lambda: (
-            RewardWeights().success,
-            RewardWeights().unsafe,
-            RewardWeights().premature,
-            RewardWeights().time_per_s,
-            RewardWeights().force_per_n_s,
-        ),
+        _reward_weights,
     ),
     ("readme-judgment-delay", README, r"filter ([\d.]+) s after the first cue", lambda: (ThresholdJudgment().delay_s,)),
     ("readme-judgment-band", README, r"its ±([\d.]+) band", lambda: (ThresholdJudgment().threshold,)),
@@ -86,13 +85,7 @@ CASES: list[tuple[str, str, str, Callable[[], tuple[float, ...]]]] = [
         ENV,
         r"``success``\s+\+(\d+) .*?``unsafe`` -(\d+) .*?``premature`` -([\d.]+)\s+.*?``time`` -([\d.]+) per second; "
         r"``force`` -([\d.]+) per newton-second",
-        lambda: (
-            RewardWeights().success,
-            RewardWeights().unsafe,
-            RewardWeights().premature,
-            RewardWeights().time_per_s,
-            RewardWeights().force_per_n_s,
-        ),
+        _reward_weights,
     ),
     (
         "env-episode",
