@@ -8,8 +8,12 @@ from typing import Any
 
 import numpy as np
 
+from coop_gym.envs.config import Outcome
+
 __all__ = ["plot_learning_curve", "plot_outcome_rates"]
 
+# Episode outcomes in report order (as agents.evaluate.OUTCOMES), from the enum: plots need not import evaluate.
+_OUTCOMES: tuple[str, ...] = tuple(o.label for o in Outcome if o is not Outcome.NONE)
 _OUTCOME_COLOURS = {"success": "#2e7d32", "unsafe": "#c62828", "premature": "#ef6c00", "timeout": "#757575"}
 
 
@@ -33,8 +37,6 @@ def plot_outcome_rates(results: Sequence[Any], path: str | Path, title: str | No
     Returns:
         The path written.
     """
-    from agents.evaluate import OUTCOMES
-
     if not results:
         raise ValueError("plot_outcome_rates needs at least one result")
     plt = _pyplot()
@@ -42,14 +44,14 @@ def plot_outcome_rates(results: Sequence[Any], path: str | Path, title: str | No
     path.parent.mkdir(parents=True, exist_ok=True)
     names = [r.agent for r in results]
     x = np.arange(len(results))
-    width = 0.8 / len(OUTCOMES)
+    width = 0.8 / len(_OUTCOMES)
     fig, ax = plt.subplots(figsize=(max(6.0, 1.4 * len(results) + 2.0), 4.0))
-    for k, outcome in enumerate(OUTCOMES):
+    for k, outcome in enumerate(_OUTCOMES):
         rates = np.array([r.rate(outcome) for r in results])
         intervals = np.array([r.interval(outcome) for r in results])
         err = np.vstack([rates - intervals[:, 0], intervals[:, 1] - rates])
         ax.bar(
-            x + (k - (len(OUTCOMES) - 1) / 2) * width,
+            x + (k - (len(_OUTCOMES) - 1) / 2) * width,
             100 * rates,
             width,
             yerr=100 * np.clip(err, 0.0, None),
@@ -64,7 +66,7 @@ def plot_outcome_rates(results: Sequence[Any], path: str | Path, title: str | No
     ax.set_yticks(range(0, 101, 20))
     first = results[0]
     ax.set_title(title or f"{first.env_id} | {','.join(first.personas)} | {first.episodes} episodes")
-    ax.legend(ncols=len(OUTCOMES), fontsize="small", loc="upper center")
+    ax.legend(ncols=len(_OUTCOMES), fontsize="small", loc="upper center")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -205,14 +205,6 @@ def soak_single(steps: int, seed: int, info_every: int) -> dict[str, Any]:
     return result
 
 
-def vector_env_exists() -> bool:
-    try:
-        import coop_gym.envs.vector  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=10_000_000, help="env-steps to run in total")
@@ -224,13 +216,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.steps < 1 or args.num_envs < 1 or args.info_every < 1:
         parser.error("--steps, --num-envs and --info-every must be positive")
-    use_vector = not args.single and vector_env_exists()
-    if use_vector:
-        result = soak_vector(args.num_envs, args.steps, args.seed, args.info_every)
-    else:
-        if not args.single:
-            print("coop_gym.envs.vector not found: soaking the single env", file=sys.stderr)
+    if args.single:
         result = soak_single(args.steps, args.seed, args.info_every)
+    else:
+        result = soak_vector(args.num_envs, args.steps, args.seed, args.info_every)
     covariances = result["covariances"]
     result["ok"] = not result["failures"] and isinstance(covariances, dict) and bool(covariances.get("ok"))
     if args.json:

@@ -39,6 +39,7 @@ import scipy.optimize
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from compiled.cache import guard_kernel_cache
 from estimator.kalman import NOMINAL_COLUMNS, nominal_row
 from estimator.multiple_model import N_MODES, _mean_step, _riccati_step
 from estimator.nominal import NominalModel
@@ -354,50 +355,17 @@ def identify(
         (True, 0.02, True)
     """
     initial = initial if initial is not None else NominalModel()
-    if restarts < 1:
-        raise ValueError(f"restarts must be >= 1, got {restarts!r}")
-    fields = tuple(fitted_fields)
-    unknown = [f for f in fields if f not in _FITTABLE]
-    if unknown or len(set(fields)) != len(fields) or not fields:
-        raise ValueError(f"fitted_fields must be distinct names from {sorted(_FITTABLE)}, got {fields!r}")
-    for name in fields:
-        if getattr(initial, name) <= 0:
-            raise ValueError(f"initial.{name} must be > 0 to be fitted in log space, got {getattr(initial, name)!r}")
+    fields = _checked_fields(initial, restarts, fitted_fields)
     packed = _PackedTrials(trials)
-    labels = _labels(packed, labelled)
-
-    base_row = nominal_row(initial)
-    columns = np.array([_FITTABLE[f][0] for f in fields])
-    powers = np.array([_FITTABLE[f][1] for f in fields], dtype=np.float64)
+    objective = _Objective(packed, _labels(packed, labelled), initial, fields)
     theta0 = np.log([getattr(initial, f) for f in fields])
     bounds = [(t - _LOG_BOUND, t + _LOG_BOUND) for t in theta0]
-    scale = 1.0 / packed.n_measurements  # per-measurement cost keeps finite differences well conditioned
-    step = 1e-5  # central-difference step in log space
-
-    def rows_of(thetas: NDArray[np.float64]) -> NDArray[np.float64]:
-        rows = np.repeat(base_row[None, :], thetas.shape[0], axis=0)
-        rows[:, columns] = np.exp(thetas * powers)
-        return rows
-
-    def costs(thetas: NDArray[np.float64]) -> NDArray[np.float64]:
-        total = _combine_modes(packed.mode_log_likelihoods(rows_of(thetas), initial), labels).sum(axis=-1)
-        cost = -total * scale
-        return np.where(np.isfinite(cost), cost, _DIVERGED_COST)
-
-    def fun_and_grad(theta: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
-        # All 2p + 1 parameter sets in one compiled call: the value and a central-difference gradient.
-        eye = np.eye(theta.shape[0]) * step
-        batch = np.vstack([theta[None, :], theta + eye, theta - eye])
-        c = costs(batch)
-        p = theta.shape[0]
-        return float(c[0]), (c[1 : p + 1] - c[p + 1 :]) / (2.0 * step)
-
     rng = np.random.default_rng(seed)
     runs = []
     for k in range(restarts):
         start = theta0 if k == 0 else theta0 + rng.normal(0.0, restart_spread, theta0.shape)
         res = scipy.optimize.minimize(
-            fun_and_grad,
+            objective.fun_and_grad,
             start,
             jac=True,
             method="L-BFGS-B",
@@ -406,14 +374,14 @@ def identify(
         )
         runs.append(res)
     best = min(runs, key=lambda r: r.fun)
-    standard_errors = _log_standard_errors(costs, best.x, scale)
+    scale = objective.scale
+    standard_errors = _log_standard_errors(objective.costs, best.x, scale)
     fitted = {name: float(np.exp(best.x[n])) for n, name in enumerate(fields)}
     dts = {t.dt_s for t in packed.trials}
     if len(dts) == 1:
         fitted["dt_s"] = float(next(iter(dts)))
-    model = initial.replace(**fitted)
     return IdentificationResult(
-        model=model,
+        model=initial.replace(**fitted),
         negative_log_likelihood=float(best.fun) / scale,
         n_iterations=int(best.nit),
         success=bool(best.success),
@@ -423,6 +391,57 @@ def identify(
         restart_negative_log_likelihoods=tuple(float(r.fun) / scale for r in runs),
         standard_errors=dict(zip(fields, standard_errors.tolist(), strict=True)),
     )
+
+
+def _checked_fields(initial: NominalModel, restarts: int, fitted_fields: Sequence[str]) -> tuple[str, ...]:
+    """The fitted fields, after checking them and ``restarts`` (``ValueError`` naming the problem)."""
+    if restarts < 1:
+        raise ValueError(f"restarts must be >= 1, got {restarts!r}")
+    fields = tuple(fitted_fields)
+    unknown = [f for f in fields if f not in _FITTABLE]
+    if unknown or len(set(fields)) != len(fields) or not fields:
+        raise ValueError(f"fitted_fields must be distinct names from {sorted(_FITTABLE)}, got {fields!r}")
+    for name in fields:
+        if getattr(initial, name) <= 0:
+            raise ValueError(f"initial.{name} must be > 0 to be fitted in log space, got {getattr(initial, name)!r}")
+    return fields
+
+
+class _Objective:
+    """The per-measurement negative log-likelihood of log-space parameters ``theta``, and its gradient."""
+
+    # Central-difference step in log space.
+    step = 1e-5
+
+    def __init__(
+        self, packed: _PackedTrials, labels: NDArray[np.int64] | None, initial: NominalModel, fields: tuple[str, ...]
+    ) -> None:
+        self.packed = packed
+        self.labels = labels
+        self.initial = initial
+        self.base_row = nominal_row(initial)
+        self.columns = np.array([_FITTABLE[f][0] for f in fields])
+        self.powers = np.array([_FITTABLE[f][1] for f in fields], dtype=np.float64)
+        # A per-measurement cost keeps finite differences well conditioned.
+        self.scale = 1.0 / packed.n_measurements
+
+    def rows_of(self, thetas: NDArray[np.float64]) -> NDArray[np.float64]:
+        rows = np.repeat(self.base_row[None, :], thetas.shape[0], axis=0)
+        rows[:, self.columns] = np.exp(thetas * self.powers)
+        return rows
+
+    def costs(self, thetas: NDArray[np.float64]) -> NDArray[np.float64]:
+        mode_ll = self.packed.mode_log_likelihoods(self.rows_of(thetas), self.initial)
+        cost = -_combine_modes(mode_ll, self.labels).sum(axis=-1) * self.scale
+        return np.where(np.isfinite(cost), cost, _DIVERGED_COST)
+
+    def fun_and_grad(self, theta: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
+        # All 2p + 1 parameter sets in one compiled call: the value and a central-difference gradient.
+        eye = np.eye(theta.shape[0]) * self.step
+        batch = np.vstack([theta[None, :], theta + eye, theta - eye])
+        c = self.costs(batch)
+        p = theta.shape[0]
+        return float(c[0]), (c[1 : p + 1] - c[p + 1 :]) / (2.0 * self.step)
 
 
 def _log_standard_errors(
@@ -594,3 +613,6 @@ def simulate_nominal_trials(
         raise ValueError(f"initial_state must be 'prior' or 'rest', got {initial_state!r}")
     measured, _ = _simulate_batch(model, cp, cv, xi_steps, rng, start)
     return [Trial(cp[i], cv[i], measured[i], xi=int(xis[i]), dt_s=dt) for i in range(n_trials)]
+
+
+guard_kernel_cache(__name__)

@@ -15,6 +15,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from compiled.cache import guard_kernel_cache
+
 __all__ = ["JUDGMENT_COLUMNS", "ThresholdJudgment", "judgment_substep", "threshold_judgment"]
 
 
@@ -80,3 +82,6 @@ def judgment_substep(
             row[J_JUDGMENT] = 0.0
         return True
     return False
+
+
+guard_kernel_cache(__name__)

@@ -27,6 +27,7 @@ from filterpy.kalman import KalmanFilter
 from numba import njit
 from numpy.typing import NDArray
 
+from compiled.cache import guard_kernel_cache
 from estimator.nominal import STATE_DIM, NominalModel
 
 __all__ = [
@@ -278,3 +279,6 @@ class FastKalmanFilter:
         log_likelihoods = np.empty((n_env, n_steps))
         _kalman_run(self.m, self.P, self.nominal, cp, cv, y, means, covariances, log_likelihoods)
         return means, covariances, log_likelihoods
+
+
+guard_kernel_cache(__name__)

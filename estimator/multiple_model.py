@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from compiled.cache import guard_kernel_cache
 from estimator.kalman import NOMINAL_COLUMNS, nominal_row
 from estimator.nominal import NominalModel
 
@@ -228,10 +229,10 @@ def _mmae_env_step(
     measured_position_m: float,
     K: NDArray[np.float64],
 ) -> None:
-    """One MMAE step of env ``i``: shared Riccati, three mean updates, Bayes on the modes."""
+    """One MMAE step of env ``i``: shared Riccati (``P[i, 0]``), three mean updates, Bayes on the modes."""
     row = nominal[i]
     # One covariance recursion serves all modes: F, Q, H, R are mode-independent.
-    S = _riccati_step(P[i], row, K)
+    S = _riccati_step(P[i, 0], row, K)
     log_S_term = _LOG_2PI + math.log(S)
     for j in range(N_MODES):
         xi = float(j - 1)
@@ -243,64 +244,6 @@ def _mmae_env_step(
         # Bayes: log mu_j += log N(innovation_j; 0, S).
         log_mu[i, j] = lp - 0.5 * (log_S_term + innovation * innovation / S)
     _log_normalise(log_mu[i])
-
-
-@njit(cache=True)
-def _mmae_step(
-    means: NDArray[np.float64],
-    P: NDArray[np.float64],
-    log_mu: NDArray[np.float64],
-    nominal: NDArray[np.float64],
-    log_keep: float,
-    log_floor: float,
-    push_force_n: NDArray[np.float64],
-    verbal_cue: NDArray[np.float64],
-    measured_position_m: NDArray[np.float64],
-    probs: NDArray[np.float64],
-    mean_out: NDArray[np.float64],
-) -> int:
-    if not _inputs_finite(push_force_n, verbal_cue, measured_position_m):
-        return _NON_FINITE_INPUT
-    K = np.empty(_STATE)
-    for i in range(means.shape[0]):
-        _mmae_env_step(
-            i, means, P, log_mu, nominal, log_keep, log_floor,
-            push_force_n[i], verbal_cue[i], measured_position_m[i], K,
-        )  # fmt: skip
-        _write_outputs(i, means, log_mu, probs, mean_out)
-    return _OK
-
-
-@njit(cache=True)
-def _mmae_run(
-    means: NDArray[np.float64],
-    P: NDArray[np.float64],
-    log_mu: NDArray[np.float64],
-    nominal: NDArray[np.float64],
-    log_keep: float,
-    log_floor: float,
-    push_force_n: NDArray[np.float64],
-    verbal_cue: NDArray[np.float64],
-    measured_position_m: NDArray[np.float64],
-    probs_seq: NDArray[np.float64],
-    probs: NDArray[np.float64],
-    mean_out: NDArray[np.float64],
-) -> int:
-    n_env, n_steps = measured_position_m.shape
-    for i in range(n_env):
-        if not _inputs_finite(push_force_n[i], verbal_cue[i], measured_position_m[i]):
-            return _NON_FINITE_INPUT
-    K = np.empty(_STATE)
-    for i in range(n_env):
-        for t in range(n_steps):
-            _mmae_env_step(
-                i, means, P, log_mu, nominal, log_keep, log_floor,
-                push_force_n[i, t], verbal_cue[i, t], measured_position_m[i, t], K,
-            )  # fmt: skip
-            for j in range(N_MODES):
-                probs_seq[i, t, j] = math.exp(log_mu[i, j])
-        _write_outputs(i, means, log_mu, probs, mean_out)
-    return _OK
 
 
 @njit(cache=True)
@@ -371,40 +314,14 @@ def _imm_env_step(
 
 
 @njit(cache=True)
-def _imm_step(
+def _filter(
     means: NDArray[np.float64],
     P: NDArray[np.float64],
     log_mu: NDArray[np.float64],
     nominal: NDArray[np.float64],
-    log_trans: NDArray[np.float64],
-    push_force_n: NDArray[np.float64],
-    verbal_cue: NDArray[np.float64],
-    measured_position_m: NDArray[np.float64],
-    probs: NDArray[np.float64],
-    mean_out: NDArray[np.float64],
-) -> int:
-    if not _inputs_finite(push_force_n, verbal_cue, measured_position_m):
-        return _NON_FINITE_INPUT
-    K = np.empty(_STATE)
-    mixed_m = np.empty((N_MODES, _STATE))
-    mixed_P = np.empty((N_MODES, _STATE, _STATE))
-    log_cbar = np.empty(N_MODES)
-    w = np.empty(N_MODES)
-    for i in range(means.shape[0]):
-        _imm_env_step(
-            i, means, P, log_mu, nominal, log_trans,
-            push_force_n[i], verbal_cue[i], measured_position_m[i], K, mixed_m, mixed_P, log_cbar, w,
-        )  # fmt: skip
-        _write_outputs(i, means, log_mu, probs, mean_out)
-    return _OK
-
-
-@njit(cache=True)
-def _imm_run(
-    means: NDArray[np.float64],
-    P: NDArray[np.float64],
-    log_mu: NDArray[np.float64],
-    nominal: NDArray[np.float64],
+    mixing: bool,
+    log_keep: float,
+    log_floor: float,
     log_trans: NDArray[np.float64],
     push_force_n: NDArray[np.float64],
     verbal_cue: NDArray[np.float64],
@@ -413,6 +330,13 @@ def _imm_run(
     probs: NDArray[np.float64],
     mean_out: NDArray[np.float64],
 ) -> int:
+    """Filter (N, T) sequences: MMAE (``mixing`` off) or IMM (on); ``step`` is the case T = 1.
+
+    ``P`` is (N, 1, 3, 3) for the MMAE's shared covariance, (N, 3, 3, 3) for the IMM's
+    per-mode ones. The MMAE reads ``log_keep``/``log_floor`` (its probability floor), the
+    IMM ``log_trans`` (the floor is folded into it). Writes ``probs_seq`` (N, T, 3) after
+    each step and the final ``probs`` (N, 3) and ``mean_out`` (N, 3).
+    """
     n_env, n_steps = measured_position_m.shape
     for i in range(n_env):
         if not _inputs_finite(push_force_n[i], verbal_cue[i], measured_position_m[i]):
@@ -424,10 +348,16 @@ def _imm_run(
     w = np.empty(N_MODES)
     for i in range(n_env):
         for t in range(n_steps):
-            _imm_env_step(
-                i, means, P, log_mu, nominal, log_trans,
-                push_force_n[i, t], verbal_cue[i, t], measured_position_m[i, t], K, mixed_m, mixed_P, log_cbar, w,
-            )  # fmt: skip
+            if mixing:
+                _imm_env_step(
+                    i, means, P, log_mu, nominal, log_trans,
+                    push_force_n[i, t], verbal_cue[i, t], measured_position_m[i, t], K, mixed_m, mixed_P, log_cbar, w,
+                )  # fmt: skip
+            else:
+                _mmae_env_step(
+                    i, means, P, log_mu, nominal, log_keep, log_floor,
+                    push_force_n[i, t], verbal_cue[i, t], measured_position_m[i, t], K,
+                )  # fmt: skip
             for j in range(N_MODES):
                 probs_seq[i, t, j] = math.exp(log_mu[i, j])
         _write_outputs(i, means, log_mu, probs, mean_out)
@@ -518,6 +448,10 @@ class _MultipleModelBase:
         self._probs = np.zeros((n, N_MODES))
         self._mean = np.zeros((n, _STATE))
         self._shape = (n,)
+        # Kernel arguments of the other estimator kind (MMAE: floor; IMM: transitions), unused by this one.
+        self._log_keep = 0.0
+        self._log_floor = -math.inf
+        self._log_trans = np.zeros((1, N_MODES, N_MODES))
         self.reset(np.arange(n), first_position_m)
 
     # --- state -----------------------------------------------------------------
@@ -652,12 +586,18 @@ class _MultipleModelBase:
         return probs_seq
 
     def _kernel_step(self, cp: NDArray[np.float64], cv: NDArray[np.float64], y: NDArray[np.float64]) -> int:
-        raise NotImplementedError
+        # One step is a sequence of length 1 (views, no copies); its probabilities land in _probs.
+        return self._kernel_run(cp[:, None], cv[:, None], y[:, None], self._probs[:, None, :])
 
     def _kernel_run(
         self, cp: NDArray[np.float64], cv: NDArray[np.float64], y: NDArray[np.float64], out: NDArray[np.float64]
     ) -> int:
-        raise NotImplementedError
+        # The IMM mixes and keeps one covariance per mode; the MMAE's shared one is passed as (N, 1, 3, 3).
+        P = self.P if self._per_mode_covariance else self.P[:, None]
+        return _filter(
+            self.means, P, self.log_mu, self.nominal, self._per_mode_covariance, self._log_keep, self._log_floor,
+            self._log_trans, cp, cv, y, out, self._probs, self._mean,
+        )  # fmt: skip
 
 
 class MultipleModelEstimator(_MultipleModelBase):
@@ -718,20 +658,6 @@ class MultipleModelEstimator(_MultipleModelBase):
         first = np.atleast_1d(np.asarray(first_position_m, dtype=np.float64))
         rows = np.tile(nominal_row(model), (first.shape[0], 1))
         return cls(rows, first, prior=model, mode_prior=mode_prior, probability_floor=probability_floor)
-
-    def _kernel_step(self, cp: NDArray[np.float64], cv: NDArray[np.float64], y: NDArray[np.float64]) -> int:
-        return _mmae_step(
-            self.means, self.P, self.log_mu, self.nominal, self._log_keep, self._log_floor,
-            cp, cv, y, self._probs, self._mean,
-        )  # fmt: skip
-
-    def _kernel_run(
-        self, cp: NDArray[np.float64], cv: NDArray[np.float64], y: NDArray[np.float64], out: NDArray[np.float64]
-    ) -> int:
-        return _mmae_run(
-            self.means, self.P, self.log_mu, self.nominal, self._log_keep, self._log_floor,
-            cp, cv, y, out, self._probs, self._mean,
-        )  # fmt: skip
 
 
 class IMMEstimator(_MultipleModelBase):
@@ -816,18 +742,6 @@ class IMMEstimator(_MultipleModelBase):
             probability_floor=probability_floor,
             switching_rate_per_s=switching_rate_per_s,
             transition_matrix=transition_matrix,
-        )
-
-    def _kernel_step(self, cp: NDArray[np.float64], cv: NDArray[np.float64], y: NDArray[np.float64]) -> int:
-        return _imm_step(
-            self.means, self.P, self.log_mu, self.nominal, self._log_trans, cp, cv, y, self._probs, self._mean
-        )
-
-    def _kernel_run(
-        self, cp: NDArray[np.float64], cv: NDArray[np.float64], y: NDArray[np.float64], out: NDArray[np.float64]
-    ) -> int:
-        return _imm_run(
-            self.means, self.P, self.log_mu, self.nominal, self._log_trans, cp, cv, y, out, self._probs, self._mean
         )
 
 
@@ -917,3 +831,6 @@ def sequential_judgment(
     at = np.clip(step, 0, None)
     judgment = np.where(any_hit, MODE_VALUES[np.argmax(p[np.arange(n), at], axis=-1)], 0)
     return judgment.astype(np.int64), step.astype(np.int64)
+
+
+guard_kernel_cache(__name__)

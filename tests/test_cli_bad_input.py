@@ -1,7 +1,7 @@
 """Bad command-line flags: exit status 2 and a message naming the problem on stderr.
 
 Covers the command lines that exist: ``python train.py``, ``python -m agents.evaluate``,
-``python -m estimator.protocol`` and ``python bench/run.py`` (each skipped, naming the
+``python -m experiment.protocol`` and ``python bench/run.py`` (each skipped, naming the
 missing module, until it is written). Cases call ``main(argv)`` in-process (argparse exits
 through ``SystemExit``) under an alarm, so a bad flag that is wrongly accepted fails the test
 in seconds instead of starting a training run; one real subprocess per command line checks
@@ -102,20 +102,20 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.evaluate", "unknown persona", ["--agent", "random", "--personas", "nobody"], r"--personas: unknown"),
     ("agents.evaluate", "unknown env", ["--agent", "random", "--env", "Nope-v0"], r"--env: unknown env id 'Nope-v0'"),
     ("agents.evaluate", "unknown backend", ["--agent", "random", "--backend", "gpu"], r"--backend: invalid choice"),
-    ("estimator.protocol", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
-    ("estimator.protocol", "subjects 0", ["--subjects", "0"], r"--subjects: expected a positive integer, got 0"),
-    ("estimator.protocol", "trials not a number", ["--trials", "x"], r"--trials: expected a positive integer, got 'x'"),
-    ("estimator.protocol", "negative seed", ["--seed", "-1"], r"--seed: expected a non-negative integer seed"),
-    ("estimator.protocol", "seeds 0", ["--seeds", "0"], r"--seeds: expected a positive integer, got 0"),
+    ("experiment.protocol", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
+    ("experiment.protocol", "subjects 0", ["--subjects", "0"], r"--subjects: expected a positive integer, got 0"),
+    ("experiment.protocol", "trials not a number", ["--trials", "x"], r"--trials: expected a positive integer, got 'x'"),  # noqa: E501
+    ("experiment.protocol", "negative seed", ["--seed", "-1"], r"--seed: expected a non-negative integer seed"),
+    ("experiment.protocol", "seeds 0", ["--seeds", "0"], r"--seeds: expected a positive integer, got 0"),
     (
-        "estimator.protocol",
+        "experiment.protocol",
         "unknown estimator",
         ["--estimator", "particle"],
         r"--estimator: invalid choice: 'particle'",
     ),
-    ("estimator.protocol", "unknown decision", ["--decision", "vote"], r"--decision: invalid choice: 'vote'"),
-    ("estimator.protocol", "unknown persona", ["--personas", "nobody"], r"nobody"),
-    ("estimator.protocol", "plot not png", ["--plot", "trace.txt"], r"plot paths must end in \.png"),
+    ("experiment.protocol", "unknown decision", ["--decision", "vote"], r"--decision: invalid choice: 'vote'"),
+    ("experiment.protocol", "unknown persona", ["--personas", "nobody"], r"nobody"),
+    ("experiment.protocol", "plot not png", ["--plot", "trace.txt"], r"plot paths must end in \.png"),
     ("bench/run.py", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
     ("bench/run.py", "repeats not a number", ["--repeats", "few"], r"--repeats: expected a positive integer, got 'few'"),  # noqa: E501
@@ -138,7 +138,7 @@ LATE_CASES: list[tuple[str, str, list[str], str]] = [
         r"a_file",
     ),
     (
-        "estimator.protocol",
+        "experiment.protocol",
         "plot in a folder that cannot be created",
         ["--subjects", "1", "--trials", "1", "--plot", "{blocked}/trace.png"],
         r"a_file",
@@ -184,7 +184,7 @@ def test_bad_output_path_exits_2_before_the_work(cli: str, argv: list[str], matc
 END_TO_END = {
     "train.py": ([sys.executable, str(ROOT / "train.py"), "--timesteps", "0"], r"--timesteps must be >= 1"),
     "agents.evaluate": ([sys.executable, "-m", "agents.evaluate", "--agent", "nobody"], r"neither a scripted agent"),
-    "estimator.protocol": ([sys.executable, "-m", "estimator.protocol", "--subjects", "0"], r"positive integer"),
+    "experiment.protocol": ([sys.executable, "-m", "experiment.protocol", "--subjects", "0"], r"positive integer"),
     "bench/run.py": ([sys.executable, str(ROOT / "bench" / "run.py"), "--bogus"], r"unrecognized arguments"),
 }
 

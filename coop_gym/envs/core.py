@@ -21,31 +21,27 @@ order -- at reset ``integers(n_personas)``, the person's variation normals, ``ra
 for the initial ``xi`` and ``normal(0, 5 mm)`` for the initial lean; then
 ``substeps x NORMALS_PER_SUBSTEP`` standard normals per non-lift step. So env ``i`` of a
 vector env seeded ``s`` and a single env seeded ``s + i`` see identical streams. The
-compiled kernels draw these through the generator's own C functions (NumPy's
-"extending via Numba" interface) with NumPy's algorithms (ziggurat normals, Lemire
-bounded integers), so the numbers are exactly those the ``Generator`` methods return
-(tests hold them equal), and the ``Generator`` object stays the single source of truth.
+compiled kernels draw these through the generator's own C functions with NumPy's
+algorithms (:mod:`compiled.rng`), so the numbers are exactly those the ``Generator``
+methods return and the ``Generator`` object stays the single source of truth.
+
+Numba caches the kernels on disk, keyed by every project source they compile in
+(:func:`compiled.cache.guard_kernel_cache`).
 """
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
-import hashlib
-import inspect
-import os
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.core.extending import intrinsic
-
-# NumPy's ziggurat tables, as Numba ships them for its own np.random.Generator support.
-from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
+from numba import njit
 from numpy.typing import NDArray
 
+from compiled.cache import guard_kernel_cache
+from compiled.rng import G_STATE, bit_generator_row, integers, random, standard_normal
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
@@ -206,8 +202,28 @@ _PT_NOMINAL = _PT_PARAMS + len(PARAM_COLUMNS)
 _PT_XI_CUTS = _PT_NOMINAL + len(NOMINAL_COLUMNS)
 _PT_WIDTH = _PT_XI_CUTS + 2
 
-# Columns of an env's bit-generator row: addresses of its C functions and of its state.
-_G_NEXT_UINT64, _G_NEXT_UINT32, _G_NEXT_DOUBLE, _G_STATE = range(4)
+
+def check_outcome_codes(outcome: type[IntEnum]) -> None:
+    """Raise ``ValueError`` unless the enum's values are ``0 .. n-1`` in order.
+
+    The kernel writes outcome codes into a float report column and the envs index label
+    tables with them, so they must be small consecutive integers. An explicit check, not
+    an ``assert``: it must hold under ``python -O`` too.
+    """
+    codes = [int(member) for member in outcome]
+    if codes != list(range(len(codes))):
+        raise ValueError(f"{outcome.__name__} values must be 0 .. {len(codes) - 1} in order, got {codes}")
+
+
+check_outcome_codes(Outcome)
+# Outcome codes the kernel writes, from the enum (Numba freezes them into the machine code).
+_NONE = int(Outcome.NONE)
+_SUCCESS = int(Outcome.SUCCESS)
+_UNSAFE = int(Outcome.UNSAFE)
+_PREMATURE = int(Outcome.PREMATURE)
+_TIMEOUT = int(Outcome.TIMEOUT)
+_ENDED_BY_LIFT = np.array([member in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE) for member in Outcome])
+"""Indexed by outcome code: does the episode terminate (the robot lifted)?"""
 
 INITIAL_LEAN_STD_M = 0.005
 """People sit a little differently: std of the initial forward lean [m]."""
@@ -258,127 +274,6 @@ class StepArrays:
     verbal_cue: NDArray[np.float64]
 
 
-# --- NumPy's random streams inside compiled code ---------------------------------
-# A bit generator exposes C functions taking its state pointer (``BitGenerator.ctypes``);
-# calling them advances the very state the Python ``Generator`` uses.
-
-
-def _call_uint64_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
-    sig = types.uint64(types.uint64, types.uint64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        function_type = ir.FunctionType(ir.IntType(64), (ir.IntType(8).as_pointer(),))
-        function = builder.inttoptr(args[0], function_type.as_pointer())
-        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
-
-    return sig, codegen
-
-
-_call_uint64: Any = intrinsic(_call_uint64_typing)
-
-
-def _call_uint32_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
-    sig = types.uint32(types.uint64, types.uint64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        function_type = ir.FunctionType(ir.IntType(32), (ir.IntType(8).as_pointer(),))
-        function = builder.inttoptr(args[0], function_type.as_pointer())
-        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
-
-    return sig, codegen
-
-
-_call_uint32: Any = intrinsic(_call_uint32_typing)
-
-
-def _call_double_typing(typingctx: Any, function_address: Any, state_address: Any) -> Any:
-    sig = types.float64(types.uint64, types.uint64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        function_type = ir.FunctionType(ir.DoubleType(), (ir.IntType(8).as_pointer(),))
-        function = builder.inttoptr(args[0], function_type.as_pointer())
-        return builder.call(function, (builder.inttoptr(args[1], ir.IntType(8).as_pointer()),))
-
-    return sig, codegen
-
-
-_call_double: Any = intrinsic(_call_double_typing)
-
-
-_U1 = np.uint64(1)
-_U8 = np.uint64(8)
-_U32 = np.uint64(32)
-_BYTE = np.uint64(0xFF)
-_MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
-_LOW32 = np.uint64(0xFFFFFFFF)
-
-
-@njit(cache=True)
-def _random(g: NDArray[np.uint64]) -> float:
-    """``Generator.random()``: a double in [0, 1) from the bit generator ``g``."""
-    return _call_double(g[_G_NEXT_DOUBLE], g[_G_STATE])
-
-
-@njit(cache=True)
-def _standard_normal(g: NDArray[np.uint64]) -> float:
-    """``Generator.standard_normal()``: NumPy's 256-layer ziggurat, step for step."""
-    while True:
-        r = _call_uint64(g[_G_NEXT_UINT64], g[_G_STATE])
-        idx = r & _BYTE
-        r >>= _U8
-        sign = r & _U1
-        rabs = (r >> _U1) & _MANTISSA
-        x = rabs * wi_double[idx]
-        if sign:
-            x = -x
-        if rabs < ki_double[idx]:
-            return x
-        if idx == 0:
-            # The tail beyond the base layer.
-            while True:
-                xx = -ziggurat_nor_inv_r * np.log1p(-_random(g))
-                yy = -np.log1p(-_random(g))
-                if yy + yy > xx * xx:
-                    if (rabs >> _U8) & _U1:
-                        return -(ziggurat_nor_r + xx)
-                    return ziggurat_nor_r + xx
-        elif (fi_double[idx - 1] - fi_double[idx]) * _random(g) + fi_double[idx] < np.exp(-0.5 * x * x):
-            return x
-
-
-@njit(cache=True)
-def _integers(g: NDArray[np.uint64], high: int) -> int:
-    """``Generator.integers(high)`` for ``1 <= high < 2**32``: Lemire's bounded draw on 32 bits."""
-    span = np.uint64(high - 1)
-    if span == 0:
-        return 0
-    bound = span + _U1
-    m = np.uint64(_call_uint32(g[_G_NEXT_UINT32], g[_G_STATE])) * bound
-    leftover = m & _LOW32
-    if leftover < bound:
-        threshold = (_LOW32 - span) % bound
-        while leftover < threshold:
-            m = np.uint64(_call_uint32(g[_G_NEXT_UINT32], g[_G_STATE])) * bound
-            leftover = m & _LOW32
-    return int(m >> _U32)
-
-
-def bit_generator_row(rng: np.random.Generator) -> NDArray[np.uint64]:
-    """The addresses the kernels need to draw from ``rng`` (see :data:`_G_STATE` ...)."""
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"an env's random source must be a numpy.random.Generator, got {type(rng).__name__}")
-    c = rng.bit_generator.ctypes
-    return np.array(
-        [
-            ctypes.cast(c.next_uint64, ctypes.c_void_p).value,
-            ctypes.cast(c.next_uint32, ctypes.c_void_p).value,
-            ctypes.cast(c.next_double, ctypes.c_void_p).value,
-            c.state_address,
-        ],
-        dtype=np.uint64,
-    )
-
-
 # --- kernels --------------------------------------------------------------------
 # Few, packed arguments: dispatching a compiled call costs ~0.1 us per argument, as much
 # as a whole env step's arithmetic.
@@ -413,16 +308,16 @@ def _draw_reset(
     # The random draws of a reset in the documented order (draws row r is env indices[r]).
     # Returns -1, or the index of an env without a generator (nothing is drawn then).
     for r in range(indices.shape[0]):
-        if generators[indices[r], _G_STATE] == 0:
+        if generators[indices[r], G_STATE] == 0:
             return indices[r]
     for r in range(indices.shape[0]):
         g = generators[indices[r]]
-        drawn = _integers(g, n_personas)
+        drawn = integers(g, n_personas)
         draws[r, _D_PERSONA] = drawn if persona_override == _NO_OVERRIDE else persona_override
         for j in range(_D_NORMALS, draws.shape[1]):
-            draws[r, j] = _standard_normal(g)
-        draws[r, _D_UNIFORM] = _random(g)
-        draws[r, _D_LEAN] = 0.0 + INITIAL_LEAN_STD_M * _standard_normal(g)
+            draws[r, j] = standard_normal(g)
+        draws[r, _D_UNIFORM] = random(g)
+        draws[r, _D_LEAN] = 0.0 + INITIAL_LEAN_STD_M * standard_normal(g)
     return -1
 
 
@@ -498,6 +393,105 @@ def _reset_rows(
 
 
 @njit(cache=True)
+def _lift_outcome(s: NDArray[np.float64], consts: NDArray[np.float64]) -> int:
+    # The lift is judged on the true state at the moment it starts (§II).
+    if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
+        return _SUCCESS
+    if s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
+        return _UNSAFE
+    return _PREMATURE
+
+
+@njit(cache=True)
+def _simulate_action(
+    row: NDArray[np.float64],
+    cp: float,
+    verbal_request: float,
+    g: NDArray[np.uint64],
+    z: NDArray[np.float64],
+    consts: NDArray[np.float64],
+) -> int:
+    # One non-lift action of one env: cues -> person -> sensors -> filter -> judgment, x substeps,
+    # then the features. Returns the outcome: TIMEOUT at the end of the episode, else NONE.
+    substeps = int(consts[_C_SUBSTEPS])
+    episode_s = consts[_C_EPISODE_S]
+    s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+    env = row[_ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
+    m = row[_ST_MEAN : _ST_MEAN + STATE_DIM]
+    P = row[_ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
+    judge = row[_ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
+    nominal = row[_ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
+    p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
+    delay_push = row[_ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
+    delay_verbal = row[_ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
+    f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
+    block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
+    dt = p[P_DT]
+    # A verbal cue is an utterance of fixed length; one can't talk over oneself.
+    if env[E_VERBAL_REMAINING] <= 0.0 and verbal_request != 0.0:
+        env[E_VERBAL_VALUE] = verbal_request
+        env[E_VERBAL_REMAINING] = consts[_C_VERBAL_S]
+    for k in range(substeps):
+        cv = env[E_VERBAL_VALUE] if env[E_VERBAL_REMAINING] > 1e-9 else 0.0
+        for j in range(NORMALS_PER_SUBSTEP):
+            z[j] = standard_normal(g)
+        person_substep(s, p, delay_push, delay_verbal, cp, cv, z)
+        pos, force = measure(s, p, cp, z[3], z[4])
+        kalman_step(m, P, nominal, force, cv, pos)
+        judgment_substep(judge, cp > 0.0 or cv != 0.0, m[3], consts[_C_JUDGE_DELAY_S], consts[_C_JUDGE_THRESHOLD], dt)
+        block[k] = force
+        block[substeps + k] = cv
+        block[2 * substeps + k] = pos
+        env[E_VERBAL_REMAINING] -= dt
+        env[E_IMPULSE] += cp * dt
+        f[F_POS] = pos
+        f[F_FORCE] = force
+    if env[E_VERBAL_REMAINING] <= 1e-9:
+        env[E_VERBAL_REMAINING] = 0.0
+        env[E_VERBAL_VALUE] = 0.0
+    env[E_ELAPSED] += substeps * dt
+    f[F_VERBAL] = env[E_VERBAL_VALUE]
+    f[F_SINCE_ONSET] = min(judge[J_SINCE_ONSET], episode_s)
+    f[F_X_HAT] = m[0]
+    f[F_XDOT_HAT] = m[1]
+    f[F_ETA_HAT] = m[2]
+    f[F_XI_HAT] = m[3]
+    f[F_XI_STD] = np.sqrt(max(P[3, 3], 0.0))
+    f[F_JUDGMENT] = judge[J_JUDGMENT]
+    f[F_ELAPSED] = env[E_ELAPSED]
+    f[F_TRUE_XI] = s[S_XI]
+    if env[E_ELAPSED] >= episode_s - 1e-9:
+        return _TIMEOUT  # truncation happens on this same step
+    return _NONE
+
+
+@njit(cache=True)
+def _write_reward_and_truth(
+    row: NDArray[np.float64], result: int, lift: bool, cp: float, consts: NDArray[np.float64]
+) -> None:
+    # Named reward terms (RewardWeights), then their sum; the outcome, the push and the true state.
+    s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+    f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
+    t_success = consts[_C_W_SUCCESS] if result == _SUCCESS else 0.0
+    t_unsafe = -consts[_C_W_UNSAFE] if result == _UNSAFE else 0.0
+    t_premature = -consts[_C_W_PREMATURE] if result == _PREMATURE else 0.0
+    t_time = 0.0 if lift else consts[_C_TIME_TERM]
+    t_force = -consts[_C_W_FORCE] * row[_ST_CUES + E_IMPULSE]
+    f[R_TERMS] = t_success
+    f[R_TERMS + 1] = t_unsafe
+    f[R_TERMS + 2] = t_premature
+    f[R_TERMS + 3] = t_time
+    f[R_TERMS + 4] = t_force
+    f[R_REWARD] = t_success + t_unsafe + t_premature + t_time + t_force
+    f[R_OUTCOME] = result
+    f[R_PUSH] = 0.0 if lift else cp
+    f[R_TRUE_X] = s[S_X]
+    f[R_TRUE_XDOT] = s[S_XDOT]
+    f[R_TRUE_ETA] = s[S_ETA]
+    f[R_TRUE_XI] = s[S_XI]
+
+
+@njit(cache=True)
 def _advance(
     cmd: NDArray[np.float64],
     state: NDArray[np.float64],
@@ -508,101 +502,28 @@ def _advance(
     # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
     n_envs = cmd.shape[0]
     for i in range(n_envs):
-        if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, _G_STATE] == 0:
+        if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, G_STATE] == 0:
             return i
     substeps = int(consts[_C_SUBSTEPS])
-    verbal_duration_s = consts[_C_VERBAL_S]
-    episode_s = consts[_C_EPISODE_S]
     z = np.empty(NORMALS_PER_SUBSTEP)
     for i in range(n_envs):
         if cmd[i, CMD_ACTIVE] < 0.5:
             continue
         row = state[i]
-        s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
-        env = row[_ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
-        m = row[_ST_MEAN : _ST_MEAN + STATE_DIM]
-        P = row[_ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
-        judge = row[_ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
-        nominal = row[_ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
-        p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
-        delay_push = row[_ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
-        delay_verbal = row[_ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
-        f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
-        block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
-        g = generators[i]
-        dt = p[P_DT]
         cp = cmd[i, CMD_PUSH]
         lift = cmd[i, CMD_LIFT] > 0.5
-        env[E_IMPULSE] = 0.0
-        result = 0
+        row[_ST_CUES + E_IMPULSE] = 0.0
         if lift:
-            # The lift is judged on the true state at the moment it starts (§II).
-            if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
-                result = 1  # Outcome.SUCCESS
-            elif s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
-                result = 2  # Outcome.UNSAFE
-            else:
-                result = 3  # Outcome.PREMATURE
+            result = _lift_outcome(row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)], consts)
+            # The filter's input blocks hold still: no push, no cue, the last reading.
+            block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
             for k in range(substeps):
                 block[k] = 0.0
                 block[substeps + k] = 0.0
-                block[2 * substeps + k] = f[F_POS]
+                block[2 * substeps + k] = row[_ST_REPORT + F_POS]
         else:
-            # A verbal cue is an utterance of fixed length; one can't talk over oneself.
-            if env[E_VERBAL_REMAINING] <= 0.0 and cmd[i, CMD_VERBAL] != 0.0:
-                env[E_VERBAL_VALUE] = cmd[i, CMD_VERBAL]
-                env[E_VERBAL_REMAINING] = verbal_duration_s
-            for k in range(substeps):
-                cv = env[E_VERBAL_VALUE] if env[E_VERBAL_REMAINING] > 1e-9 else 0.0
-                for j in range(NORMALS_PER_SUBSTEP):
-                    z[j] = _standard_normal(g)
-                person_substep(s, p, delay_push, delay_verbal, cp, cv, z)
-                pos, force = measure(s, p, cp, z[3], z[4])
-                kalman_step(m, P, nominal, force, cv, pos)
-                judgment_substep(
-                    judge, cp > 0.0 or cv != 0.0, m[3], consts[_C_JUDGE_DELAY_S], consts[_C_JUDGE_THRESHOLD], dt
-                )
-                block[k] = force
-                block[substeps + k] = cv
-                block[2 * substeps + k] = pos
-                env[E_VERBAL_REMAINING] -= dt
-                env[E_IMPULSE] += cp * dt
-                f[F_POS] = pos
-                f[F_FORCE] = force
-            if env[E_VERBAL_REMAINING] <= 1e-9:
-                env[E_VERBAL_REMAINING] = 0.0
-                env[E_VERBAL_VALUE] = 0.0
-            env[E_ELAPSED] += substeps * dt
-            f[F_VERBAL] = env[E_VERBAL_VALUE]
-            f[F_SINCE_ONSET] = min(judge[J_SINCE_ONSET], episode_s)
-            f[F_X_HAT] = m[0]
-            f[F_XDOT_HAT] = m[1]
-            f[F_ETA_HAT] = m[2]
-            f[F_XI_HAT] = m[3]
-            f[F_XI_STD] = np.sqrt(max(P[3, 3], 0.0))
-            f[F_JUDGMENT] = judge[J_JUDGMENT]
-            f[F_ELAPSED] = env[E_ELAPSED]
-            f[F_TRUE_XI] = s[S_XI]
-            if env[E_ELAPSED] >= episode_s - 1e-9:
-                result = 4  # Outcome.TIMEOUT (truncation happens on this same step)
-        # Named reward terms (RewardWeights), then their sum.
-        t_success = consts[_C_W_SUCCESS] if result == 1 else 0.0
-        t_unsafe = -consts[_C_W_UNSAFE] if result == 2 else 0.0
-        t_premature = -consts[_C_W_PREMATURE] if result == 3 else 0.0
-        t_time = 0.0 if lift else consts[_C_TIME_TERM]
-        t_force = -consts[_C_W_FORCE] * env[E_IMPULSE]
-        f[R_TERMS] = t_success
-        f[R_TERMS + 1] = t_unsafe
-        f[R_TERMS + 2] = t_premature
-        f[R_TERMS + 3] = t_time
-        f[R_TERMS + 4] = t_force
-        f[R_REWARD] = t_success + t_unsafe + t_premature + t_time + t_force
-        f[R_OUTCOME] = result
-        f[R_PUSH] = 0.0 if lift else cp
-        f[R_TRUE_X] = s[S_X]
-        f[R_TRUE_XDOT] = s[S_XDOT]
-        f[R_TRUE_ETA] = s[S_ETA]
-        f[R_TRUE_XI] = s[S_XI]
+            result = _simulate_action(row, cp, cmd[i, CMD_VERBAL], generators[i], z, consts)
+        _write_reward_and_truth(row, result, lift, cp, consts)
         if consts[_C_BUILD_OBS] > 0.5:
             _observe_row(row, obs[i], consts)
     return -1
@@ -662,9 +583,20 @@ class SitToStandCore:
         self.reward_weights = reward
         self.judgment = judgment
         self.estimator = estimator
+        self._nominal_prior = NominalModel()
+        varied = self._pack_personas()
+        index = tuple(range(len(FEATURES))) if observation_index is None else tuple(observation_index)
+        self.consts = _pack_consts(self, index, observation_low, observation_high, varied)
+        self._allocate(n, len(index), len(varied))
+        self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
+        # With a multiple-model estimator the observation waits for its probabilities.
+        self.consts[_C_BUILD_OBS] = 1.0 if self.mm is None else 0.0
+
+    def _pack_personas(self) -> list[int]:
+        """Fill ``persona_table`` and the variation stds; return the varied columns of a packed person."""
+        personas, timing, realism = self.personas, self.timing, self.realism
         # The filter's nominal model depends only on the persona: pack each once.
         self._persona_nominal = [nominal_row(nominal_model_for(p.params, timing)) for p in personas]
-        self._nominal_prior = prior = NominalModel()
         # Each persona packed once; a reset scales the varied gains (as sample_person does) and
         # recomputes the zero-order hold, instead of building and validating dataclasses.
         table = np.zeros((len(personas), _PT_WIDTH))
@@ -675,48 +607,16 @@ class SitToStandCore:
             table[k, _PT_XI_CUTS] = coop.initial_p_uncooperative
             table[k, _PT_XI_CUTS + 1] = 1.0 - coop.initial_p_cooperative
         self.persona_table = table
-        varied = [PARAM_COLUMNS.index(name) for names in VARIED_PARAMETERS.values() for name in names]
         stds = {p.variation_relative_std for p in personas}
         # One shared std (the usual case) broadcasts from a 1-element array (cheaper for a ufunc
         # than a Python float); else each reset env takes its persona's.
         self._variation_std = np.array([stds.pop()]) if len(stds) == 1 else None
         self._persona_variation_std = np.array([p.variation_relative_std for p in personas])
+        return [PARAM_COLUMNS.index(name) for names in VARIED_PARAMETERS.values() for name in names]
 
-        index = tuple(range(len(FEATURES))) if observation_index is None else tuple(observation_index)
-        n_obs = len(index)
-        template = initial_state_row(0, 0.0)
-        consts = np.zeros(_N_CONSTS + 3 * n_obs + len(varied) + len(template))
-        consts[_C_SUBSTEPS] = timing.substeps
-        consts[_C_VERBAL_S] = cues.verbal_duration_s
-        consts[_C_JUDGE_DELAY_S] = judgment.delay_s
-        consts[_C_JUDGE_THRESHOLD] = judgment.threshold
-        consts[_C_SUCCESS_LEAN_M] = lift.success_lean_m
-        consts[_C_UPRIGHT_M] = lift.upright_m
-        consts[_C_EPISODE_S] = timing.episode_s
-        consts[_C_W_SUCCESS] = reward.success
-        consts[_C_W_UNSAFE] = reward.unsafe
-        consts[_C_W_PREMATURE] = reward.premature
-        consts[_C_TIME_TERM] = -reward.time_per_s * timing.action_period_s
-        consts[_C_W_FORCE] = reward.force_per_n_s
-        consts[_C_VARY] = 1.0 if realism.person_variation else 0.0
-        consts[_C_XDOT_VAR] = prior.initial_velocity_std_m_per_s**2
-        consts[_C_ETA_VAR] = prior.initial_intention_std_m**2
-        consts[_C_XI_VAR] = prior.initial_cooperativeness_std**2
-        consts[_C_XI_STD] = prior.initial_cooperativeness_std
-        consts[_C_N_OBS] = n_obs
-        consts[_C_N_VARIED] = len(varied)
-        at = _N_CONSTS
-        consts[_C_OBS_AT] = at
-        consts[at : at + n_obs] = index
-        consts[at + n_obs : at + 2 * n_obs] = -np.inf if observation_low is None else observation_low
-        consts[at + 2 * n_obs : at + 3 * n_obs] = np.inf if observation_high is None else observation_high
-        consts[_C_VARIED_AT] = at = at + 3 * n_obs
-        consts[at : at + len(varied)] = varied
-        consts[_C_TEMPLATE_AT] = at = at + len(varied)
-        consts[at : at + len(template)] = template
-        self.consts = consts
-
-        substeps = timing.substeps
+    def _allocate(self, n: int, n_obs: int, n_varied: int) -> None:
+        """The packed per-env state with its views, the command rows and the output buffers."""
+        substeps = self.timing.substeps
         self.state = st = np.zeros((n, _ST_BLOCKS + 3 * substeps))
         self.person = st[:, _ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
         self.env = st[:, _ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
@@ -748,10 +648,7 @@ class SitToStandCore:
             verbal_cue=self.report[:, F_VERBAL],
         )
         self._all = np.arange(n, dtype=np.int64)
-        self._draws = np.zeros((n, _D_NORMALS + len(varied)))
-        self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
-        # With a multiple-model estimator the observation waits for its probabilities.
-        consts[_C_BUILD_OBS] = 1.0 if self.mm is None else 0.0
+        self._draws = np.zeros((n, _D_NORMALS + n_varied))
 
     def _make_multiple_model(self, options: dict[str, Any]) -> Any:
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
@@ -766,7 +663,7 @@ class SitToStandCore:
     def out(self) -> StepArrays:
         """What the last step or reset produced, as :class:`StepArrays` (views; outcome and terminated refreshed)."""
         np.copyto(self._outcome, self.report[:, R_OUTCOME], casting="unsafe")
-        np.copyto(self._terminated, (self._outcome >= Outcome.SUCCESS) & (self._outcome <= Outcome.PREMATURE))
+        np.take(_ENDED_BY_LIFT, self._outcome, out=self._terminated)
         return self._out
 
     @property
@@ -889,59 +786,48 @@ class SitToStandCore:
             if rng is not None:
                 self.generators[i] = bit_generator_row(rng)
 
-    def true_state(self, i: int) -> dict[str, float]:
-        """The hidden truth of env ``i``, for ``info``."""
-        s = self.person[i]
-        return {
-            "true_x_m": float(s[S_X]),
-            "true_xdot_m_per_s": float(s[S_XDOT]),
-            "true_eta_m": float(s[S_ETA]),
-            "true_xi": int(s[S_XI]),
-        }
+
+def _pack_consts(
+    core: SitToStandCore,
+    index: tuple[int, ...],
+    observation_low: NDArray[np.float64] | None,
+    observation_high: NDArray[np.float64] | None,
+    varied: list[int],
+) -> NDArray[np.float64]:
+    """The scalars the kernels read (``_C_*``), then the observation spec, varied columns and initial state row."""
+    timing, reward, prior = core.timing, core.reward_weights, core._nominal_prior
+    n_obs = len(index)
+    template = initial_state_row(0, 0.0)
+    consts = np.zeros(_N_CONSTS + 3 * n_obs + len(varied) + len(template))
+    consts[_C_SUBSTEPS] = timing.substeps
+    consts[_C_VERBAL_S] = core.cues.verbal_duration_s
+    consts[_C_JUDGE_DELAY_S] = core.judgment.delay_s
+    consts[_C_JUDGE_THRESHOLD] = core.judgment.threshold
+    consts[_C_SUCCESS_LEAN_M] = core.lift.success_lean_m
+    consts[_C_UPRIGHT_M] = core.lift.upright_m
+    consts[_C_EPISODE_S] = timing.episode_s
+    consts[_C_W_SUCCESS] = reward.success
+    consts[_C_W_UNSAFE] = reward.unsafe
+    consts[_C_W_PREMATURE] = reward.premature
+    consts[_C_TIME_TERM] = -reward.time_per_s * timing.action_period_s
+    consts[_C_W_FORCE] = reward.force_per_n_s
+    consts[_C_VARY] = 1.0 if core.realism.person_variation else 0.0
+    consts[_C_XDOT_VAR] = prior.initial_velocity_std_m_per_s**2
+    consts[_C_ETA_VAR] = prior.initial_intention_std_m**2
+    consts[_C_XI_VAR] = prior.initial_cooperativeness_std**2
+    consts[_C_XI_STD] = prior.initial_cooperativeness_std
+    consts[_C_N_OBS] = n_obs
+    consts[_C_N_VARIED] = len(varied)
+    at = _N_CONSTS
+    consts[_C_OBS_AT] = at
+    consts[at : at + n_obs] = index
+    consts[at + n_obs : at + 2 * n_obs] = -np.inf if observation_low is None else observation_low
+    consts[at + 2 * n_obs : at + 3 * n_obs] = np.inf if observation_high is None else observation_high
+    consts[_C_VARIED_AT] = at = at + 3 * n_obs
+    consts[at : at + len(varied)] = varied
+    consts[_C_TEMPLATE_AT] = at = at + len(varied)
+    consts[at : at + len(template)] = template
+    return consts
 
 
-# Outcome codes the kernels write, checked against the enum they stand for.
-assert (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE, Outcome.TIMEOUT) == (1, 2, 3, 4)
-
-
-def _flush_kernel_cache_if_dependencies_changed() -> None:
-    """Drop the kernels' cached machine code when the model or filter sources change.
-
-    Numba's on-disk cache watches only this file, but the kernels compile in the person
-    (``coop_gym.model.dynamics``), the filter and the judgment: after an edit there, the
-    env would keep simulating the old maths. A hash of those sources, kept beside the
-    cache, detects the edit.
-    """
-    from coop_gym.model import dynamics
-    from estimator import judgment, kalman
-
-    digest = hashlib.sha256()
-    for module in (dynamics, kalman, judgment):
-        with open(inspect.getsourcefile(module) or "", "rb") as source:
-            digest.update(source.read())
-    kernels: tuple[Any, ...] = (
-        _advance,
-        _reset_rows,
-        _draw_reset,
-        _observe,
-        _observe_row,
-        _standard_normal,
-        _random,
-        _integers,
-    )
-    try:
-        stamp = os.path.join(kernels[0]._cache.cache_path, "core-kernels.dependencies.sha256")
-        previous = None
-        if os.path.exists(stamp):
-            with open(stamp) as f:
-                previous = f.read().strip()
-        if previous != digest.hexdigest():
-            for kernel in kernels:
-                kernel._cache.flush()
-            with open(stamp, "w") as f:
-                f.write(digest.hexdigest())
-    except (AttributeError, OSError):  # another Numba layout or a read-only cache: compile as usual
-        pass
-
-
-_flush_kernel_cache_if_dependencies_changed()
+guard_kernel_cache(__name__)

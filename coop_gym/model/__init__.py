@@ -1,5 +1,6 @@
 """The pure human model: parameters, personas and the three levels (paper §III)."""
 
+from compiled.cache import guard_kernel_cache
 from coop_gym.model.dynamics import Trajectory, pack_person, simulate
 from coop_gym.model.params import (
     Biomechanics,
@@ -41,3 +42,6 @@ __all__ = [
     "sample_person",
     "simulate",
 ]
+
+# dynamics' kernels inline each other and read params' constants: key their cache by both.
+guard_kernel_cache("coop_gym.model.dynamics")

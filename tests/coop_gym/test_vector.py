@@ -13,7 +13,6 @@ from gymnasium.utils.passive_env_checker import check_obs
 from gymnasium.vector import AutoresetMode
 
 import coop_gym
-from coop_gym.envs import core as core_module
 from coop_gym.envs.config import Outcome
 from coop_gym.envs.vector import SitToStandVectorEnv
 from coop_gym.model.dynamics import (
@@ -316,42 +315,6 @@ def test_rgb_render_shows_env_zero_as_the_single_env_draws_it() -> None:
 
 
 # --- the compiled core ------------------------------------------------------------
-
-
-@pytest.mark.parametrize("bit_generator", [np.random.PCG64, np.random.MT19937, np.random.Philox, np.random.SFC64])
-def test_compiled_draws_are_the_generators_own_numbers(bit_generator: type) -> None:
-    """The kernels' normals, uniforms and bounded integers equal the Generator methods'."""
-    from numba import njit
-
-    @njit(cache=False)
-    def draw(g: np.ndarray, highs: np.ndarray, out: np.ndarray) -> None:
-        k = 0
-        for high in highs:
-            out[k] = core_module._integers(g, high)
-            out[k + 1] = core_module._random(g)
-            for j in range(2, 7):
-                out[k + j] = core_module._standard_normal(g)
-            k += 7
-
-    highs = np.tile(np.arange(1, 11), 300)
-    reference = np.random.Generator(bit_generator(2024))
-    expected = np.empty(7 * highs.size)
-    for r, high in enumerate(highs):
-        expected[7 * r] = reference.integers(high)
-        expected[7 * r + 1] = reference.random()
-        expected[7 * r + 2 : 7 * r + 7] = reference.standard_normal(5)
-    rng = np.random.Generator(bit_generator(2024))
-    got = np.empty_like(expected)
-    draw(core_module.bit_generator_row(rng), highs, got)
-    assert np.array_equal(got, expected)
-    # The Generator object itself advanced: Python draws continue the same stream.
-    assert rng.standard_normal(3).tolist() == reference.standard_normal(3).tolist()
-    assert np.abs(expected).max() > 3.7  # the ziggurat's tail branch was exercised
-
-
-def test_bit_generator_row_rejects_other_random_sources() -> None:
-    with pytest.raises(TypeError, match=r"numpy\.random\.Generator"):
-        core_module.bit_generator_row(np.random.RandomState(0))  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("realism", [Realism(), Realism.off()])

@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from coop_gym.envs.core import nominal_model_for
-from estimator import calibrate, metrics, protocol
+from estimator import metrics
 from estimator.judgment import JUDGMENT_COLUMNS, judgment_substep
 from estimator.kalman import PaperKalmanFilter
-from estimator.protocol import (
+from estimator.nominal import NominalModel
+from experiment import calibrate, protocol
+from experiment.protocol import (
     PAPER_RESULTS,
     ProtocolConfig,
     TrialSpec,
@@ -196,7 +198,7 @@ def test_protocol_kf_is_the_paper_filter_on_measured_force(small_data: protocol.
 
 
 def test_intention_drive_is_the_delayed_cue_input() -> None:
-    model = protocol.NominalModel()
+    model = NominalModel()
     force = np.zeros((1, 50))
     force[0, 10:20] = 10.0
     verbal = np.zeros((1, 50))

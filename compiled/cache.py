@@ -1,0 +1,166 @@
+"""Numba's on-disk cache, keyed by every project source a kernel compiles in.
+
+Numba's cache (``@njit(cache=True)``) checks only the file that defines a kernel. But a
+kernel inlines the functions it calls and freezes the module-level constants it reads,
+from other files too: ``coop_gym.envs.core._advance`` compiles in the person
+(``coop_gym.model.dynamics``), the filter and the judgment, and
+``estimator.identify`` the multiple-model steps. After an edit there Numba would
+keep running the old machine code.
+
+:func:`guard_kernel_cache` fixes this for every cached kernel of a module: before the
+first cache load in a process it hashes the sources of the module and of every project
+module it imports, directly or not (:func:`project_sources`, read from the import
+statements with ``ast``), and flushes the module's kernels' cache when the hash differs
+from the one stamped beside the cache. Nothing is read or written at import time: the
+check runs lazily, once per module and process, when Numba first looks in the cache
+(i.e. at the first call of one of its kernels). Keying Numba's cache directory by the
+hash instead would need the sources read at import.
+"""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+import importlib
+import os
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+from numba.core.caching import FunctionCache
+
+__all__ = ["guard_kernel_cache", "guarded_kernels", "project_sources", "source_digest"]
+
+_STAMP_SUFFIX = ".sources.sha256"
+
+
+def _project_root(module_name: str) -> Path:
+    """The directory holding the top-level package of ``module_name``."""
+    module = sys.modules.get(module_name) or importlib.import_module(module_name)
+    depth = module_name.count(".") + (1 if Path(module.__file__ or "").name == "__init__.py" else 0)
+    return Path(module.__file__ or "").resolve().parents[depth]
+
+
+def _module_file(root: Path, name: str) -> Path | None:
+    base = root.joinpath(*name.split("."))
+    for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _imported_names(path: Path, name: str) -> set[str]:
+    """Dotted names imported anywhere in ``path`` (module ``name``), function-local imports included."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{parent}.{base}" if base else parent
+            names.add(base)
+            # ``from package import module`` imports a module, not a name.
+            names.update(f"{base}.{alias.name}" for alias in node.names)
+    return names
+
+
+def project_sources(module_name: str) -> list[Path]:
+    """Source files of ``module_name`` and of every project module it imports, transitively.
+
+    A project module is one whose file lies under the same root as ``module_name``'s
+    package (so NumPy, Numba ... are not followed). Parent packages' ``__init__`` files
+    are not included unless imported by name.
+    """
+    root = _project_root(module_name)
+    first = _module_file(root, module_name)
+    if first is None:
+        raise ValueError(f"no source file for module {module_name!r} under {root}")
+    seen = {module_name: first}
+    pending = [module_name]
+    while pending:
+        name = pending.pop()
+        for imported in _imported_names(seen[name], name):
+            if imported not in seen and (path := _module_file(root, imported)) is not None:
+                seen[imported] = path
+                pending.append(imported)
+    return sorted(seen.values())
+
+
+def source_digest(module_name: str) -> str:
+    """SHA-256 over the relative paths and contents of :func:`project_sources`."""
+    root = _project_root(module_name)
+    digest = hashlib.sha256()
+    for path in project_sources(module_name):
+        digest.update(path.relative_to(root).as_posix().encode())
+        digest.update(b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def guarded_kernels(module_name: str) -> list[Any]:
+    """The disk-cached Numba kernels defined in ``module_name``."""
+    module = sys.modules[module_name]
+    return [
+        value
+        for value in vars(module).values()
+        if isinstance(getattr(value, "_cache", None), FunctionCache)
+        and getattr(getattr(value, "py_func", None), "__module__", None) == module_name
+    ]
+
+
+class _SourceGuard:
+    """Checks a module's source digest against its stamp once, before the first cache load."""
+
+    def __init__(self, module_name: str, kernels: list[Any]) -> None:
+        self.module_name = module_name
+        self.kernels = kernels
+        self.checked = False
+        self._lock = threading.Lock()
+
+    def check(self) -> None:
+        if self.checked:
+            return
+        with self._lock:
+            if self.checked:
+                return
+            self.checked = True
+            digest = source_digest(self.module_name)
+            try:
+                stamp = Path(self.kernels[0]._cache.cache_path) / f"{self.module_name}{_STAMP_SUFFIX}"
+                previous = stamp.read_text().strip() if stamp.exists() else None
+                if previous != digest:
+                    for kernel in self.kernels:
+                        kernel._cache.flush()
+                    temporary = stamp.with_name(f"{stamp.name}.{os.getpid()}")
+                    temporary.write_text(digest)
+                    os.replace(temporary, stamp)
+            except OSError:  # a read-only cache: Numba compiles as usual
+                pass
+
+
+def guard_kernel_cache(module_name: str) -> None:
+    """Flush the cached kernels of ``module_name`` whenever a project source they depend on changes.
+
+    Call at the end of a module that defines ``@njit(cache=True)`` kernels:
+    ``guard_kernel_cache(__name__)``. No file is touched until a kernel is first called.
+    """
+    kernels = guarded_kernels(module_name)
+    if not kernels:
+        return
+    guard = _SourceGuard(module_name, kernels)
+    for kernel in kernels:
+        cache = kernel._cache
+        if getattr(cache, "source_guard", None) is not None:
+            continue
+        original = cache.load_overload
+
+        def load_overload(sig: Any, target_context: Any, _original: Any = original) -> Any:
+            guard.check()
+            return _original(sig, target_context)
+
+        cache.load_overload = load_overload
+        cache.source_guard = guard

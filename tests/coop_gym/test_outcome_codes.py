@@ -1,0 +1,77 @@
+"""Outcomes are the Outcome enum end to end: the kernel's codes come from it, checks survive ``python -O``."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+import subprocess
+import sys
+from enum import IntEnum
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from coop_gym.envs import core
+from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
+from coop_gym.model.dynamics import S_X
+from coop_gym.model.params import Cues, Realism, Timing
+from coop_gym.model.personas import PERSONAS
+from estimator.judgment import ThresholdJudgment
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_core_has_no_assert_and_its_kernel_no_outcome_literal() -> None:
+    tree = ast.parse(Path(core.__file__).read_text())
+    asserts = [node.lineno for node in ast.walk(tree) if isinstance(node, ast.Assert)]
+    assert not asserts, f"asserts vanish under python -O; raise instead (lines {asserts})"
+    kernel = ast.parse(inspect.getsource(core._advance.py_func))
+    literals = [
+        node.lineno
+        for node in ast.walk(kernel)
+        if isinstance(node, (ast.Assign, ast.Compare))
+        and any(isinstance(n, ast.Name) and n.id == "result" for n in ast.walk(node))
+        and any(isinstance(n, ast.Constant) and n.value in (1, 2, 3, 4) for n in ast.walk(node))
+    ]
+    assert not literals, f"outcome literals in _advance (lines {literals}): use the enum's codes"
+
+
+def test_the_kernel_codes_are_the_enums() -> None:
+    codes = (core._NONE, core._SUCCESS, core._UNSAFE, core._PREMATURE, core._TIMEOUT)
+    assert codes == tuple(Outcome)
+    assert core._ENDED_BY_LIFT.tolist() == [o in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE) for o in Outcome]
+
+
+def test_outcome_codes_that_are_not_consecutive_are_refused() -> None:
+    class Gapped(IntEnum):
+        NONE = 0
+        SUCCESS = 2
+
+    with pytest.raises(ValueError, match=r"Gapped values must be 0 \.\. 1"):
+        core.check_outcome_codes(Gapped)
+    core.check_outcome_codes(Outcome)
+
+
+def test_the_package_imports_and_checks_under_python_optimize() -> None:
+    code = "import coop_gym.envs.core as c; c.check_outcome_codes(c.Outcome); print(c._SUCCESS)"
+    out = subprocess.run([sys.executable, "-O", "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == str(int(Outcome.SUCCESS))
+
+
+@pytest.mark.parametrize(
+    ("xi", "lean_m", "expected"),
+    [(1, 0.2, Outcome.SUCCESS), (-1, 0.2, Outcome.UNSAFE), (1, 0.0, Outcome.UNSAFE), (0, 0.1, Outcome.PREMATURE)],
+)
+def test_a_lift_ends_with_the_enums_outcome(xi: int, lean_m: float, expected: Outcome) -> None:
+    lift = LiftCriteria()
+    person = (PERSONAS["typical"],)
+    c = core.SitToStandCore(1, person, Timing(), Cues(), Realism(), lift, RewardWeights(), ThresholdJudgment())
+    c.reset_env(0, np.random.default_rng(0), initial_xi=xi)
+    c.person[0, S_X] = lean_m  # place the shoulder
+    out = c.step(np.zeros(1), np.zeros(1), np.ones(1, dtype=bool))
+    assert Outcome(int(out.outcome[0])) is expected
+    assert bool(out.terminated[0])
+    terms = dict(zip(core.REWARD_TERMS, out.reward_terms[0].tolist(), strict=True))
+    assert terms[expected.label] != 0.0
