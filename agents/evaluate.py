@@ -488,7 +488,8 @@ def evaluate(
         if isinstance(agent, str):
             if agent not in SCRIPTED_AGENTS:
                 raise ValueError(f"unknown agent {agent!r}; scripted agents: {', '.join(SCRIPTED_AGENTS)}")
-            policy = make_scripted(agent, slots.features, slots.action_type, seed=seed)
+            level = kwargs.get("difficulty", gym.spec(env_id).kwargs.get("difficulty"))
+            policy = make_scripted(agent, slots.features, slots.action_type, seed=seed, level=level)
         else:
             policy = agent
             _check_agent_fits(policy, slots.features)
@@ -790,6 +791,73 @@ def _personas_arg(text: str) -> str | list[str]:
     return text if "," not in text else [p.strip() for p in text.split(",") if p.strip()]
 
 
+ORACLE_AGENTS = ("oracle",)
+"""Agents that see the true mental state: upper bounds, never the "best non-oracle"."""
+BLIND_AGENTS = ("blind", "push_then_lift", "lift_at_once", "random")
+"""Scripted agents that never use the cue-response evidence (lean, timers and pushes only)."""
+
+
+@dataclass(frozen=True)
+class Headroom:
+    """What a comparison says about reading the mind (success rates in [0, 1]).
+
+    Attributes:
+        oracle: Best success of the agents that see the true ``xi``.
+        best_blind: Best success of the mental-state-blind agents (:data:`BLIND_AGENTS`).
+        best_reader: Best success of every other agent (learned or scripted, no oracle).
+        best_blind_agent, best_reader_agent: Their names.
+    """
+
+    oracle: float
+    best_blind: float
+    best_reader: float
+    best_blind_agent: str
+    best_reader_agent: str
+
+    @property
+    def value_of_reading_the_mind(self) -> float:
+        """Oracle minus best blind: what knowing the mental state is worth on this env."""
+        return self.oracle - self.best_blind
+
+    @property
+    def achieved_insight(self) -> float:
+        """Best non-oracle minus best blind: how much of it the non-oracle agents obtain."""
+        return self.best_reader - self.best_blind
+
+    def lines(self) -> list[str]:
+        """Two human-readable lines for the report."""
+        return [
+            f"value of reading the mind = oracle {100 * self.oracle:.1f} % - best blind ({self.best_blind_agent}) "
+            f"{100 * self.best_blind:.1f} % = {100 * self.value_of_reading_the_mind:+.1f} points",
+            f"achieved insight = best non-oracle ({self.best_reader_agent}) {100 * self.best_reader:.1f} % - best "
+            f"blind {100 * self.best_blind:.1f} % = {100 * self.achieved_insight:+.1f} points",
+        ]
+
+
+def headroom(results: Sequence[EvaluationResult]) -> Headroom | None:
+    """:class:`Headroom` of a comparison on the same episodes; None without an oracle and a blind agent."""
+
+    def kind(name: str) -> str:
+        base = name.split(":")[0].split(" ")[0]
+        return "oracle" if base in ORACLE_AGENTS else ("blind" if base in BLIND_AGENTS else "reader")
+
+    best: dict[str, EvaluationResult] = {}
+    for result in results:
+        k = kind(result.agent)
+        if k not in best or result.success_rate > best[k].success_rate:
+            best[k] = result
+    if "oracle" not in best or "blind" not in best:
+        return None
+    reader = best.get("reader", best["blind"])
+    return Headroom(
+        best["oracle"].success_rate,
+        best["blind"].success_rate,
+        reader.success_rate,
+        best["blind"].agent,
+        reader.agent,
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (usage errors exit 2)."""
     parser = _parser()
@@ -860,6 +928,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(json.dumps(results_json(results)))
     else:
         print_table(results)
+        room = headroom(results)
+        if room is not None:
+            print("\n".join(room.lines()))
         if args.by_persona:
             split = [sub for r in results for sub in _split_named(r)]
             print_table(split, title="by persona")

@@ -51,12 +51,17 @@ from estimator.judgment import ThresholdJudgment
 
 __all__ = [
     "SCRIPTED_AGENTS",
+    "TUNED_BLIND",
+    "BlindAgent",
+    "BlindSettings",
     "HandbookCaregiver",
     "HandbookSettings",
     "LiftAtOnceAgent",
     "OracleAgent",
     "OracleSettings",
     "PhaseState",
+    "ProbingCaregiver",
+    "ProbingSettings",
     "PushThenLiftAgent",
     "PushThenLiftSettings",
     "RandomAgent",
@@ -69,6 +74,11 @@ _DEFAULT_LEAN_M = LiftCriteria().success_lean_m
 _JUDGMENT_DELAY_S = ThresholdJudgment().delay_s
 
 
+def _check_range(name: str, value: Any, low: float, high: float) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
+        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")
+
+
 @dataclass
 class PhaseState:
     """Per-env memory of a scripted agent (mutable arrays of shape (N,)).
@@ -78,12 +88,19 @@ class PhaseState:
         phase_start_s: Episode time at which the phase began [s].
         count: A per-phase counter (e.g. pushes since the last explanation).
         flag: A per-phase flag (e.g. the explanation has been spoken).
+        anchor: A per-phase value (e.g. the shoulder position when a probe began) [m].
     """
 
     phase: NDArray[np.int64]
     phase_start_s: NDArray[np.float64]
     count: NDArray[np.int64]
     flag: NDArray[np.bool_]
+    anchor: NDArray[np.float64] = None  # type: ignore[assignment]  # zeros when not given
+
+    def __post_init__(self) -> None:
+        """Give ``anchor`` its zeros when it was not passed (agents that do not use it)."""
+        if self.anchor is None:
+            self.anchor = np.zeros(self.phase.shape[0])
 
     @classmethod
     def zeros(cls, n_envs: int) -> PhaseState:
@@ -93,6 +110,7 @@ class PhaseState:
             np.zeros(n_envs),
             np.zeros(n_envs, dtype=np.int64),
             np.zeros(n_envs, dtype=bool),
+            np.zeros(n_envs),
         )
 
     @property
@@ -102,7 +120,9 @@ class PhaseState:
 
     def copy(self) -> PhaseState:
         """An independent copy (``predict`` never mutates the state it is given)."""
-        return PhaseState(self.phase.copy(), self.phase_start_s.copy(), self.count.copy(), self.flag.copy())
+        return PhaseState(
+            self.phase.copy(), self.phase_start_s.copy(), self.count.copy(), self.flag.copy(), self.anchor.copy()
+        )
 
     def enter(self, mask: NDArray[np.bool_], phase: int, now_s: NDArray[np.float64]) -> None:
         """Move the envs in ``mask`` to ``phase``, starting its clock now."""
@@ -459,21 +479,187 @@ class OracleAgent(ScriptedAgent):
         return push, verbal, np.where(lift, LIFT, WAIT)
 
 
+# --- mental-state-blind baselines (tuned and searched in agents/tune_baselines.py) ---
+
+_PUSHES = {"none": PUSH_NONE, "soft": PUSH_SOFT, "firm": PUSH_FIRM}
+
+
+@dataclass(frozen=True)
+class BlindSettings:
+    """Settings of :class:`BlindAgent`.
+
+    Attributes:
+        push: ``"none"``, ``"soft"`` or ``"firm"``: the push given while guiding.
+        words: Say "lean forward" (repeated whenever silent) while guiding.
+        lean_m: Lift once the shoulder estimate is at least this far forward [m].
+        min_time_s: Never lift before this much of the episode has passed [s].
+        release_on_lean: Stop pushing and talking while the person leans (push until lean).
+        hold_s: The lean must have held this long before a lift [s].
+    """
+
+    push: str = "soft"
+    words: bool = True
+    lean_m: float = 0.16
+    min_time_s: float = 0.0
+    release_on_lean: bool = False
+    hold_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        if self.push not in _PUSHES:
+            raise ValueError(f"BlindSettings.push must be one of {list(_PUSHES)}, got {self.push!r}")
+        _check_range("BlindSettings.lean_m", self.lean_m, 0.0, 1.0)
+        _check_range("BlindSettings.min_time_s", self.min_time_s, 0.0, 3600.0)
+        _check_range("BlindSettings.hold_s", self.hold_s, 0.0, 3600.0)
+
+
+class BlindAgent(ScriptedAgent):
+    """A rule of thumb that never reads the mind (see the module docstring)."""
+
+    name = "blind"
+    needs = ("elapsed_s", "verbal_cue", "x_hat_m")
+    GUIDE, LEANING = 0, 1
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+        settings: BlindSettings | None = None,
+    ) -> None:
+        """See :class:`ScriptedAgent`; ``settings`` default to the hard level's tuned ones."""
+        super().__init__(features, action_type, seed)
+        self.settings = settings or TUNED_BLIND["hard"]
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        s = self.settings
+        leaning = self._column(obs, "x_hat_m") >= s.lean_m
+        silent = self._column(obs, "verbal_cue") == 0.0
+        # The lean's clock: phase LEANING starts when the lean appears, ends when it is lost.
+        memory.enter(leaning & (memory.phase == self.GUIDE), self.LEANING, now)
+        memory.enter(~leaning & (memory.phase == self.LEANING), self.GUIDE, now)
+        held = now - memory.phase_start_s >= s.hold_s - _EPS_S
+        lift = leaning & held & (now >= s.min_time_s - _EPS_S)
+        guiding = ~lift & ~(leaning & s.release_on_lean)
+        push = np.where(guiding, _PUSHES[s.push], PUSH_NONE)
+        verbal = np.where(guiding & silent & s.words, VERBAL_FORWARD, VERBAL_NONE)
+        return push, verbal, np.where(lift, LIFT, WAIT)
+
+
+# Winners of `python -m agents.tune_baselines blind --level LEVEL` (training personas, 300 episodes
+# from seed 1,000,000 per candidate, the 648 settings of GRID). Rerun after a model change.
+TUNED_BLIND: dict[str, BlindSettings] = {
+    "v0": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
+    "easy": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
+    "medium": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=0.0),
+    "hard": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=0.0),
+}
+"""The tuned blind policy of each level (``v0``: the ``-v0`` ids)."""
+
+
+# --- the probing caregiver: reads the mind from the answer to a cue ---
+
+
+@dataclass(frozen=True)
+class ProbingSettings:
+    """Settings of :class:`ProbingCaregiver` (see the module docstring for the cycle).
+
+    Attributes:
+        burst_s: Length of a recruiting burst (soft push + "lean forward") [s].
+        push_below_m: Push only while the shoulder estimate is behind this [m].
+        settle_s: Silence between the burst and the probe [s].
+        window_s: How long a probe's answer is watched for [s].
+        answer_m: Forward displacement since the probe began that counts as an answer [m].
+        lean_m: Lift only with the shoulder estimate at least this far forward [m].
+    """
+
+    burst_s: float = 0.5
+    push_below_m: float = 0.32
+    settle_s: float = 0.3
+    window_s: float = 1.2
+    answer_m: float = 0.02
+    lean_m: float = 0.16
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        for name in ("burst_s", "settle_s", "window_s"):
+            _check_range(f"ProbingSettings.{name}", getattr(self, name), 0.0, 60.0)
+        for name in ("push_below_m", "answer_m", "lean_m"):
+            _check_range(f"ProbingSettings.{name}", getattr(self, name), 0.0, 1.0)
+
+
+class ProbingCaregiver(ScriptedAgent):
+    """Recruit, settle, probe with words alone, lift on a forward answer (module docstring)."""
+
+    name = "prober"
+    needs = ("elapsed_s", "x_hat_m")
+    RECRUIT, SETTLE, PROBE = 0, 1, 2
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+        settings: ProbingSettings | None = None,
+    ) -> None:
+        """See :class:`ScriptedAgent`; ``settings`` default to :class:`ProbingSettings`."""
+        super().__init__(features, action_type, seed)
+        self.settings = settings or ProbingSettings()
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        s = self.settings
+        x = self._column(obs, "x_hat_m")
+        age = now - memory.phase_start_s
+        phase = memory.phase.copy()  # transitions are decided on the phase at the start of the step
+        # Probe: the answer is in (lift), or the window passed without one (recruit again).
+        answered = (phase == self.PROBE) & (x - memory.anchor >= s.answer_m) & (x >= s.lean_m)
+        memory.enter((phase == self.PROBE) & ~answered & (age >= s.window_s - _EPS_S), self.RECRUIT, now)
+        # Settle -> probe: remember where the shoulder was when the question was asked.
+        asking = (phase == self.SETTLE) & (age >= s.settle_s - _EPS_S)
+        memory.enter(asking, self.PROBE, now)
+        memory.anchor[asking] = x[asking]
+        # Recruit -> settle after one burst.
+        memory.enter((phase == self.RECRUIT) & (age >= s.burst_s - _EPS_S), self.SETTLE, now)
+
+        recruiting = memory.phase == self.RECRUIT
+        push = np.where(recruiting & (x < s.push_below_m), PUSH_SOFT, PUSH_NONE)
+        verbal = np.where(recruiting | asking, VERBAL_FORWARD, VERBAL_NONE)
+        return push, verbal, np.where(answered, LIFT, WAIT)
+
+
 SCRIPTED_AGENTS: dict[str, type[ScriptedAgent]] = {
-    cls.name: cls for cls in (RandomAgent, LiftAtOnceAgent, PushThenLiftAgent, HandbookCaregiver, OracleAgent)
+    cls.name: cls
+    for cls in (
+        RandomAgent,
+        LiftAtOnceAgent,
+        PushThenLiftAgent,
+        HandbookCaregiver,
+        OracleAgent,
+        BlindAgent,
+        ProbingCaregiver,
+    )
 }
 """Scripted agents by name."""
 
 
 def make_scripted(
-    name: str, features: Sequence[str] | None = None, action_type: str = "multidiscrete", seed: int | None = None
+    name: str,
+    features: Sequence[str] | None = None,
+    action_type: str = "multidiscrete",
+    seed: int | None = None,
+    level: str | None = None,
 ) -> ScriptedAgent:
-    """Build a scripted agent by name (see :data:`SCRIPTED_AGENTS`)."""
+    """Build a scripted agent by name (see :data:`SCRIPTED_AGENTS`).
+
+    ``level`` (a difficulty name, or None for the ``-v0`` ids) picks the blind policy tuned
+    for that level (:data:`TUNED_BLIND`); the other agents do not depend on it.
+    """
     if name not in SCRIPTED_AGENTS:
         raise ValueError(f"unknown scripted agent {name!r}; known: {', '.join(SCRIPTED_AGENTS)}")
+    if name == BlindAgent.name:
+        return BlindAgent(features, action_type, seed, settings=TUNED_BLIND[level or "v0"])
     return SCRIPTED_AGENTS[name](features, action_type, seed)
-
-
-def _check_range(name: str, value: Any, low: float, high: float) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
-        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")
