@@ -10,6 +10,7 @@ re-exports their public names.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Sequence
@@ -18,6 +19,8 @@ from typing import Any, Literal
 from coop_gym.cli import output_path_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
+from coop_gym.model.difficulty import DIFFICULTIES
+from coop_gym.model.personas import resolve_personas
 from experiment.estimators import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
@@ -101,6 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="multiple-model judgment: MAP at the paper's 0.75 s, or the earliest confident step up to it",
     )  # fmt: skip
     parser.add_argument("--personas", default="all", help="persona set of the subjects: all, train, test or a name")
+    parser.add_argument(
+        "--difficulty",
+        choices=tuple(DIFFICULTIES),
+        default=None,
+        help="subjects at this difficulty level of the -v1 envs (default: the -v0 model)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     parser.add_argument("--plot", metavar="PATH", help="write a Fig. 6 style trace of one trial (PNG)")
     parser.add_argument("--plot-confusion", metavar="PATH", help="write the confusion matrix beside the paper's (PNG)")
@@ -112,7 +121,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        config = ProtocolConfig(n_subjects=args.subjects, n_trials=args.trials, personas=args.personas)
+        personas: Any = args.personas
+        if args.difficulty is not None:
+            level = DIFFICULTIES[args.difficulty]
+            personas = tuple(
+                dataclasses.replace(p, params=level.apply(p.params)) for p in resolve_personas(args.personas)
+            )
+        config = ProtocolConfig(n_subjects=args.subjects, n_trials=args.trials, personas=personas)
     except ValueError as err:
         parser.error(str(err))
     for path in (args.plot, args.plot_confusion):
