@@ -44,6 +44,8 @@ from agents.base import Agent, action_type_of, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from coop_gym.cli import output_path_problem
 from coop_gym.envs.config import Outcome
+from coop_gym.io import atomic_open
+from coop_gym.io import write_json as atomic_write_json
 from coop_gym.model.personas import resolve_personas
 
 __all__ = [
@@ -724,7 +726,7 @@ def write_csv(results: Sequence[EvaluationResult], path: str | Path) -> Path:
         for key, value in row.items():
             if isinstance(value, list):
                 row[key] = ";".join(str(v) for v in value)
-    with path.open("w", newline="") as handle:
+    with atomic_open(path, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else [])
         writer.writeheader()
         writer.writerows(rows)
@@ -736,7 +738,7 @@ def write_json(results: Sequence[EvaluationResult], path: str | Path, episodes: 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = results_json(results, episodes=episodes)
-    path.write_text(json.dumps(payload, indent=2) + "\n")
+    atomic_write_json(path, payload)
     return path
 
 

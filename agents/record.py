@@ -43,6 +43,7 @@ from agents.base import Agent, action_type_of, features_of
 from agents.scripted import SCRIPTED_AGENTS, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
 from coop_gym.cli import positive_int as _positive_int
+from coop_gym.io import atomic_path
 
 __all__ = [
     "DEFAULT_ENV_ID",
@@ -118,13 +119,17 @@ class _RecordVideoOrGif(RecordVideo):  # type: ignore[misc]
         try:
             if self.fallback_reason:
                 raise gym.error.DependencyNotInstalled(self.fallback_reason)
-            frames = len(self.recorded_frames)
-            super().stop_recording()
-            if frames:
+            if not self.recorded_frames:
+                super().stop_recording()  # nothing to write
+            else:
+                # moviepy writes {video_folder}/{_video_name}.mp4: point it at a temporary name
+                # and rename when complete, so a failure never leaves half an MP4.
+                with atomic_path(mp4) as temp:
+                    self._video_name = temp.stem
+                    super().stop_recording()
                 self.written.append(mp4)
         except Exception as exc:
             self.fallback_reason = self.fallback_reason or f"{type(exc).__name__}: {exc}"
-            mp4.unlink(missing_ok=True)  # a half-written file is worse than none
             if self.recorded_frames:
                 gif = mp4.with_suffix(".gif")
                 _write_gif(self.recorded_frames, gif, self.frames_per_sec)
@@ -139,7 +144,8 @@ def _write_gif(frames: Sequence[Any], path: Path, fps: int) -> None:
     from PIL import Image
 
     images = [Image.fromarray(np.asarray(frame, dtype=np.uint8)) for frame in frames]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=round(1000 / fps), loop=0, optimize=True)
+    with atomic_path(path) as temp:
+        images[0].save(temp, save_all=True, append_images=images[1:], duration=round(1000 / fps), loop=0, optimize=True)
 
 
 def load_model(path: str | Path) -> Agent:

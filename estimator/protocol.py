@@ -73,6 +73,7 @@ from coop_gym.cli import output_path_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
 from coop_gym.envs.core import nominal_model_for
+from coop_gym.io import save_figure
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas, sample_person
@@ -1214,7 +1215,7 @@ def plot_trial(
         a.set_xlabel("time [s]")
     fig.suptitle("Fig. 6 style: paper Kalman filter on one simulated trial")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -1245,7 +1246,7 @@ def plot_confusion(summary: dict[str, Any], path: str, paper: PaperResults = PAP
         ax.set_ylabel("requested")
         ax.set_title(f"{title}\nBA {100 * balanced_accuracy(conf):.1f}%", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
