@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import coop_gym  # registers the env ids
-from agents.base import Agent, action_type_of, features_of
+from agents.base import Agent, action_type_of, feature_mismatch, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from coop_gym.cli import output_path_problem
 from coop_gym.envs.config import Outcome
@@ -493,7 +493,7 @@ def evaluate(
             policy = make_scripted(agent, slots.features, slots.action_type, seed=seed)
         else:
             policy = agent
-            _check_agent_fits(policy, slots.features)
+            _check_agent_fits(policy, slots.features, env_id)
         records = _play(policy, slots, episodes, seed, deterministic, progress)
     finally:
         slots.close()
@@ -509,8 +509,12 @@ def evaluate(
     )
 
 
-def _check_agent_fits(agent: Any, features: tuple[str, ...]) -> None:
+def _check_agent_fits(agent: Any, features: tuple[str, ...], env_id: str) -> None:
     """Fail early, naming the mismatch, when an agent was built for another observation."""
+    trained = None if isinstance(agent, ScriptedAgent) else getattr(agent, "features", None)
+    problem = feature_mismatch(trained, features, env_id)
+    if problem:
+        raise ValueError(f"{problem}; evaluate it on the env id it was trained on")
     if isinstance(agent, ScriptedAgent) and agent.features != features:
         raise ValueError(
             f"{type(agent).__name__} was built for features {list(agent.features)} but the env observes "

@@ -39,8 +39,8 @@ import numpy as np
 from gymnasium.wrappers import RecordVideo
 
 import coop_gym
-from agents.base import Agent, action_type_of, features_of
-from agents.scripted import SCRIPTED_AGENTS, make_scripted
+from agents.base import Agent, action_type_of, feature_mismatch, features_of
+from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.io import atomic_path
@@ -348,6 +348,12 @@ def play_episode(
 
 def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
     """A clear error when a loaded model was trained on another observation or action space."""
+    if not isinstance(agent, ScriptedAgent):
+        problem = feature_mismatch(
+            getattr(agent, "features", None), features_of(env), env.spec.id if env.spec else "the env"
+        )
+        if problem:
+            raise IncompatibleAgentError(f"{problem}; pass the env id it was trained on")
     for attr in ("observation_space", "action_space"):
         expected = getattr(agent, attr, None)
         actual = getattr(env, attr)
@@ -355,7 +361,6 @@ def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
             raise IncompatibleAgentError(
                 f"the model's {attr} {expected} does not match the env's {actual}; pass the env id it was trained on"
             )
-
 
 
 def _int(text: str) -> int:

@@ -4,12 +4,16 @@
   when available, else one Gymnasium env per slot), with episode statistics
   (``VecMonitor``) and optional observation normalisation (``VecNormalize``).
 * :func:`make_model` -- the algorithm with the defaults of :mod:`agents.hyperparams`.
-* :func:`save_agent` / :func:`load_agent` -- a model folder holds ``model.zip``,
-  ``vecnormalize.pkl`` (if observations were normalised) and ``agent.json`` (algorithm,
-  env id). :func:`load_agent` returns an :class:`SB3Agent`, which follows the same
-  ``predict`` protocol as the scripted agents and applies the saved normalisation, so
-  :func:`agents.evaluate.evaluate` scores it like any other agent. RecurrentPPO's LSTM
-  state travels in ``state`` and is reset by ``episode_start``.
+* :func:`save_agent` / :func:`load_agent` -- ``model.zip`` is self-contained: besides SB3's
+  members it holds ``coop_gym/agent.json`` (algorithm, env id, observation feature names,
+  coop_gym version, step count) and ``coop_gym/vecnormalize.pkl`` (the observation
+  statistics, if observations were normalised), so a lone copy of the file loads and scores
+  as trained. The folder also gets ``vecnormalize.pkl`` and ``agent.json`` beside it (what
+  older run folders hold; they still load). :func:`load_agent` returns an :class:`SB3Agent`,
+  which follows the same ``predict`` protocol as the scripted agents and applies the saved
+  normalisation, so :func:`agents.evaluate.evaluate` scores it like any other agent.
+  RecurrentPPO's LSTM state travels in ``state`` and is reset by ``episode_start``. Every
+  file is written atomically (:mod:`coop_gym.io`).
 
 Example:
     >>> from agents.rl import make_train_env, make_model
@@ -27,6 +31,7 @@ from __future__ import annotations
 import json
 import pickle
 import warnings
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,11 +46,14 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import KVWriter, Logger, TensorBoardOutputFormat
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
 
-import coop_gym  # noqa: F401  (registers the env ids)
+import coop_gym  # registers the env ids
 from agents.hyperparams import ALGORITHMS, TrainingConfig
+from coop_gym.io import atomic_path, write_bytes, write_json
 
 __all__ = [
     "AGENT_FILE",
+    "BUNDLE_INFO",
+    "BUNDLE_VECNORMALIZE",
     "MODEL_FILE",
     "VECNORMALIZE_FILE",
     "CleanRLTensorBoard",
@@ -61,13 +69,20 @@ __all__ = [
     "load_model",
     "make_model",
     "make_train_env",
+    "observation_features",
+    "read_bundle",
     "save_agent",
+    "save_model_bundle",
     "vec_env_backend",
 ]
 
 MODEL_FILE = "model.zip"
 VECNORMALIZE_FILE = "vecnormalize.pkl"
 AGENT_FILE = "agent.json"
+BUNDLE_INFO = "coop_gym/agent.json"
+"""Member of ``model.zip`` with the metadata (SB3 ignores members it does not know)."""
+BUNDLE_VECNORMALIZE = "coop_gym/vecnormalize.pkl"
+"""Member of ``model.zip`` with the pickled ``VecNormalize`` (statistics only, no env)."""
 
 
 def algorithm_class(algo: str) -> type[BaseAlgorithm]:
@@ -212,28 +227,99 @@ def find_vec_normalize(env: VecEnv | None) -> VecNormalize | None:
     return None
 
 
-def save_agent(model: BaseAlgorithm, folder: str | Path, *, algo: str, env_id: str) -> Path:
-    """Save ``model`` (and its ``VecNormalize`` statistics) into ``folder``; returns the model path."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    model_path = folder / MODEL_FILE
-    model.save(model_path)
-    vec_normalize = find_vec_normalize(model.get_env())
-    if vec_normalize is not None:
-        vec_normalize.save(str(folder / VECNORMALIZE_FILE))
+def observation_features(env_id: str, env: VecEnv | None = None) -> list[str]:
+    """The observation feature names of ``env`` (a training ``VecEnv``) or of a fresh ``env_id`` env."""
+    from agents.base import features_of
+
+    if env is not None:
+        try:
+            return [str(f) for f in env.get_attr("features", indices=[0])[0]]
+        except (AttributeError, IndexError):
+            pass
+    single = gym.make(env_id)
+    try:
+        return list(features_of(single))
+    finally:
+        single.close()
+
+
+def save_model_bundle(
+    model: BaseAlgorithm,
+    path: str | Path,
+    *,
+    algo: str,
+    env_id: str,
+    vec_normalize: VecNormalize | None = None,
+) -> dict[str, Any]:
+    """Save ``model`` to ``path`` (a zip) with its metadata and normaliser inside; returns the metadata.
+
+    The file appears only once complete (written under a temporary name, then renamed).
+    """
     info = {
         "algo": algo,
         "env_id": env_id,
+        "features": observation_features(env_id, model.get_env()),
         "num_timesteps": int(model.num_timesteps),
-        "model": MODEL_FILE,
-        "vecnormalize": VECNORMALIZE_FILE if vec_normalize is not None else None,
+        "coop_gym_version": coop_gym.__version__,
+        "normalized": vec_normalize is not None,
     }
-    (folder / AGENT_FILE).write_text(json.dumps(info, indent=2) + "\n")
+    with atomic_path(path) as temp:
+        model.save(temp)
+        with zipfile.ZipFile(temp, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+            archive.writestr(BUNDLE_INFO, json.dumps(info, indent=2) + "\n")
+            if vec_normalize is not None:
+                archive.writestr(BUNDLE_VECNORMALIZE, pickle.dumps(vec_normalize))
+    return info
+
+
+def save_agent(model: BaseAlgorithm, folder: str | Path, *, algo: str, env_id: str) -> Path:
+    """Save ``model`` (its ``VecNormalize`` statistics and metadata inside) into ``folder``; returns the model path.
+
+    ``vecnormalize.pkl`` and ``agent.json`` are also written beside ``model.zip``, as older
+    versions did (``VecNormalize.load`` reads the former when training resumes).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    model_path = folder / MODEL_FILE
+    vec_normalize = find_vec_normalize(model.get_env())
+    info = save_model_bundle(model, model_path, algo=algo, env_id=env_id, vec_normalize=vec_normalize)
+    if vec_normalize is not None:
+        write_bytes(folder / VECNORMALIZE_FILE, pickle.dumps(vec_normalize))
+    info |= {"model": MODEL_FILE, "vecnormalize": VECNORMALIZE_FILE if vec_normalize is not None else None}
+    write_json(folder / AGENT_FILE, info)
     return model_path
 
 
+def read_bundle(model_path: str | Path) -> tuple[dict[str, Any], VecNormalize | None]:
+    """The metadata and normaliser stored inside a model zip (``({}, None)`` for a plain SB3 zip).
+
+    Raises:
+        ValueError: the file is not a zip archive (empty, truncated, another format) or its
+            members are unreadable.
+    """
+    model_path = Path(model_path)
+    try:
+        with zipfile.ZipFile(model_path) as archive:
+            names = set(archive.namelist())
+            if "data" not in names:
+                raise ValueError(f"could not load {model_path}: a zip but not a Stable-Baselines3 model (no 'data')")
+            info = json.loads(archive.read(BUNDLE_INFO)) if BUNDLE_INFO in names else {}
+            stats = pickle.loads(archive.read(BUNDLE_VECNORMALIZE)) if BUNDLE_VECNORMALIZE in names else None
+    except zipfile.BadZipFile as exc:
+        size = model_path.stat().st_size
+        what = "the file is empty" if size == 0 else f"not a complete zip archive ({size} bytes: {exc})"
+        raise ValueError(f"could not load {model_path}: {what}") from None
+    except (OSError, EOFError, json.JSONDecodeError, pickle.UnpicklingError, zipfile.LargeZipFile) as exc:
+        raise ValueError(f"could not load {model_path}: damaged archive ({type(exc).__name__}: {exc})") from None
+    if not isinstance(info, dict):
+        raise ValueError(f"{model_path}: {BUNDLE_INFO} is not a JSON object")
+    if stats is not None and not isinstance(stats, VecNormalize):
+        raise ValueError(f"{model_path}: {BUNDLE_VECNORMALIZE} holds a {type(stats).__name__}, not a VecNormalize")
+    return info, stats
+
+
 def _resolve(path: str | Path) -> tuple[Path, dict[str, Any]]:
-    """The model file and the ``agent.json`` beside it (empty if absent)."""
+    """The model file and its metadata: the bundle's, else the ``agent.json`` beside it (empty if neither)."""
     path = Path(path)
     if path.is_dir():
         path = path / MODEL_FILE
@@ -241,8 +327,20 @@ def _resolve(path: str | Path) -> tuple[Path, dict[str, Any]]:
         path = path.with_suffix(".zip")
     if not path.exists():
         raise FileNotFoundError(f"no saved model at {path}")
+    info, _ = read_bundle(path)
+    if info:
+        return path, info
     info_path = path.parent / AGENT_FILE
-    info = json.loads(info_path.read_text()) if info_path.exists() else {}
+    if not info_path.exists():
+        return path, {}
+    try:
+        info = json.loads(info_path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{info_path}: not valid JSON ({exc})") from None
+    if not isinstance(info, dict) or not isinstance(info.get("algo", ""), str):
+        raise ValueError(f"{info_path}: expected a JSON object with a string 'algo'")
+    if info.get("algo") and info["algo"] not in ALGORITHMS:
+        raise ValueError(f"{info_path}: unknown algo {info['algo']!r}; known: {', '.join(ALGORITHMS)}")
     return path, info
 
 
@@ -331,13 +429,20 @@ class SB3Agent:
         algo: Algorithm name.
         env_id: Env id it was trained on (None if unknown).
         obs_normalizer: The observation normalisation the model was trained with (or None).
+        features: The observation feature names it was trained on (None if unknown).
     """
 
     def __init__(
-        self, model: BaseAlgorithm, algo: str, env_id: str | None = None, obs_normalizer: ObsNormalizer | None = None
+        self,
+        model: BaseAlgorithm,
+        algo: str,
+        env_id: str | None = None,
+        obs_normalizer: ObsNormalizer | None = None,
+        features: tuple[str, ...] | None = None,
     ) -> None:
         """Wrap the model."""
         self.model = model
+        self.features = features
         self.algo = algo
         self.env_id = env_id
         self.name = algo
@@ -377,20 +482,34 @@ def load_agent(path: str | Path) -> SB3Agent:
     """
     model_path, saved_info = _resolve(path)
     model, info = load_model(model_path)
-    normalizer = None
-    if saved_info:
-        name = saved_info.get("vecnormalize")
-        candidates = [model_path.parent / name] if name else []
-    else:
-        # No agent.json: a vecnormalize.pkl beside the model, or in RL Zoo's layout
-        # (logs/ppo/<env>_1/<env>.zip with <env>_1/<env>/vecnormalize.pkl).
-        candidates = [model_path.parent / VECNORMALIZE_FILE, model_path.with_suffix("") / VECNORMALIZE_FILE]
-    for candidate in candidates:
-        if candidate.exists():
-            with candidate.open("rb") as handle:
-                normalizer = ObsNormalizer.from_vec_normalize(pickle.load(handle))  # pickled without its venv
-            break
-    return SB3Agent(model, info["algo"], info.get("env_id"), normalizer)
+    _, bundled = read_bundle(model_path)
+    normalizer = ObsNormalizer.from_vec_normalize(bundled)
+    if bundled is None and saved_info.get("normalized", True):  # not in the bundle: look beside the model
+        if saved_info:
+            name = saved_info.get("vecnormalize")
+            candidates = [model_path.parent / name] if name else []
+        else:
+            # No agent.json: a vecnormalize.pkl beside the model, or in RL Zoo's layout
+            # (logs/ppo/<env>_1/<env>.zip with <env>_1/<env>/vecnormalize.pkl).
+            candidates = [model_path.parent / VECNORMALIZE_FILE, model_path.with_suffix("") / VECNORMALIZE_FILE]
+        for candidate in candidates:
+            if candidate.exists():
+                normalizer = ObsNormalizer.from_vec_normalize(_load_vec_normalize(candidate))
+                break
+    features = info.get("features")
+    return SB3Agent(model, info["algo"], info.get("env_id"), normalizer, tuple(features) if features else None)
+
+
+def _load_vec_normalize(path: Path) -> VecNormalize:
+    """A pickled ``VecNormalize`` (saved without its venv); ValueError naming the file if it is not one."""
+    try:
+        with path.open("rb") as handle:
+            stats = pickle.load(handle)
+    except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError, ValueError) as exc:
+        raise ValueError(f"{path}: not a readable VecNormalize pickle ({type(exc).__name__}: {exc})") from None
+    if not isinstance(stats, VecNormalize):
+        raise ValueError(f"{path}: holds a {type(stats).__name__}, not a VecNormalize")
+    return stats
 
 
 # --- logging ------------------------------------------------------------------
