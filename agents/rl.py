@@ -829,7 +829,7 @@ class CheckpointCallback(BaseCallback):
         super().__init__()
         self.run_dir, self.every, self.algo, self.env_id = Path(run_dir), every, algo, env_id
         self.stop_requested, self.extra = stop_requested, extra
-        self._next = start_steps + every if every > 0 else None
+        self._next = (start_steps // every + 1) * every if every > 0 else None
         self.last: Path | None = None
 
     def save(self) -> Path:

@@ -1,0 +1,132 @@
+"""train.py never loses a run: Ctrl-C and SIGKILL mid-training, then ``--resume`` to completion."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+ROOT = Path(__file__).resolve().parents[2]
+# PPO with one env: 512-step rollouts, so a checkpoint boundary every 512 steps.
+TINY = [
+    "--timesteps", "2560", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
+    "--eval-points", "0", "--baselines", "", "--no-progress", "--threads", "1",
+]  # fmt: skip
+
+
+def _start(out: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, str(ROOT / "train.py"), *TINY, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=out,
+    )
+
+
+def _wait_for_checkpoint(out: Path, proc: subprocess.Popen[str], timeout_s: float = 120) -> Path:
+    """The run folder, once its first checkpoint exists (training is under way)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        found = [p for p in out.glob("*/checkpoints/step_*") if (p / "state.pkl").exists()]
+        if found:
+            return found[0].parents[1]
+        if proc.poll() is not None:
+            pytest.fail(f"train.py ended before its first checkpoint: {proc.communicate()[1][-2000:]}")
+        time.sleep(0.05)
+    proc.kill()
+    pytest.fail("no checkpoint appeared")
+
+
+def _policy_weights(run: Path) -> dict[str, torch.Tensor]:
+    from agents.rl import load_model
+
+    model, _ = load_model(run / "model.zip")
+    return model.policy.state_dict()
+
+
+def test_ctrl_c_stops_cleanly_and_resume_reaches_the_weights_of_an_unbroken_run(tmp_path):
+    import train
+
+    out = tmp_path / "runs"
+    out.mkdir()
+    proc = _start(out)
+    run = _wait_for_checkpoint(out, proc)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGINT, err[-2000:]
+    assert (run / "INTERRUPTED").exists() and not (run / "COMPLETE").exists()
+    assert f"python train.py --resume {run}" in err and "Traceback" not in err
+    assert f"--resume {run}" in (run / "INTERRUPTED").read_text()
+
+    # Resume with no other flag: the run's own settings, in its own folder.
+    assert train.main(["--resume", str(run), "--no-progress"]) == 0
+    assert [p.name for p in out.iterdir()] == [run.name]  # no orphan folder
+    assert (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()
+    assert not (run / "checkpoints").exists()
+    results = json.loads((run / "results.json").read_text())
+    assert results["training"]["total_timesteps"] == 2560 and results["learning_curve"] == []
+
+    # Stopped at a rollout boundary, so the weights are those of a run that never stopped.
+    straight = tmp_path / "straight"
+    assert train.main([*TINY, "--out", str(straight)]) == 0
+    (unbroken,) = straight.iterdir()
+    a, b = _policy_weights(run), _policy_weights(unbroken)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_sigkill_then_resume_continues_from_the_last_checkpoint(tmp_path):
+    out = tmp_path / "runs"
+    out.mkdir()
+    proc = _start(out)
+    run = _wait_for_checkpoint(out, proc)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    assert not (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()
+    (run / "checkpoints" / ".step_000000009999.tmp-dead").mkdir()  # as if killed while writing one
+
+    resumed = subprocess.run(
+        [sys.executable, str(ROOT / "train.py"), "--resume", str(run), "--no-progress"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=out,
+    )
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "continuing from" in resumed.stdout and "step_" in resumed.stdout
+    assert [p.name for p in out.iterdir()] == [run.name]
+    assert (run / "COMPLETE").exists()
+    assert not [p for p in run.rglob("*") if ".tmp-" in p.name]
+    results = json.loads((run / "results.json").read_text())
+    assert results["training"]["total_timesteps"] == 2560
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--seed", "3"], r"--seed 3 \(the run has 0\)"),
+        (["--algo", "dqn", "--timesteps", "64"], r"--algo 'dqn' \(the run has 'ppo'\); --timesteps 64"),
+    ],
+)
+def test_resume_flags_that_contradict_the_run_are_named(tmp_path, argv, message, capsys):
+    import re
+
+    import train
+
+    run = tmp_path / "run"
+    run.mkdir()
+    settings = {"algo": "ppo", "env": "CoopGym/SitToStand-v0", "seed": 0, "timesteps": 2560, "n_envs": 1}
+    (run / "args.json").write_text(json.dumps(settings))
+    with pytest.raises(SystemExit) as exc:
+        train.parse_args(["--resume", str(run), *argv])
+    assert exc.value.code == 2
+    assert re.search(message, capsys.readouterr().err)
+    args = train.parse_args(["--resume", str(run), "--seed", "0"])  # agreeing flags are fine
+    assert (args.algo, args.seed, args.timesteps, args.n_envs) == ("ppo", 0, 2560, 1)
