@@ -15,7 +15,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[2]
 # PPO with one env: 512-step rollouts, so a checkpoint boundary every 512 steps.
 TINY = [
-    "--timesteps", "2560", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
+    "--timesteps", "1536", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
     "--eval-points", "0", "--baselines", "", "--no-progress", "--threads", "1",
 ]  # fmt: skip
 
@@ -51,61 +51,66 @@ def _policy_weights(run: Path) -> dict[str, torch.Tensor]:
     return model.policy.state_dict()
 
 
-def test_ctrl_c_stops_cleanly_and_resume_reaches_the_weights_of_an_unbroken_run(tmp_path):
+def _interrupt(out: Path, signum: int) -> Path:
+    """Start a tiny train.py run, send ``signum`` once its first checkpoint exists; the run folder."""
+    proc = _start(out)
+    run = _wait_for_checkpoint(out, proc)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=120)
+    expected = -signal.SIGKILL if signum == signal.SIGKILL else 128 + signum
+    assert proc.returncode == expected, err[-2000:]
+    assert not (run / "COMPLETE").exists()
+    if signum != signal.SIGKILL:
+        assert (run / "INTERRUPTED").exists() and "Traceback" not in err
+        assert f"python train.py --resume {run}" in err and f"--resume {run}" in (run / "INTERRUPTED").read_text()
+    return run
+
+
+def _resume_to_completion(run: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    """Resume in-process with no other flag (the run's own settings); the printed output."""
+    import train
+
+    assert train.main(["--resume", str(run), "--no-progress"]) == 0
+    assert [p.name for p in run.parent.iterdir()] == [run.name]  # in its own folder: no orphan
+    assert (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()
+    assert not (run / "checkpoints").exists() and not [p for p in run.rglob("*") if ".tmp-" in p.name]
+    results = json.loads((run / "results.json").read_text())
+    assert results["training"]["total_timesteps"] == 1536 and results["learning_curve"] == []  # --eval-points 0
+    return capsys.readouterr().out
+
+
+def test_ctrl_c_stops_cleanly_and_resume_completes(tmp_path, capsys):
+    out = tmp_path / "runs"
+    out.mkdir()
+    run = _interrupt(out, signal.SIGINT)
+    assert "continuing from" in _resume_to_completion(run, capsys)
+
+
+def test_sigkill_then_resume_continues_from_the_last_checkpoint(tmp_path, capsys):
+    out = tmp_path / "runs"
+    out.mkdir()
+    run = _interrupt(out, signal.SIGKILL)
+    assert not (run / "INTERRUPTED").exists()
+    (run / "checkpoints" / ".step_000000009999.tmp-dead").mkdir()  # as if killed while writing one
+    (run / ".eval.tmp-dead.json").write_text("{")
+    printed = _resume_to_completion(run, capsys)
+    assert "continuing from" in printed and "step_000000000512" in printed
+
+
+@pytest.mark.slow
+def test_sigterm_at_a_boundary_then_resume_reaches_the_weights_of_an_unbroken_run(tmp_path, capsys):
+    """End to end through train.py; tests/agents/test_checkpoint.py shows the same for each algorithm in-process."""
     import train
 
     out = tmp_path / "runs"
     out.mkdir()
-    proc = _start(out)
-    run = _wait_for_checkpoint(out, proc)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 128 + signal.SIGINT, err[-2000:]
-    assert (run / "INTERRUPTED").exists() and not (run / "COMPLETE").exists()
-    assert f"python train.py --resume {run}" in err and "Traceback" not in err
-    assert f"--resume {run}" in (run / "INTERRUPTED").read_text()
-
-    # Resume with no other flag: the run's own settings, in its own folder.
-    assert train.main(["--resume", str(run), "--no-progress"]) == 0
-    assert [p.name for p in out.iterdir()] == [run.name]  # no orphan folder
-    assert (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()
-    assert not (run / "checkpoints").exists()
-    results = json.loads((run / "results.json").read_text())
-    assert results["training"]["total_timesteps"] == 2560 and results["learning_curve"] == []
-
-    # Stopped at a rollout boundary, so the weights are those of a run that never stopped.
+    run = _interrupt(out, signal.SIGTERM)
+    _resume_to_completion(run, capsys)
     straight = tmp_path / "straight"
     assert train.main([*TINY, "--out", str(straight)]) == 0
     (unbroken,) = straight.iterdir()
     a, b = _policy_weights(run), _policy_weights(unbroken)
     assert all(torch.equal(a[k], b[k]) for k in a)
-
-
-def test_sigkill_then_resume_continues_from_the_last_checkpoint(tmp_path):
-    out = tmp_path / "runs"
-    out.mkdir()
-    proc = _start(out)
-    run = _wait_for_checkpoint(out, proc)
-    proc.kill()
-    proc.communicate(timeout=60)
-    assert proc.returncode == -signal.SIGKILL
-    assert not (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()
-    (run / "checkpoints" / ".step_000000009999.tmp-dead").mkdir()  # as if killed while writing one
-
-    resumed = subprocess.run(
-        [sys.executable, str(ROOT / "train.py"), "--resume", str(run), "--no-progress"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=out,
-    )
-    assert resumed.returncode == 0, resumed.stderr[-3000:]
-    assert "continuing from" in resumed.stdout and "step_" in resumed.stdout
-    assert [p.name for p in out.iterdir()] == [run.name]
-    assert (run / "COMPLETE").exists()
-    assert not [p for p in run.rglob("*") if ".tmp-" in p.name]
-    results = json.loads((run / "results.json").read_text())
-    assert results["training"]["total_timesteps"] == 2560
 
 
 @pytest.mark.parametrize(
