@@ -176,7 +176,9 @@ def parse_args(argv: list[str] | None = None) -> Args:
     if args.algo not in ALGORITHMS:
         parser.error(f"--algo must be one of {', '.join(ALGORITHMS)}, got {args.algo!r}")
     if args.env is not None and args.env not in coop_gym.ENV_IDS:
-        parser.error(f"--env: {args.env!r} is not a coop_gym env id; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
+        parser.error(
+            f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+        )
     for name in ("timesteps", "n_envs"):
         value = getattr(args, name)
         if value is not None and value < 1:
@@ -359,12 +361,17 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError) as exc:
             return _usage_error(f"--resume: {exc}")
         model_features = model_info.get("features")
+    flag = "--model" if args.eval_only else "--resume"
     if model_features is not None:
         from agents.base import feature_mismatch
 
         problem = feature_mismatch(model_features, observation_features(env_id), env_id)
         if problem:
-            return _usage_error(f"--{'model' if args.eval_only else 'resume'}: {problem}")
+            return _usage_error(f"{flag}: {problem}")
+    elif saved_agent is not None:  # an older model without feature names: compare the sizes at least
+        shape, width = saved_agent.observation_space.shape, len(observation_features(env_id))
+        if shape != (width,):
+            return _usage_error(f"{flag}: the model observes shape {shape} but {env_id} gives ({width},)")
 
     if in_place:
         assert args.resume is not None
@@ -384,7 +391,10 @@ def main(argv: list[str] | None = None) -> int:
             "n_envs": n_envs,
             "checkpoint_every": checkpoint_every,
         }
-        write_json(run_dir / ARGS_FILE, settings)
+        try:
+            write_json(run_dir / ARGS_FILE, settings)
+        except OSError as exc:
+            return _write_failed(exc, run_dir)
         print(f"run folder: {run_dir}")
 
     stop = _StopSignals()
@@ -393,6 +403,15 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args, stop, run_dir, algo, env_id, config, timesteps, n_envs, checkpoint_every, source_model)
     except Stopped as exc:
         return _interrupted(run_dir, stop, str(exc))
+    except OSError as exc:
+        return _write_failed(exc, run_dir)
+
+
+def _write_failed(exc: OSError, run_dir: Path) -> int:
+    """A file could not be written (e.g. a full disk): it is not there, never half-written; exit status 1."""
+    print(f"python train.py: error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+    print(f"{run_dir} keeps what was complete: free space, then python train.py --resume {run_dir}", file=sys.stderr)
+    return 1
 
 
 def _run(

@@ -42,7 +42,9 @@ import coop_gym
 from agents.base import Agent, action_type_of, feature_mismatch, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
+from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.cli import positive_int as _positive_int
+from coop_gym.cli import seed as _seed
 from coop_gym.io import atomic_path
 
 __all__ = [
@@ -232,12 +234,14 @@ def record_episode(
 
     Raises:
         IncompatibleAgentError: If the agent cannot act in the env.
-        ValueError: For a bad ``persona``, ``fps`` or ``max_steps``.
+        ValueError: For a bad ``seed``, ``persona``, ``fps`` or ``max_steps``.
     """
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, int) or fps < 1):
         raise ValueError(f"fps must be a positive int, got {fps!r}")
     if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1):
         raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < SEED_LIMIT):
+        raise ValueError(f"seed must be None or an int with 0 <= seed < 2**32, got {seed!r}")
     kwargs = dict(env_kwargs or {})
     if isinstance(agent, str):
         from agents.evaluate import env_kwargs_for
@@ -363,13 +367,6 @@ def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
             )
 
 
-def _int(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
     parser = argparse.ArgumentParser(
@@ -380,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     who.add_argument("--agent", choices=sorted(SCRIPTED_AGENTS), help="a scripted caregiver")
     who.add_argument("--model", type=Path, help="a saved Stable-Baselines3 model (.zip) or model folder")
     parser.add_argument("--env", default=None, help=f"env id (default: the model's, else {DEFAULT_ENV_ID})")
-    parser.add_argument("--seed", type=_int, default=0, help="reset seed (default 0)")
+    parser.add_argument("--seed", type=_seed, default=0, help="reset seed, 0 <= seed < 2**32 (default 0)")
     parser.add_argument("--persona", default=None, help=f"persona to run, one of: {', '.join(coop_gym.PERSONAS)}")
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--fps", type=_positive_int, default=None, help="video frame rate (default 10 = real time)")
@@ -394,13 +391,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     env_id = args.env or DEFAULT_ENV_ID
-    if env_id not in gym.registry:
-        known = ", ".join(sorted(k for k in gym.registry if k.startswith("CoopGym/")))
-        parser.error(f"unknown env id {env_id!r}; registered coop_gym ids: {known}")
+    if env_id not in coop_gym.ENV_IDS:
+        parser.error(f"unknown env id {env_id!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
     if args.persona is not None and args.persona not in coop_gym.PERSONAS:
         parser.error(f"unknown persona {args.persona!r}; known: {', '.join(coop_gym.PERSONAS)}")
-    if args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out {args.out} exists and is not a folder")
+    problem = output_path_problem(args.out, folder=True)  # before the episode, not after it
+    if problem:
+        parser.error(f"--out: {problem}")
     if args.model is not None:
         if not args.model.exists():
             parser.error(f"--model {args.model}: no such file or folder")
@@ -429,6 +426,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     except IncompatibleAgentError as exc:
         parser.error(str(exc))
+    except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
+        print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
     if result.fallback_reason:
         print(f"MP4 writing failed ({result.fallback_reason}); wrote a GIF instead", file=sys.stderr)
     trace = result.trace
