@@ -394,6 +394,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             write_json(run_dir / ARGS_FILE, settings)
         except OSError as exc:
+            run_dir.rmdir()  # still empty: no run to resume, so no folder left behind
             return _write_failed(exc, run_dir)
         print(f"run folder: {run_dir}")
 

@@ -11,6 +11,7 @@ the exit status and stderr end to end.
 from __future__ import annotations
 
 import contextlib
+import errno
 import importlib
 import importlib.util
 import io
@@ -24,6 +25,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+from coop_gym import io as atomic_io
 
 ROOT = Path(__file__).resolve().parents[1]
 ALARM_S = 30  # a rejected flag exits at once; an accepted one would start the real work
@@ -406,6 +409,56 @@ def test_bad_flag_end_to_end(cli: str) -> None:
     assert "usage:" in done.stderr
     assert re.search(match, done.stderr), done.stderr
     assert done.stdout == ""
+
+
+# --- a full disk -----------------------------------------------------------------
+# The disk is "full" after the bytes are written and before they are flushed (coop_gym.io._fsync
+# raises ENOSPC), the moment a real ENOSPC strikes: each file then exists only as a temporary,
+# and must be gone afterwards; the command exits 1 with one line.
+
+
+@pytest.fixture
+def full_disk(monkeypatch: pytest.MonkeyPatch) -> list[Path]:
+    """Every atomic write fails with ENOSPC once its temporary file holds the data; the files tried."""
+    tried: list[Path] = []
+
+    def no_space(path: Path) -> None:
+        assert path.exists()  # the partial file is on disk now
+        tried.append(path)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(atomic_io, "_fsync", no_space)
+    return tried
+
+
+def _left(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
+
+
+@pytest.mark.parametrize(
+    ("cli", "argv"),
+    [
+        (
+            "agents.evaluate",
+            ["--agent", "random", "--episodes", "2", "--n-envs", "2", "--csv", "{out}/a.csv",
+             "--json-out", "{out}/a.json", "--plot", "{out}/a.png"],
+        ),
+        ("estimator.protocol", ["--subjects", "1", "--trials", "1", "--plot", "{out}/trace.png"]),
+        ("agents.record", ["--agent", "handbook", "--max-steps", "5", "--out", "{out}"]),
+        ("train.py", ["--timesteps", "64", "--eval-episodes", "1", "--baselines", "", "--out", "{out}"]),
+    ],
+)  # fmt: skip
+def test_a_full_disk_leaves_no_partial_file(cli, argv, tmp_path, full_disk):
+    if cli == "agents.record" and importlib.util.find_spec("pygame") is None:
+        pytest.skip("rendering needs pygame")
+    out = tmp_path / "out"
+    out.mkdir()
+    code, err = run_main(_main_of(cli), [a.format(out=out) for a in argv])
+    assert code == 1, err
+    assert full_disk, "nothing was written through coop_gym.io"
+    assert "No space left on device" in err and "Traceback" not in err
+    assert _left(out) == [], "a file was left behind"
+    assert not any(out.iterdir()), "a folder was left behind"
 
 
 def bad_input_table() -> list[tuple[str, str, Any, str]]:
