@@ -135,3 +135,27 @@ def test_resume_flags_that_contradict_the_run_are_named(tmp_path, argv, message,
     assert re.search(message, capsys.readouterr().err)
     args = train.parse_args(["--resume", str(run), "--seed", "0"])  # agreeing flags are fine
     assert (args.algo, args.seed, args.timesteps, args.n_envs) == ("ppo", 0, 2560, 1)
+
+
+def test_resume_without_a_checkpoint_starts_over_and_after_training_only_evaluates(tmp_path, capsys):
+    """Killed before the first checkpoint: training starts over in the same folder. Killed while
+    evaluating: the finished training is kept and only the evaluation runs again."""
+    import dataclasses
+
+    import train
+
+    run = tmp_path / "runs" / "killed_early"
+    run.mkdir(parents=True)
+    args = train.Args(timesteps=64, n_envs=1, eval_episodes=2, eval_points=0, baselines="", progress=False)
+    (run / "args.json").write_text(json.dumps(dataclasses.asdict(args)))  # older style: env etc. left None
+    assert train.main(["--resume", str(run)]) == 0
+    assert [p.name for p in run.parent.iterdir()] == [run.name] and (run / "COMPLETE").exists()
+    trained = json.loads((run / "results.json").read_text())["training"]
+    assert trained["total_timesteps"] == 512  # one rollout of the default n_steps
+
+    for name in ("COMPLETE", "results.json", "eval.json"):  # as if killed during the evaluation
+        (run / name).unlink()
+    capsys.readouterr()
+    assert train.main(["--resume", str(run)]) == 0
+    assert "trained" not in capsys.readouterr().out  # no training this time
+    assert json.loads((run / "results.json").read_text())["training"] == trained
