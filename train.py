@@ -161,7 +161,7 @@ def parse_args(argv: list[str] | None = None) -> Args:
     import gymnasium as gym  # noqa: F401  (coop_gym registers into it)
 
     import coop_gym
-    from agents.hyperparams import ALGORITHMS
+    from agents.hyperparams import ALGORITHMS, hyperparams_for
     from agents.scripted import SCRIPTED_AGENTS
     from coop_gym.cli import output_path_problem, seed_range_problem
     from coop_gym.model.personas import resolve_personas
@@ -188,7 +188,8 @@ def parse_args(argv: list[str] | None = None) -> Args:
     if args.seed < 0 or args.eval_seed < 0:
         parser.error("--seed and --eval-seed must be >= 0")
     # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
-    problem = seed_range_problem("--seed", args.seed, args.n_envs or 64) or seed_range_problem(
+    n_envs = args.n_envs or hyperparams_for(args.algo).n_envs
+    problem = seed_range_problem("--seed", args.seed, n_envs) or seed_range_problem(
         "--eval-seed", args.eval_seed, args.eval_episodes
     )
     if problem:

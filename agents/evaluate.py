@@ -830,14 +830,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(
             f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
         )
-    if args.plot and Path(args.plot).suffix.lower() not in PLOT_SUFFIXES:
-        parser.error(
-            f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
-        )
     for flag, value in (("--csv", args.csv), ("--json-out", args.json_out), ("--plot", args.plot)):
         problem = output_path_problem(value) if value else None
         if problem:
             parser.error(f"{flag}: {problem}")
+    if args.plot and Path(args.plot).suffix.lower() not in PLOT_SUFFIXES:
+        parser.error(
+            f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
+        )
     for entry in entries:
         if entry not in SCRIPTED_AGENTS and not Path(entry).exists():
             parser.error(
