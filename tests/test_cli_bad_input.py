@@ -26,8 +26,6 @@ from typing import Any
 
 import pytest
 
-from coop_gym import io as atomic_io
-
 ROOT = Path(__file__).resolve().parents[1]
 ALARM_S = 30  # a rejected flag exits at once; an accepted one would start the real work
 
@@ -420,6 +418,8 @@ def test_bad_flag_end_to_end(cli: str) -> None:
 @pytest.fixture
 def full_disk(monkeypatch: pytest.MonkeyPatch) -> list[Path]:
     """Every atomic write fails with ENOSPC once its temporary file holds the data; the files tried."""
+    from coop_gym import io as atomic_io
+
     tried: list[Path] = []
 
     def no_space(path: Path) -> None:
@@ -477,7 +477,8 @@ def bad_input_table() -> list[tuple[str, str, Any, str]]:
 
 if __name__ == "__main__":
     # python tests/test_cli_bad_input.py: the bad-input table (case -> message -> exit status).
-    sys.path.insert(0, str(ROOT))
+    # Run as a script, sys.path starts with tests/, whose coop_gym/ folder would shadow the package.
+    sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p).resolve() != ROOT / "tests"]
     print("| command | case | message | exit |")
     print("|---|---|---|---|")
     for cli, case, code, message in bad_input_table():
