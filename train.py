@@ -234,6 +234,10 @@ def _resume_args(parser: argparse.ArgumentParser, args: Args, given: set[str]) -
                 raise ValueError("not a JSON object")
         except (OSError, ValueError) as exc:
             parser.error(f"--resume: {path / ARGS_FILE} is unreadable ({exc})")
+        if recorded.get("eval_only"):
+            parser.error(
+                f"--resume: {path} was an --eval-only run; run it again: --eval-only --model {recorded.get('model')}"
+            )
         recorded = _resolved(recorded)
         saved = {name: recorded[name] for name in RUN_FIELDS if name in recorded}
     else:  # a finished run or a model: a new run continuing the model, on its algorithm and env

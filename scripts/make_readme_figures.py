@@ -58,6 +58,7 @@ from agents.base import action_type_of, features_of
 from agents.record import play_episode
 from agents.scripted import SCRIPTED_AGENTS, make_scripted
 from agents.timeline import Trace, judgment_events, plot_timeline
+from coop_gym.cli import output_path_problem
 from coop_gym.io import save_with
 
 REPO = Path(__file__).resolve().parents[1]
@@ -220,6 +221,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ):
         if value < low:
             parser.error(f"{flag} must be >= {low}, got {value}")
+    problem = output_path_problem(args.out, folder=True)
+    if problem:
+        parser.error(f"--out: {problem}")
     args.out.mkdir(parents=True, exist_ok=True)
 
     episode: tuple[Trace, list[np.ndarray]] | None = None

@@ -159,3 +159,15 @@ def test_resume_without_a_checkpoint_starts_over_and_after_training_only_evaluat
     assert train.main(["--resume", str(run)]) == 0
     assert "trained" not in capsys.readouterr().out  # no training this time
     assert json.loads((run / "results.json").read_text())["training"] == trained
+
+
+def test_an_interrupted_eval_only_run_is_not_resumed_as_training(tmp_path, capsys):
+    import train
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "args.json").write_text(json.dumps({"algo": "ppo", "eval_only": True, "model": "runs/x/model.zip"}))
+    with pytest.raises(SystemExit) as exc:
+        train.parse_args(["--resume", str(run)])
+    assert exc.value.code == 2
+    assert "was an --eval-only run; run it again: --eval-only --model runs/x/model.zip" in capsys.readouterr().err
