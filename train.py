@@ -407,8 +407,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with stop:
             return _run(args, stop, run_dir, algo, env_id, config, timesteps, n_envs, checkpoint_every, source_model)
-    except Stopped as exc:
-        return _interrupted(run_dir, stop, str(exc))
+    except Stopped:
+        return _interrupted(run_dir, stop)
     except OSError as exc:
         return _write_failed(exc, run_dir)
 
@@ -550,8 +550,8 @@ def _run(
                 progress_bar=args.progress,
                 callback=callbacks,
             )
-        except TrainingInterrupted as exc:
-            return _interrupted(run_dir, stop, f"checkpoint {exc.checkpoint}")
+        except TrainingInterrupted:
+            return _interrupted(run_dir, stop)
         finally:
             stop.in_training = False
         train_s = wall_s + time.perf_counter() - started
@@ -647,17 +647,18 @@ def _run(
     return 0
 
 
-def _interrupted(run_dir: Path, stop: _StopSignals, where: str) -> int:
+def _interrupted(run_dir: Path, stop: _StopSignals) -> int:
     """Write the INTERRUPTED marker, say how to resume; the exit status is 128 + the signal number."""
     from agents.rl import latest_checkpoint
     from coop_gym.io import write_text
 
     name = signal.Signals(stop.signum).name if stop.signum else "interrupt"
     checkpoint = latest_checkpoint(run_dir)
-    done = (run_dir / TRAINING_FILE).exists()
-    state = "training had finished" if done else f"last checkpoint: {checkpoint or 'none (starts over)'}"
-    resume = f"python train.py --resume {run_dir}"
-    message = f"{name}: stopped ({where}); {state}\nresume with: {resume}\n"
+    if (run_dir / TRAINING_FILE).exists():
+        state = "training had finished; resuming runs the evaluation"
+    else:
+        state = f"last checkpoint {checkpoint}" if checkpoint else "no checkpoint yet; resuming starts training over"
+    message = f"{name}: stopped, {state}\nresume with: python train.py --resume {run_dir}\n"
     write_text(run_dir / INTERRUPTED_FILE, time.strftime("%Y-%m-%dT%H:%M:%S ") + message)
     print(f"\n{message}", end="", file=sys.stderr)
     return 128 + (stop.signum or signal.SIGINT)
