@@ -6,16 +6,27 @@ observation of the same episodes -- on the held-out test personas over 1000 seed
 episodes, prints the comparison table and saves everything in one run folder::
 
     runs/{env}__{algo}__{seed}__{time}/
-        model.zip, vecnormalize.pkl, agent.json   the trained agent (agents.rl.load_agent)
+        args.json                                 the run's settings (what --resume continues)
+        model.zip                                 the trained agent, self-contained (agents.rl.load_agent)
+        vecnormalize.pkl, agent.json              the same normaliser and metadata beside it
+        checkpoints/step_N/                       while training: the newest two checkpoints
+        training.json                             training summary, once training finished
         tb/                                       TensorBoard: charts/, losses/, eval/
         monitor.csv                               training episodes (return, length, outcome)
         eval.json, eval.csv                       the comparison (eval.json with every episode)
         learning_curve.png, outcome_rates.png     figures
         results.json                              summary, written last
         COMPLETE                                  marker: the run finished
+        INTERRUPTED                               marker: stopped by Ctrl-C/SIGTERM; says how to resume
 
-A run folder without ``COMPLETE`` is a failed or interrupted run. Read top to bottom:
-arguments -> training env -> model -> learn -> save -> evaluate -> report.
+Never lose a run: every file is written atomically (:mod:`coop_gym.io`); a checkpoint is
+taken every ``--checkpoint-every`` env steps at a rollout boundary; Ctrl-C or SIGTERM
+stops at the next boundary with a final checkpoint (a second Ctrl-C stops at once, keeping
+the last one), writes ``INTERRUPTED`` and prints the command that resumes. After a crash or
+SIGKILL, ``python train.py --resume RUN`` continues the unfinished run in its own folder
+from the last checkpoint with the run's recorded settings and reaches the same weights as
+a run that never stopped. A run folder without ``COMPLETE`` is a failed or interrupted run.
+Read top to bottom: arguments -> training env -> model -> learn -> save -> evaluate -> report.
 """
 
 from __future__ import annotations
@@ -26,6 +37,7 @@ import dataclasses
 import inspect
 import itertools
 import json
+import signal
 import sys
 import time
 import types
@@ -54,7 +66,8 @@ class Args:
     out: str = "runs"
     """folder that receives the run folder {env}__{algo}__{seed}__{time}"""
     resume: str | None = None
-    """continue training a saved model (a run folder or its model.zip); the step count continues"""
+    """continue a run: an unfinished run folder resumes in place from its last checkpoint with its recorded
+    settings; a finished run folder or a model.zip starts a new run from that model (the step count continues)"""
     eval_episodes: int = 1000
     """seeded evaluation episodes per agent (episode k uses seed eval_seed + k)"""
     eval_seed: int = 0
@@ -69,6 +82,9 @@ class Args:
     """scripted agents to compare with, joined by ',' (empty: none)"""
     eval_points: int = 8
     """evaluations during training for the learning curve (min(200, eval_episodes) episodes each; 0: none)"""
+    checkpoint_every: int | None = None
+    """env steps between checkpoints, taken at the next rollout boundary (default: a tenth of --timesteps;
+    0: only when interrupted)"""
     threads: int = 1
     """torch CPU threads (1 measured fastest for these small networks on a shared 2-core machine)"""
     progress: bool = True
@@ -90,8 +106,13 @@ def _field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
-def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python train.py", description=(__doc__ or "").split("\n\n")[0])
+def _build_parser(suppress_defaults: bool = False) -> argparse.ArgumentParser:
+    """The parser; with ``suppress_defaults`` it returns only the flags given on the command line."""
+    parser = argparse.ArgumentParser(
+        prog="python train.py",
+        description=(__doc__ or "").split("\n\n")[0],
+        argument_default=argparse.SUPPRESS if suppress_defaults else None,
+    )
     docs = _field_docs(Args)
     hints = get_type_hints(Args)
     for f in dataclasses.fields(Args):
@@ -101,32 +122,63 @@ def _build_parser() -> argparse.ArgumentParser:
         if origin in (Union, types.UnionType):
             hint = next(a for a in get_args(hint) if a is not type(None))
         doc = docs.get(f.name, "")
+        default = argparse.SUPPRESS if suppress_defaults else f.default
         if hint is bool and f.default:  # on by default: --no-<flag> turns it off
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=True, help=doc)
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=doc)
         elif hint is bool:
-            parser.add_argument(flag, action="store_true", help=doc)
+            parser.add_argument(flag, action="store_true", default=default, help=doc)
         else:
             shown = "" if f.default is None else f" (default: {f.default})"
-            parser.add_argument(flag, type=hint, default=f.default, help=doc + shown, metavar=f.name.upper())
+            parser.add_argument(flag, type=hint, default=default, help=doc + shown, metavar=f.name.upper())
     return parser
 
 
+# Settings that define a run: --resume of an unfinished run takes them from its args.json.
+RUN_FIELDS = (
+    "algo",
+    "env",
+    "seed",
+    "timesteps",
+    "n_envs",
+    "eval_episodes",
+    "eval_seed",
+    "eval_personas",
+    "baselines",
+    "eval_points",
+    "checkpoint_every",
+)
+ARGS_FILE = "args.json"
+TRAINING_FILE = "training.json"
+INTERRUPTED_FILE = "INTERRUPTED"
+
+
 def parse_args(argv: list[str] | None = None) -> Args:
-    """Parse and validate the command line; usage errors exit with status 2."""
-    import gymnasium as gym
+    """Parse and validate the command line; usage errors exit with status 2.
+
+    With ``--resume`` of an unfinished run folder the run's own settings fill in the flags not
+    given; a given flag that contradicts the run is an error naming it.
+    """
+    import gymnasium as gym  # noqa: F401  (coop_gym registers into it)
 
     import coop_gym
-    from agents.evaluate import output_path_problem
-    from agents.hyperparams import ALGORITHMS
+    from agents.hyperparams import ALGORITHMS, hyperparams_for
     from agents.scripted import SCRIPTED_AGENTS
+    from coop_gym.cli import output_path_problem, seed_range_problem
     from coop_gym.model.personas import resolve_personas
 
     parser = _build_parser()
     args = Args(**vars(parser.parse_args(argv)))
+    given = set(vars(_build_parser(suppress_defaults=True).parse_args(argv)))
+    if args.eval_only and args.resume is not None:
+        parser.error("--eval-only and --resume exclude each other")
+    if args.resume is not None:
+        args = _resume_args(parser, args, given)
     if args.algo not in ALGORITHMS:
         parser.error(f"--algo must be one of {', '.join(ALGORITHMS)}, got {args.algo!r}")
-    if args.env is not None and args.env not in gym.registry:
-        parser.error(f"--env: unknown env id {args.env!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
+    if args.env is not None and args.env not in coop_gym.ENV_IDS:
+        parser.error(
+            f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+        )
     for name in ("timesteps", "n_envs"):
         value = getattr(args, name)
         if value is not None and value < 1:
@@ -135,8 +187,17 @@ def parse_args(argv: list[str] | None = None) -> Args:
         parser.error(f"--eval-episodes must be >= 1, got {args.eval_episodes}")
     if args.seed < 0 or args.eval_seed < 0:
         parser.error("--seed and --eval-seed must be >= 0")
+    # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
+    n_envs = args.n_envs or hyperparams_for(args.algo).n_envs
+    problem = seed_range_problem("--seed", args.seed, n_envs) or seed_range_problem(
+        "--eval-seed", args.eval_seed, args.eval_episodes
+    )
+    if problem:
+        parser.error(problem)
     if args.eval_points < 0 or args.threads < 1:
         parser.error("--eval-points must be >= 0 and --threads >= 1")
+    if args.checkpoint_every is not None and args.checkpoint_every < 0:
+        parser.error(f"--checkpoint-every must be >= 0, got {args.checkpoint_every}")
     try:
         resolve_personas(args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas)
     except ValueError as exc:
@@ -151,17 +212,118 @@ def parse_args(argv: list[str] | None = None) -> Args:
     problem = output_path_problem(args.out, folder=True)
     if problem:
         parser.error(f"--out: {problem}")
-    if args.eval_only and args.resume is not None:
-        parser.error("--eval-only and --resume exclude each other")
-    for name in ("resume", "model"):
-        path = getattr(args, name)
-        if path is not None and not (Path(path).exists() or Path(path).with_suffix(".zip").exists()):
-            parser.error(f"--{name}: nothing saved at {path}")
+    if args.model is not None and not (Path(args.model).exists() or Path(args.model).with_suffix(".zip").exists()):
+        parser.error(f"--model: nothing saved at {args.model}")
     return args
+
+
+def _is_unfinished_run(path: Path) -> bool:
+    return path.is_dir() and (path / ARGS_FILE).exists() and not (path / "COMPLETE").exists()
+
+
+def _resume_args(parser: argparse.ArgumentParser, args: Args, given: set[str]) -> Args:
+    """``args`` completed from the run (or model) being resumed; contradicting flags are an error."""
+    assert args.resume is not None
+    path = Path(args.resume)
+    if not (path.exists() or path.with_suffix(".zip").exists()):
+        parser.error(f"--resume: nothing saved at {path}")
+    if _is_unfinished_run(path):
+        try:
+            recorded = json.loads((path / ARGS_FILE).read_text())
+            if not isinstance(recorded, dict):
+                raise ValueError("not a JSON object")
+        except (OSError, ValueError) as exc:
+            parser.error(f"--resume: {path / ARGS_FILE} is unreadable ({exc})")
+        if recorded.get("eval_only"):
+            parser.error(
+                f"--resume: {path} was an --eval-only run; run it again: --eval-only --model {recorded.get('model')}"
+            )
+        recorded = _resolved(recorded)
+        saved = {name: recorded[name] for name in RUN_FIELDS if name in recorded}
+    else:  # a finished run or a model: a new run continuing the model, on its algorithm and env
+        from agents.rl import _resolve
+
+        try:
+            _, info = _resolve(path)
+        except (OSError, ValueError) as exc:
+            parser.error(f"--resume: {exc}")
+        saved = {k: v for k, v in (("algo", info.get("algo")), ("env", info.get("env_id"))) if v}
+    conflicts = [
+        f"--{name.replace('_', '-')} {getattr(args, name)!r} (the run has {value!r})"
+        for name, value in saved.items()
+        if name in given and getattr(args, name) != value
+    ]
+    if conflicts:
+        parser.error(f"--resume {path}: {'; '.join(conflicts)} contradict the saved run; leave them out")
+    return dataclasses.replace(args, **saved)
+
+
+def _resolved(settings: dict[str, Any]) -> dict[str, Any]:
+    """Run settings with the algorithm's defaults filled in (older args.json files hold None)."""
+    from agents.hyperparams import hyperparams_for
+
+    out = dict(settings)
+    algo = out.get("algo", "ppo")
+    config = hyperparams_for(algo, out.get("env") or hyperparams_for(algo).env_id)
+    out["env"] = out.get("env") or config.env_id
+    out["timesteps"] = out.get("timesteps") or config.total_timesteps
+    out["n_envs"] = out.get("n_envs") or config.n_envs
+    if out.get("checkpoint_every") is None:
+        out["checkpoint_every"] = max(1, out["timesteps"] // 10)
+    return out
 
 
 def _baselines(args: Args) -> list[str]:
     return [b.strip() for b in args.baselines.split(",") if b.strip()]
+
+
+def _usage_error(message: str) -> int:
+    """A problem found after parsing (e.g. a damaged model): one line on stderr, exit status 2."""
+    print(f"python train.py: error: {message}", file=sys.stderr)
+    return 2
+
+
+# --- stopping cleanly ------------------------------------------------------------
+
+
+class Stopped(Exception):
+    """A second Ctrl-C/SIGTERM, or one outside training: stop now."""
+
+
+class _StopSignals:
+    """SIGINT and SIGTERM stop training at the next rollout boundary; a second one stops at once.
+
+    Outside training a signal stops at once. The previous handlers are restored on exit.
+    """
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.in_training = False
+        self._previous: dict[int, Any] = {}
+
+    def requested(self) -> bool:
+        return self.signum is not None
+
+    def _handle(self, signum: int, _frame: Any) -> None:
+        first = self.signum is None
+        self.signum = signum
+        if first and self.in_training:
+            print(
+                f"\n{signal.Signals(signum).name}: saving a checkpoint at the next rollout boundary "
+                "(send it again to stop at once)",
+                file=sys.stderr,
+            )
+            return
+        raise Stopped(signal.Signals(signum).name)
+
+    def __enter__(self) -> _StopSignals:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *_: Any) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
 
 
 # --- the run --------------------------------------------------------------------
@@ -171,103 +333,249 @@ def main(argv: list[str] | None = None) -> int:
     """Train (unless --eval-only), evaluate against the baselines, save the run folder."""
     args = parse_args(argv)
 
-    import numpy as np
     import torch
 
     torch.set_num_threads(args.threads)
 
+    from agents.hyperparams import hyperparams_for
+    from agents.rl import load_agent, load_model, observation_features
+    from coop_gym.io import make_unique_folder, write_json
+
+    # The run's settings: the algorithm's defaults (agents/hyperparams.py), overridden by the flags.
+    in_place = args.resume is not None and _is_unfinished_run(Path(args.resume))
+    saved_agent = None
+    if args.eval_only:
+        assert args.model is not None  # parse_args requires --model with --eval-only
+        try:
+            saved_agent = load_agent(args.model)
+        except (OSError, ValueError) as exc:
+            return _usage_error(f"--model: {exc}")
+    algo = saved_agent.algo if saved_agent is not None else args.algo
+    env_id = args.env or (saved_agent.env_id if saved_agent else None) or hyperparams_for(algo).env_id
+    config = hyperparams_for(algo, env_id)
+    timesteps = args.timesteps or config.total_timesteps
+    n_envs = args.n_envs or config.n_envs
+    checkpoint_every = args.checkpoint_every if args.checkpoint_every is not None else max(1, timesteps // 10)
+    # A model must meet the observation it was trained on: checked before any folder is made.
+    model_features = None
+    if saved_agent is not None:
+        model_features = saved_agent.features
+    elif args.resume is not None and not in_place:
+        try:
+            _, model_info = load_model(args.resume)
+        except (OSError, ValueError) as exc:
+            return _usage_error(f"--resume: {exc}")
+        model_features = model_info.get("features")
+    flag = "--model" if args.eval_only else "--resume"
+    if model_features is not None:
+        from agents.base import feature_mismatch
+
+        problem = feature_mismatch(model_features, observation_features(env_id), env_id)
+        if problem:
+            return _usage_error(f"{flag}: {problem}")
+    elif saved_agent is not None:  # an older model without feature names: compare the sizes at least
+        shape, width = saved_agent.observation_space.shape, len(observation_features(env_id))
+        if shape != (width,):
+            return _usage_error(f"{flag}: the model observes shape {shape} but {env_id} gives ({width},)")
+
+    if in_place:
+        assert args.resume is not None
+        run_dir = Path(args.resume)
+        recorded = json.loads((run_dir / ARGS_FILE).read_text())
+        source_model = recorded.get("resume")  # the model this run itself continued, if any
+        _clean_leftovers(run_dir)
+        print(f"resuming run folder: {run_dir}")
+    else:
+        run_name = f"{env_id.replace('/', '-')}__{algo}__{args.seed}__{int(time.time())}"
+        run_dir = make_unique_folder(args.out, run_name)  # never shared, even when started in the same second
+        source_model = args.resume
+        settings = dataclasses.asdict(args) | {
+            "algo": algo,
+            "env": env_id,
+            "timesteps": timesteps,
+            "n_envs": n_envs,
+            "checkpoint_every": checkpoint_every,
+        }
+        try:
+            write_json(run_dir / ARGS_FILE, settings)
+        except OSError as exc:
+            run_dir.rmdir()  # still empty: no run to resume, so no folder left behind
+            return _write_failed(exc, run_dir)
+        print(f"run folder: {run_dir}")
+
+    stop = _StopSignals()
+    try:
+        with stop:
+            return _run(args, stop, run_dir, algo, env_id, config, timesteps, n_envs, checkpoint_every, source_model)
+    except Stopped:
+        return _interrupted(run_dir, stop)
+    except OSError as exc:
+        return _write_failed(exc, run_dir)
+
+
+def _write_failed(exc: OSError, run_dir: Path) -> int:
+    """A file could not be written (e.g. a full disk): it is not there, never half-written; exit status 1."""
+    print(f"python train.py: error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+    print(f"{run_dir} keeps what was complete: free space, then python train.py --resume {run_dir}", file=sys.stderr)
+    return 1
+
+
+def _run(
+    args: Args,
+    stop: _StopSignals,
+    run_dir: Path,
+    algo: str,
+    env_id: str,
+    config: Any,
+    timesteps: int,
+    n_envs: int,
+    checkpoint_every: int,
+    source_model: str | None,
+) -> int:
+    """Train (or finish training), evaluate, report; returns the exit status."""
+    import numpy as np
+    import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.evaluate import evaluate, print_table, write_csv, write_json
-    from agents.hyperparams import hyperparams_for
     from agents.plots import plot_learning_curve, plot_outcome_rates
     from agents.rl import (
+        MODEL_FILE,
         VECNORMALIZE_FILE,
+        CheckpointCallback,
         OutcomeStatsCallback,
         PeriodicEvalCallback,
+        TrainingInterrupted,
         cleanrl_logger,
+        latest_checkpoint,
         load_agent,
         load_model,
         make_model,
         make_train_env,
+        read_bundle,
+        restore_checkpoint,
         save_agent,
     )
+    from coop_gym.io import write_json as write_json_file
+    from coop_gym.io import write_text
 
-    # The defaults of the algorithm (agents/hyperparams.py), overridden by the flags.
-    saved: dict[str, Any] = {}
-    if args.eval_only or args.resume:
-        saved = _saved_info(args.model or args.resume)
-    algo = saved.get("algo", args.algo) if args.eval_only else args.algo
-    env_id = args.env or saved.get("env_id") or hyperparams_for(algo).env_id
-    config = hyperparams_for(algo, env_id)
-    n_envs = args.n_envs or config.n_envs
-    timesteps = args.timesteps or config.total_timesteps
-
-    run_name = f"{env_id.replace('/', '-')}__{algo}__{args.seed}__{int(time.time())}"
-    run_dir = Path(args.out) / run_name
-    for k in range(1, 100):  # two runs started in the same second never share a folder
-        try:
-            run_dir.mkdir(parents=True, exist_ok=False)
-            break
-        except FileExistsError:
-            run_dir = Path(args.out) / f"{run_name}_{k}"
-    run_name = run_dir.name
-    print(f"run folder: {run_dir}")
-    (run_dir / "args.json").write_text(json.dumps(dataclasses.asdict(args), indent=2) + "\n")
     eval_personas: Any = args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas
-
     training: dict[str, Any] = {}
     curve_points: list[dict[str, Any]] = []
-    if not args.eval_only:
-        # Training env: training personas only; observations normalised if the config says so
-        # (a resumed model brings its own statistics and keeps updating them).
-        env = make_train_env(env_id, n_envs, args.seed, personas=config.personas, monitor_file=run_dir / "monitor.csv")
-        resume_stats = _resume_file(args.resume, VECNORMALIZE_FILE) if args.resume else None
-        if resume_stats is not None:
-            env = VecNormalize.load(str(resume_stats), env)
-            env.training = True
-        elif config.normalize and not args.resume:
-            env = VecNormalize(env, norm_obs=True, norm_reward=False)
-
-        if args.resume:
-            model, _ = load_model(args.resume, env=env)
+    start_steps = 0
+    done_before = (run_dir / TRAINING_FILE).exists()  # an interrupted run that had finished training
+    if done_before:
+        finished = json.loads((run_dir / TRAINING_FILE).read_text())
+        training, curve_points, start_steps = finished["training"], finished["learning_curve"], finished["start_steps"]
+    if not args.eval_only and not done_before:
+        checkpoint = latest_checkpoint(run_dir)
+        # Training env: training personas only; observations normalised if the config says so.
+        env = make_train_env(
+            env_id,
+            n_envs,
+            args.seed,
+            personas=config.personas,
+            monitor_file=run_dir / "monitor.csv",
+            monitor_append=checkpoint is not None,
+        )
+        state: dict[str, Any] = {}
+        if checkpoint is not None:
+            try:
+                model, state = restore_checkpoint(checkpoint, env)
+            except (OSError, ValueError) as exc:
+                return _usage_error(f"--resume: checkpoint {checkpoint}: {exc}")
+            start_steps = state["start_steps"]
+            print(f"continuing from {checkpoint} at {model.num_timesteps} steps")
+        elif source_model is not None:
+            # A new run from a saved model: its own statistics come along and keep updating.
+            model_path = Path(source_model)
+            model_path = model_path / MODEL_FILE if model_path.is_dir() else model_path
+            _, stats = read_bundle(model_path)
+            beside = model_path.parent / VECNORMALIZE_FILE
+            if stats is None and beside.exists():
+                stats = VecNormalize.load(str(beside), env)
+            if stats is not None:
+                stats.set_venv(env)
+                stats.training = True
+                env = stats
+            model, _ = load_model(model_path, env=env)
             start_steps = int(model.num_timesteps)
-            print(f"resuming {algo} from {args.resume} at {start_steps} steps")
+            print(f"continuing {algo} from {source_model} at {start_steps} steps")
         else:
+            if config.normalize:
+                env = VecNormalize(env, norm_obs=True, norm_reward=False)
             model = make_model(config, env, args.seed)
-            start_steps = 0
+        target = start_steps + timesteps
         model.set_logger(cleanrl_logger(run_dir / "tb"))
 
         # Periodic scores on the evaluation personas (for the learning curve only; the
         # final model is the last one, never a selected one).
-        every = max(1, timesteps // args.eval_points) if args.eval_points else timesteps + 1
-        curve_episodes = min(200, args.eval_episodes)
-        curve = PeriodicEvalCallback(algo, env_id, eval_personas, curve_episodes, args.eval_seed, every, start_steps)
+        callbacks: list[Any] = [OutcomeStatsCallback()]
+        curve = None
+        if args.eval_points > 0:
+            every = max(1, timesteps // args.eval_points)
+            curve_episodes = min(200, args.eval_episodes)
+            curve = PeriodicEvalCallback(
+                algo, env_id, eval_personas, curve_episodes, args.eval_seed, every, start_steps
+            )
+            if state:
+                curve.history, curve._next = state["curve_history"], state["curve_next"]
+            callbacks.append(curve)
+        wall_s = float(state.get("wall_time_s", 0.0))
         started = time.perf_counter()
-        model.learn(
-            total_timesteps=timesteps,
-            reset_num_timesteps=not args.resume,
-            progress_bar=args.progress,
-            callback=[OutcomeStatsCallback(), curve],
+
+        def checkpoint_state() -> dict[str, Any]:
+            return {
+                "start_steps": start_steps,
+                "curve_history": curve.history if curve else [],
+                "curve_next": curve._next if curve else None,
+                "wall_time_s": wall_s + time.perf_counter() - started,
+            }
+
+        checkpoints = CheckpointCallback(
+            run_dir,
+            checkpoint_every,
+            algo=algo,
+            env_id=env_id,
+            stop_requested=stop.requested,
+            extra=checkpoint_state,
+            start_steps=int(model.num_timesteps),
         )
-        train_s = time.perf_counter() - started
-        curve_points = curve.history
-        model_path = save_agent(model, run_dir, algo=algo, env_id=env_id)
+        callbacks.append(checkpoints)
+        stop.in_training = True
+        try:
+            model.learn(
+                total_timesteps=target - int(model.num_timesteps),
+                reset_num_timesteps=checkpoint is None and source_model is None,
+                progress_bar=args.progress,
+                callback=callbacks,
+            )
+        except TrainingInterrupted:
+            return _interrupted(run_dir, stop)
+        finally:
+            stop.in_training = False
+        train_s = wall_s + time.perf_counter() - started
+        curve_points = curve.history if curve else []
+        save_agent(model, run_dir, algo=algo, env_id=env_id)
         env.close()
         trained_steps = int(model.num_timesteps) - start_steps
         training = {
             "timesteps": trained_steps,
             "total_timesteps": int(model.num_timesteps),
-            "resumed_from": args.resume,
+            "resumed_from": source_model,
             "n_envs": n_envs,
             "wall_time_s": train_s,
             "steps_per_s": trained_steps / train_s if train_s > 0 else None,
             "hyperparams": {**config.model_kwargs(), "normalize": config.normalize, "policy": config.policy},
         }
+        # Training is over: the summary marks it, and the checkpoints have served their purpose.
+        finished = {"training": training, "learning_curve": curve_points, "start_steps": start_steps}
+        write_json_file(run_dir / TRAINING_FILE, finished)
+        _remove_checkpoints(run_dir)
         print(f"trained {trained_steps} steps in {train_s:.0f} s ({training['steps_per_s']:.0f} steps/s)")
-    else:
-        assert args.model is not None  # parse_args requires --model with --eval-only
-        model_path = Path(args.model)
+        if stop.requested():  # the signal came after the last rollout boundary
+            raise Stopped(signal.Signals(stop.signum or signal.SIGINT).name)
+    model_path = Path(args.model) if args.eval_only and args.model else run_dir / MODEL_FILE
 
     # Evaluate the saved agent (what a user loads) and the baselines on the same episodes.
     agent = load_agent(model_path)
@@ -313,7 +621,7 @@ def main(argv: list[str] | None = None) -> int:
             f"unsafe {learned.unsafe_rate:.3f} vs {handbook.unsafe_rate:.3f}"
         )
     summary = {
-        "run": run_name,
+        "run": run_dir.name,
         "algo": algo,
         "env_id": env_id,
         "seed": args.seed,
@@ -332,25 +640,50 @@ def main(argv: list[str] | None = None) -> int:
         "torch": torch.__version__,
     }
     # Written last: a run folder with results.json and COMPLETE finished; one without did not.
-    (run_dir / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (run_dir / "COMPLETE").write_text(time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
+    write_json_file(run_dir / "results.json", summary)
+    (run_dir / INTERRUPTED_FILE).unlink(missing_ok=True)
+    write_text(run_dir / "COMPLETE", time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
     print(f"saved: {run_dir}")
     return 0
 
 
-def _saved_info(path: str | None) -> dict[str, Any]:
-    """``agent.json`` beside a saved model (empty when absent)."""
-    info = _resume_file(path, "agent.json") if path else None
-    return json.loads(info.read_text()) if info is not None else {}
+def _interrupted(run_dir: Path, stop: _StopSignals) -> int:
+    """Write the INTERRUPTED marker, say how to resume; the exit status is 128 + the signal number."""
+    from agents.rl import latest_checkpoint
+    from coop_gym.io import write_text
+
+    name = signal.Signals(stop.signum).name if stop.signum else "interrupt"
+    checkpoint = latest_checkpoint(run_dir)
+    if (run_dir / TRAINING_FILE).exists():
+        state = "training had finished; resuming runs the evaluation"
+    else:
+        state = f"last checkpoint {checkpoint}" if checkpoint else "no checkpoint yet; resuming starts training over"
+    message = f"{name}: stopped, {state}\nresume with: python train.py --resume {run_dir}\n"
+    write_text(run_dir / INTERRUPTED_FILE, time.strftime("%Y-%m-%dT%H:%M:%S ") + message)
+    print(f"\n{message}", end="", file=sys.stderr)
+    return 128 + (stop.signum or signal.SIGINT)
 
 
-def _resume_file(path: str | None, name: str) -> Path | None:
-    """A file saved beside a model (``path`` is the run folder or its model.zip)."""
-    if path is None:
-        return None
-    folder = Path(path) if Path(path).is_dir() else Path(path).parent
-    candidate = folder / name
-    return candidate if candidate.exists() else None
+def _clean_leftovers(run_dir: Path) -> None:
+    """Before resuming: drop the marker and any temporary file a killed process left behind."""
+    import shutil
+
+    from coop_gym.io import TEMP_MARKER
+
+    (run_dir / INTERRUPTED_FILE).unlink(missing_ok=True)
+    for leftover in list(run_dir.rglob(f"*{TEMP_MARKER}*")):
+        if leftover.is_dir():
+            shutil.rmtree(leftover, ignore_errors=True)
+        else:
+            leftover.unlink(missing_ok=True)
+
+
+def _remove_checkpoints(run_dir: Path) -> None:
+    import shutil
+
+    from agents.rl import CHECKPOINTS_DIR
+
+    shutil.rmtree(run_dir / CHECKPOINTS_DIR, ignore_errors=True)
 
 
 def _monitor_curve(path: Path, start_steps: int) -> tuple[list[float], list[float]]:

@@ -31,6 +31,7 @@ __all__ = [
     "Agent",
     "action_type_of",
     "encode_actions",
+    "feature_mismatch",
     "features_of",
     "require_features",
 ]
@@ -112,6 +113,25 @@ def action_type_of(env: Any) -> str:
         if isinstance(value, str):
             return value
     raise ValueError(f"{type(env).__name__} has no `action_type` attribute; is it a coop_gym env?")
+
+
+def feature_mismatch(trained: Sequence[str] | None, observed: Sequence[str], env_id: str = "the env") -> str | None:
+    """One line naming how a model's observation features differ from an env's (None if they match or are unknown).
+
+    Example:
+        >>> feature_mismatch(["a", "b"], ["a", "c", "d"], "E-v0")
+        "the model's 2 observation features differ from E-v0's 3: missing ['b'], extra ['c', 'd']"
+        >>> feature_mismatch(["a", "b"], ["b", "a"], "E-v0")
+        "the model's 2 observation features differ from E-v0's 2: same names in another order ['b', 'a']"
+    """
+    if trained is None or tuple(trained) == tuple(observed):
+        return None
+    missing = [f for f in trained if f not in observed]
+    extra = [f for f in observed if f not in trained]
+    detail = (
+        f"missing {missing}, extra {extra}" if missing or extra else f"same names in another order {list(observed)}"
+    )
+    return f"the model's {len(trained)} observation features differ from {env_id}'s {len(observed)}: {detail}"
 
 
 def require_features(features: Sequence[str], needed: Sequence[str], agent: str) -> dict[str, int]:

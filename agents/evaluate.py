@@ -40,14 +40,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 import coop_gym  # registers the env ids
-from agents.base import Agent, action_type_of, features_of
+from agents.base import Agent, action_type_of, feature_mismatch, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
-from coop_gym.cli import output_path_problem
+from coop_gym.cli import SEED_LIMIT, output_path_problem, seed_range_problem
 from coop_gym.envs.config import Outcome
+from coop_gym.io import atomic_open
+from coop_gym.io import write_json as atomic_write_json
 from coop_gym.model.personas import resolve_personas
 
 __all__ = [
     "OUTCOMES",
+    "PLOT_SUFFIXES",
     "EpisodeRecord",
     "EvaluationResult",
     "env_kwargs_for",
@@ -61,6 +64,8 @@ __all__ = [
 ]
 
 DEFAULT_ENV_ID = "CoopGym/SitToStand-v0"
+PLOT_SUFFIXES: tuple[str, ...] = (".png", ".pdf", ".svg")
+"""File types ``--plot`` writes (matplotlib picks the format from the suffix)."""
 OUTCOMES: tuple[str, ...] = ("success", "unsafe", "premature", "timeout")
 """Episode outcomes, in report order."""
 
@@ -471,6 +476,8 @@ def evaluate(
         raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be a non-negative int, got {seed!r}")
+    if seed + episodes > SEED_LIMIT:
+        raise ValueError(f"seed + episodes must be <= 2**32 (episode k uses seed + k), got seed={seed}")
     if backend not in ("auto", "vector", "single"):
         raise ValueError(f"backend must be 'auto', 'vector' or 'single', got {backend!r}")
     persona_names = tuple(p.name for p in resolve_personas(personas if isinstance(personas, str) else list(personas)))
@@ -492,7 +499,7 @@ def evaluate(
             policy = make_scripted(agent, slots.features, slots.action_type, seed=seed, level=level)
         else:
             policy = agent
-            _check_agent_fits(policy, slots.features)
+            _check_agent_fits(policy, slots.features, env_id)
         records = _play(policy, slots, episodes, seed, deterministic, progress)
     finally:
         slots.close()
@@ -508,8 +515,12 @@ def evaluate(
     )
 
 
-def _check_agent_fits(agent: Any, features: tuple[str, ...]) -> None:
+def _check_agent_fits(agent: Any, features: tuple[str, ...], env_id: str) -> None:
     """Fail early, naming the mismatch, when an agent was built for another observation."""
+    trained = None if isinstance(agent, ScriptedAgent) else getattr(agent, "features", None)
+    problem = feature_mismatch(trained, features, env_id)
+    if problem:
+        raise ValueError(f"{problem}; evaluate it on the env id it was trained on")
     if isinstance(agent, ScriptedAgent) and agent.features != features:
         raise ValueError(
             f"{type(agent).__name__} was built for features {list(agent.features)} but the env observes "
@@ -725,7 +736,7 @@ def write_csv(results: Sequence[EvaluationResult], path: str | Path) -> Path:
         for key, value in row.items():
             if isinstance(value, list):
                 row[key] = ";".join(str(v) for v in value)
-    with path.open("w", newline="") as handle:
+    with atomic_open(path, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else [])
         writer.writeheader()
         writer.writerows(rows)
@@ -737,7 +748,7 @@ def write_json(results: Sequence[EvaluationResult], path: str | Path, episodes: 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = results_json(results, episodes=episodes)
-    path.write_text(json.dumps(payload, indent=2) + "\n")
+    atomic_write_json(path, payload)
     return path
 
 
@@ -875,38 +886,54 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
     if args.n_envs < 1:
         parser.error(f"--n-envs must be >= 1, got {args.n_envs}")
-    if args.seed < 0:
-        parser.error(f"--seed must be >= 0, got {args.seed}")
+    problem = seed_range_problem("--seed", args.seed, args.episodes)  # episode k uses seed + k
+    if problem:
+        parser.error(problem)
     personas = _personas_arg(args.personas)
     try:
         resolve_personas(personas)
     except ValueError as exc:
         parser.error(f"--personas: {exc}")
-    if args.env is not None and args.env not in gym.registry:
-        parser.error(f"--env: unknown env id {args.env!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
+    if args.env is not None and args.env not in coop_gym.ENV_IDS:
+        parser.error(
+            f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+        )
     for flag, value in (("--csv", args.csv), ("--json-out", args.json_out), ("--plot", args.plot)):
         problem = output_path_problem(value) if value else None
         if problem:
             parser.error(f"{flag}: {problem}")
+    if args.plot and Path(args.plot).suffix.lower() not in PLOT_SUFFIXES:
+        parser.error(
+            f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
+        )
     for entry in entries:
         if entry not in SCRIPTED_AGENTS and not Path(entry).exists():
             parser.error(
                 f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
             )
 
-    results: list[EvaluationResult] = []
+    # Every model is loaded and matched to its env before any episode is played.
+    planned: list[tuple[Agent | str, str, str]] = []
     for entry in entries:
-        agent: Agent | str = entry
-        env_id = args.env or DEFAULT_ENV_ID
-        label = entry
-        if entry not in SCRIPTED_AGENTS:
-            from agents.rl import load_agent
+        if entry in SCRIPTED_AGENTS:
+            planned.append((entry, args.env or DEFAULT_ENV_ID, entry))
+            continue
+        from agents.base import feature_mismatch
+        from agents.rl import load_agent, observation_features
 
+        try:
             loaded = load_agent(entry)
-            agent = loaded
-            env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
-            folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
-            label = f"{loaded.algo}:{folder.name or Path(entry).stem}"
+        except (OSError, ValueError) as exc:
+            parser.error(f"--model {entry}: {exc}")
+        env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
+        problem = feature_mismatch(loaded.features, observation_features(env_id), env_id)
+        if problem:
+            parser.error(f"--model {entry}: {problem}")
+        folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
+        planned.append((loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"))
+
+    results: list[EvaluationResult] = []
+    for agent, env_id, label in planned:
         try:
             result = evaluate(
                 agent,
@@ -934,14 +961,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.by_persona:
             split = [sub for r in results for sub in _split_named(r)]
             print_table(split, title="by persona")
-    if args.csv:
-        write_csv(results, args.csv)
-    if args.json_out:
-        write_json(results, args.json_out, episodes=True)
-    if args.plot:
-        from agents.plots import plot_outcome_rates
+    try:
+        if args.csv:
+            write_csv(results, args.csv)
+        if args.json_out:
+            write_json(results, args.json_out, episodes=True)
+        if args.plot:
+            from agents.plots import plot_outcome_rates
 
-        plot_outcome_rates(results, args.plot)
+            plot_outcome_rates(results, args.plot)
+    except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
+        print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
     return 0
 
 

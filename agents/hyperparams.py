@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from coop_gym.io import write_text
+
 __all__ = [
     "ALGORITHMS",
     "DEFAULT_ENV_IDS",
@@ -236,6 +238,6 @@ def write_zoo_files(folder: str | Path | None = None) -> list[Path]:
     paths = []
     for algo in ALGORITHMS:
         path = folder / f"{ZOO_ALGO_NAMES[algo]}.yml"
-        path.write_text(zoo_yaml(algo))
+        write_text(path, zoo_yaml(algo))
         paths.append(path)
     return paths

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from coop_gym.envs.config import Outcome
+from coop_gym.io import save_figure
 
 __all__ = ["plot_learning_curve", "plot_outcome_rates"]
 
@@ -68,7 +69,7 @@ def plot_outcome_rates(results: Sequence[Any], path: str | Path, title: str | No
     ax.set_title(title or f"{first.env_id} | {','.join(first.personas)} | {first.episodes} episodes")
     ax.legend(ncols=len(_OUTCOMES), fontsize="small", loc="upper center")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -123,6 +124,6 @@ def plot_learning_curve(
     if handles:
         ax.legend(handles, labels, fontsize="small", loc="lower right")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path

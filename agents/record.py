@@ -39,10 +39,13 @@ import numpy as np
 from gymnasium.wrappers import RecordVideo
 
 import coop_gym
-from agents.base import Agent, action_type_of, features_of
-from agents.scripted import SCRIPTED_AGENTS, make_scripted
+from agents.base import Agent, action_type_of, feature_mismatch, features_of
+from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
+from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.cli import positive_int as _positive_int
+from coop_gym.cli import seed as _seed
+from coop_gym.io import atomic_path
 
 __all__ = [
     "DEFAULT_ENV_ID",
@@ -118,13 +121,17 @@ class _RecordVideoOrGif(RecordVideo):  # type: ignore[misc]
         try:
             if self.fallback_reason:
                 raise gym.error.DependencyNotInstalled(self.fallback_reason)
-            frames = len(self.recorded_frames)
-            super().stop_recording()
-            if frames:
+            if not self.recorded_frames:
+                super().stop_recording()  # nothing to write
+            else:
+                # moviepy writes {video_folder}/{_video_name}.mp4: point it at a temporary name
+                # and rename when complete, so a failure never leaves half an MP4.
+                with atomic_path(mp4) as temp:
+                    self._video_name = temp.stem
+                    super().stop_recording()
                 self.written.append(mp4)
         except Exception as exc:
             self.fallback_reason = self.fallback_reason or f"{type(exc).__name__}: {exc}"
-            mp4.unlink(missing_ok=True)  # a half-written file is worse than none
             if self.recorded_frames:
                 gif = mp4.with_suffix(".gif")
                 _write_gif(self.recorded_frames, gif, self.frames_per_sec)
@@ -139,7 +146,8 @@ def _write_gif(frames: Sequence[Any], path: Path, fps: int) -> None:
     from PIL import Image
 
     images = [Image.fromarray(np.asarray(frame, dtype=np.uint8)) for frame in frames]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=round(1000 / fps), loop=0, optimize=True)
+    with atomic_path(path) as temp:
+        images[0].save(temp, save_all=True, append_images=images[1:], duration=round(1000 / fps), loop=0, optimize=True)
 
 
 def load_model(path: str | Path) -> Agent:
@@ -226,12 +234,14 @@ def record_episode(
 
     Raises:
         IncompatibleAgentError: If the agent cannot act in the env.
-        ValueError: For a bad ``persona``, ``fps`` or ``max_steps``.
+        ValueError: For a bad ``seed``, ``persona``, ``fps`` or ``max_steps``.
     """
     if fps is not None and (isinstance(fps, bool) or not isinstance(fps, int) or fps < 1):
         raise ValueError(f"fps must be a positive int, got {fps!r}")
     if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1):
         raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < SEED_LIMIT):
+        raise ValueError(f"seed must be None or an int with 0 <= seed < 2**32, got {seed!r}")
     kwargs = dict(env_kwargs or {})
     if isinstance(agent, str):
         from agents.evaluate import env_kwargs_for
@@ -342,6 +352,12 @@ def play_episode(
 
 def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
     """A clear error when a loaded model was trained on another observation or action space."""
+    if not isinstance(agent, ScriptedAgent):
+        problem = feature_mismatch(
+            getattr(agent, "features", None), features_of(env), env.spec.id if env.spec else "the env"
+        )
+        if problem:
+            raise IncompatibleAgentError(f"{problem}; pass the env id it was trained on")
     for attr in ("observation_space", "action_space"):
         expected = getattr(agent, attr, None)
         actual = getattr(env, attr)
@@ -349,14 +365,6 @@ def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
             raise IncompatibleAgentError(
                 f"the model's {attr} {expected} does not match the env's {actual}; pass the env id it was trained on"
             )
-
-
-
-def _int(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -369,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     who.add_argument("--agent", choices=sorted(SCRIPTED_AGENTS), help="a scripted caregiver")
     who.add_argument("--model", type=Path, help="a saved Stable-Baselines3 model (.zip) or model folder")
     parser.add_argument("--env", default=None, help=f"env id (default: the model's, else {DEFAULT_ENV_ID})")
-    parser.add_argument("--seed", type=_int, default=0, help="reset seed (default 0)")
+    parser.add_argument("--seed", type=_seed, default=0, help="reset seed, 0 <= seed < 2**32 (default 0)")
     parser.add_argument("--persona", default=None, help=f"persona to run, one of: {', '.join(coop_gym.PERSONAS)}")
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--fps", type=_positive_int, default=None, help="video frame rate (default 10 = real time)")
@@ -383,13 +391,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     env_id = args.env or DEFAULT_ENV_ID
-    if env_id not in gym.registry:
-        known = ", ".join(sorted(k for k in gym.registry if k.startswith("CoopGym/")))
-        parser.error(f"unknown env id {env_id!r}; registered coop_gym ids: {known}")
+    if env_id not in coop_gym.ENV_IDS:
+        parser.error(f"unknown env id {env_id!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
     if args.persona is not None and args.persona not in coop_gym.PERSONAS:
         parser.error(f"unknown persona {args.persona!r}; known: {', '.join(coop_gym.PERSONAS)}")
-    if args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out {args.out} exists and is not a folder")
+    problem = output_path_problem(args.out, folder=True)  # before the episode, not after it
+    if problem:
+        parser.error(f"--out: {problem}")
     if args.model is not None:
         if not args.model.exists():
             parser.error(f"--model {args.model}: no such file or folder")
@@ -418,6 +426,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     except IncompatibleAgentError as exc:
         parser.error(str(exc))
+    except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
+        print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
     if result.fallback_reason:
         print(f"MP4 writing failed ({result.fallback_reason}); wrote a GIF instead", file=sys.stderr)
     trace = result.trace

@@ -4,12 +4,16 @@
   when available, else one Gymnasium env per slot), with episode statistics
   (``VecMonitor``) and optional observation normalisation (``VecNormalize``).
 * :func:`make_model` -- the algorithm with the defaults of :mod:`agents.hyperparams`.
-* :func:`save_agent` / :func:`load_agent` -- a model folder holds ``model.zip``,
-  ``vecnormalize.pkl`` (if observations were normalised) and ``agent.json`` (algorithm,
-  env id). :func:`load_agent` returns an :class:`SB3Agent`, which follows the same
-  ``predict`` protocol as the scripted agents and applies the saved normalisation, so
-  :func:`agents.evaluate.evaluate` scores it like any other agent. RecurrentPPO's LSTM
-  state travels in ``state`` and is reset by ``episode_start``.
+* :func:`save_agent` / :func:`load_agent` -- ``model.zip`` is self-contained: besides SB3's
+  members it holds ``coop_gym/agent.json`` (algorithm, env id, observation feature names,
+  coop_gym version, step count) and ``coop_gym/vecnormalize.pkl`` (the observation
+  statistics, if observations were normalised), so a lone copy of the file loads and scores
+  as trained. The folder also gets ``vecnormalize.pkl`` and ``agent.json`` beside it (what
+  older run folders hold; they still load). :func:`load_agent` returns an :class:`SB3Agent`,
+  which follows the same ``predict`` protocol as the scripted agents and applies the saved
+  normalisation, so :func:`agents.evaluate.evaluate` scores it like any other agent.
+  RecurrentPPO's LSTM state travels in ``state`` and is reset by ``episode_start``. Every
+  file is written atomically (:mod:`coop_gym.io`).
 
 Example:
     >>> from agents.rl import make_train_env, make_model
@@ -26,7 +30,10 @@ from __future__ import annotations
 
 import json
 import pickle
+import random
+import shutil
 import warnings
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,33 +48,50 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import KVWriter, Logger, TensorBoardOutputFormat
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
 
-import coop_gym  # noqa: F401  (registers the env ids)
+import coop_gym  # registers the env ids
 from agents.hyperparams import ALGORITHMS, TrainingConfig
+from coop_gym.io import atomic_path, write_bytes, write_json
 
 __all__ = [
     "AGENT_FILE",
+    "BUNDLE_INFO",
+    "BUNDLE_VECNORMALIZE",
+    "CHECKPOINTS_DIR",
     "MODEL_FILE",
     "VECNORMALIZE_FILE",
+    "CheckpointCallback",
     "CleanRLTensorBoard",
     "LinearDecay",
     "ObsNormalizer",
     "OutcomeStatsCallback",
     "PeriodicEvalCallback",
     "SB3Agent",
+    "TrainingInterrupted",
     "algorithm_class",
     "cleanrl_logger",
     "find_vec_normalize",
+    "latest_checkpoint",
     "load_agent",
     "load_model",
     "make_model",
     "make_train_env",
+    "observation_features",
+    "read_bundle",
+    "restore_checkpoint",
     "save_agent",
+    "save_checkpoint",
+    "save_model_bundle",
     "vec_env_backend",
 ]
 
 MODEL_FILE = "model.zip"
 VECNORMALIZE_FILE = "vecnormalize.pkl"
 AGENT_FILE = "agent.json"
+CHECKPOINTS_DIR = "checkpoints"
+BUNDLE_INFO = "coop_gym/agent.json"
+"""Member of ``model.zip`` with the metadata (SB3 ignores members it does not know)."""
+BUNDLE_VECNORMALIZE = "coop_gym/vecnormalize.pkl"
+"""Member of ``model.zip`` with the pickled ``VecNormalize`` (statistics only, no env)."""
 
 
 def algorithm_class(algo: str) -> type[BaseAlgorithm]:
@@ -100,6 +124,7 @@ def make_train_env(
     personas: str = "train",
     normalize: bool = False,
     monitor_file: str | Path | None = None,
+    monitor_append: bool = False,
     env_kwargs: dict[str, Any] | None = None,
     backend: str = "auto",
 ) -> VecEnv:
@@ -112,6 +137,7 @@ def make_train_env(
         personas: Persona set (``"train"`` by default; never train on ``"test"``).
         normalize: Wrap in ``VecNormalize`` (observations only).
         monitor_file: Write SB3's ``monitor.csv`` episode log here (for learning curves).
+        monitor_append: Append to an existing ``monitor_file`` (a resumed run) instead of replacing it.
         env_kwargs: Extra env kwargs.
         backend: ``"batched"`` (the native vector env through ``agents.sb3_vec``),
             ``"dummy"`` (SB3 ``DummyVecEnv`` of single envs) or ``"auto"`` (batched when
@@ -138,7 +164,13 @@ def make_train_env(
     if monitor_file is not None:
         Path(monitor_file).parent.mkdir(parents=True, exist_ok=True)
         filename = str(monitor_file)
-    venv = VecMonitor(venv, filename=filename, info_keywords=("outcome",))
+    append = monitor_append and filename is not None and Path(str(filename)).exists()
+    venv = VecMonitor(venv, filename=None if append else filename, info_keywords=("outcome",))
+    if append:
+        from stable_baselines3.common.monitor import ResultsWriter
+
+        # VecMonitor always starts a new file; a resumed run keeps its episodes and adds rows.
+        venv.results_writer = ResultsWriter(str(filename), extra_keys=("outcome",), override_existing=False)
     if normalize:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
     return venv
@@ -212,28 +244,99 @@ def find_vec_normalize(env: VecEnv | None) -> VecNormalize | None:
     return None
 
 
-def save_agent(model: BaseAlgorithm, folder: str | Path, *, algo: str, env_id: str) -> Path:
-    """Save ``model`` (and its ``VecNormalize`` statistics) into ``folder``; returns the model path."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    model_path = folder / MODEL_FILE
-    model.save(model_path)
-    vec_normalize = find_vec_normalize(model.get_env())
-    if vec_normalize is not None:
-        vec_normalize.save(str(folder / VECNORMALIZE_FILE))
+def observation_features(env_id: str, env: VecEnv | None = None) -> list[str]:
+    """The observation feature names of ``env`` (a training ``VecEnv``) or of a fresh ``env_id`` env."""
+    from agents.base import features_of
+
+    if env is not None:
+        try:
+            return [str(f) for f in env.get_attr("features", indices=[0])[0]]
+        except (AttributeError, IndexError):
+            pass
+    single = gym.make(env_id)
+    try:
+        return list(features_of(single))
+    finally:
+        single.close()
+
+
+def save_model_bundle(
+    model: BaseAlgorithm,
+    path: str | Path,
+    *,
+    algo: str,
+    env_id: str,
+    vec_normalize: VecNormalize | None = None,
+) -> dict[str, Any]:
+    """Save ``model`` to ``path`` (a zip) with its metadata and normaliser inside; returns the metadata.
+
+    The file appears only once complete (written under a temporary name, then renamed).
+    """
     info = {
         "algo": algo,
         "env_id": env_id,
+        "features": observation_features(env_id, model.get_env()),
         "num_timesteps": int(model.num_timesteps),
-        "model": MODEL_FILE,
-        "vecnormalize": VECNORMALIZE_FILE if vec_normalize is not None else None,
+        "coop_gym_version": coop_gym.__version__,
+        "normalized": vec_normalize is not None,
     }
-    (folder / AGENT_FILE).write_text(json.dumps(info, indent=2) + "\n")
+    with atomic_path(path) as temp:
+        model.save(temp)
+        with zipfile.ZipFile(temp, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+            archive.writestr(BUNDLE_INFO, json.dumps(info, indent=2) + "\n")
+            if vec_normalize is not None:
+                archive.writestr(BUNDLE_VECNORMALIZE, pickle.dumps(vec_normalize))
+    return info
+
+
+def save_agent(model: BaseAlgorithm, folder: str | Path, *, algo: str, env_id: str) -> Path:
+    """Save ``model`` (its ``VecNormalize`` statistics and metadata inside) into ``folder``; returns the model path.
+
+    ``vecnormalize.pkl`` and ``agent.json`` are also written beside ``model.zip``, as older
+    versions did (``VecNormalize.load`` reads the former when training resumes).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    model_path = folder / MODEL_FILE
+    vec_normalize = find_vec_normalize(model.get_env())
+    info = save_model_bundle(model, model_path, algo=algo, env_id=env_id, vec_normalize=vec_normalize)
+    if vec_normalize is not None:
+        write_bytes(folder / VECNORMALIZE_FILE, pickle.dumps(vec_normalize))
+    info |= {"model": MODEL_FILE, "vecnormalize": VECNORMALIZE_FILE if vec_normalize is not None else None}
+    write_json(folder / AGENT_FILE, info)
     return model_path
 
 
+def read_bundle(model_path: str | Path) -> tuple[dict[str, Any], VecNormalize | None]:
+    """The metadata and normaliser stored inside a model zip (``({}, None)`` for a plain SB3 zip).
+
+    Raises:
+        ValueError: the file is not a zip archive (empty, truncated, another format) or its
+            members are unreadable.
+    """
+    model_path = Path(model_path)
+    try:
+        with zipfile.ZipFile(model_path) as archive:
+            names = set(archive.namelist())
+            if "data" not in names:
+                raise ValueError(f"could not load {model_path}: a zip but not a Stable-Baselines3 model (no 'data')")
+            info = json.loads(archive.read(BUNDLE_INFO)) if BUNDLE_INFO in names else {}
+            stats = pickle.loads(archive.read(BUNDLE_VECNORMALIZE)) if BUNDLE_VECNORMALIZE in names else None
+    except zipfile.BadZipFile as exc:
+        size = model_path.stat().st_size
+        what = "the file is empty" if size == 0 else f"not a complete zip archive ({size} bytes: {exc})"
+        raise ValueError(f"could not load {model_path}: {what}") from None
+    except (OSError, EOFError, json.JSONDecodeError, pickle.UnpicklingError, zipfile.LargeZipFile) as exc:
+        raise ValueError(f"could not load {model_path}: damaged archive ({type(exc).__name__}: {exc})") from None
+    if not isinstance(info, dict):
+        raise ValueError(f"{model_path}: {BUNDLE_INFO} is not a JSON object")
+    if stats is not None and not isinstance(stats, VecNormalize):
+        raise ValueError(f"{model_path}: {BUNDLE_VECNORMALIZE} holds a {type(stats).__name__}, not a VecNormalize")
+    return info, stats
+
+
 def _resolve(path: str | Path) -> tuple[Path, dict[str, Any]]:
-    """The model file and the ``agent.json`` beside it (empty if absent)."""
+    """The model file and its metadata: the bundle's, else the ``agent.json`` beside it (empty if neither)."""
     path = Path(path)
     if path.is_dir():
         path = path / MODEL_FILE
@@ -241,8 +344,20 @@ def _resolve(path: str | Path) -> tuple[Path, dict[str, Any]]:
         path = path.with_suffix(".zip")
     if not path.exists():
         raise FileNotFoundError(f"no saved model at {path}")
+    info, _ = read_bundle(path)
+    if info:
+        return path, info
     info_path = path.parent / AGENT_FILE
-    info = json.loads(info_path.read_text()) if info_path.exists() else {}
+    if not info_path.exists():
+        return path, {}
+    try:
+        info = json.loads(info_path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{info_path}: not valid JSON ({exc})") from None
+    if not isinstance(info, dict) or not isinstance(info.get("algo", ""), str):
+        raise ValueError(f"{info_path}: expected a JSON object with a string 'algo'")
+    if info.get("algo") and info["algo"] not in ALGORITHMS:
+        raise ValueError(f"{info_path}: unknown algo {info['algo']!r}; known: {', '.join(ALGORITHMS)}")
     return path, info
 
 
@@ -331,13 +446,20 @@ class SB3Agent:
         algo: Algorithm name.
         env_id: Env id it was trained on (None if unknown).
         obs_normalizer: The observation normalisation the model was trained with (or None).
+        features: The observation feature names it was trained on (None if unknown).
     """
 
     def __init__(
-        self, model: BaseAlgorithm, algo: str, env_id: str | None = None, obs_normalizer: ObsNormalizer | None = None
+        self,
+        model: BaseAlgorithm,
+        algo: str,
+        env_id: str | None = None,
+        obs_normalizer: ObsNormalizer | None = None,
+        features: tuple[str, ...] | None = None,
     ) -> None:
         """Wrap the model."""
         self.model = model
+        self.features = features
         self.algo = algo
         self.env_id = env_id
         self.name = algo
@@ -377,20 +499,34 @@ def load_agent(path: str | Path) -> SB3Agent:
     """
     model_path, saved_info = _resolve(path)
     model, info = load_model(model_path)
-    normalizer = None
-    if saved_info:
-        name = saved_info.get("vecnormalize")
-        candidates = [model_path.parent / name] if name else []
-    else:
-        # No agent.json: a vecnormalize.pkl beside the model, or in RL Zoo's layout
-        # (logs/ppo/<env>_1/<env>.zip with <env>_1/<env>/vecnormalize.pkl).
-        candidates = [model_path.parent / VECNORMALIZE_FILE, model_path.with_suffix("") / VECNORMALIZE_FILE]
-    for candidate in candidates:
-        if candidate.exists():
-            with candidate.open("rb") as handle:
-                normalizer = ObsNormalizer.from_vec_normalize(pickle.load(handle))  # pickled without its venv
-            break
-    return SB3Agent(model, info["algo"], info.get("env_id"), normalizer)
+    _, bundled = read_bundle(model_path)
+    normalizer = ObsNormalizer.from_vec_normalize(bundled)
+    if bundled is None and saved_info.get("normalized", True):  # not in the bundle: look beside the model
+        if saved_info:
+            name = saved_info.get("vecnormalize")
+            candidates = [model_path.parent / name] if name else []
+        else:
+            # No agent.json: a vecnormalize.pkl beside the model, or in RL Zoo's layout
+            # (logs/ppo/<env>_1/<env>.zip with <env>_1/<env>/vecnormalize.pkl).
+            candidates = [model_path.parent / VECNORMALIZE_FILE, model_path.with_suffix("") / VECNORMALIZE_FILE]
+        for candidate in candidates:
+            if candidate.exists():
+                normalizer = ObsNormalizer.from_vec_normalize(_load_vec_normalize(candidate))
+                break
+    features = info.get("features")
+    return SB3Agent(model, info["algo"], info.get("env_id"), normalizer, tuple(features) if features else None)
+
+
+def _load_vec_normalize(path: Path) -> VecNormalize:
+    """A pickled ``VecNormalize`` (saved without its venv); ValueError naming the file if it is not one."""
+    try:
+        with path.open("rb") as handle:
+            stats = pickle.load(handle)
+    except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError, ValueError) as exc:
+        raise ValueError(f"{path}: not a readable VecNormalize pickle ({type(exc).__name__}: {exc})") from None
+    if not isinstance(stats, VecNormalize):
+        raise ValueError(f"{path}: holds a {type(stats).__name__}, not a VecNormalize")
+    return stats
 
 
 # --- logging ------------------------------------------------------------------
@@ -517,3 +653,198 @@ class PeriodicEvalCallback(BaseCallback):
         if point["mean_time_to_lift_s"] is not None:
             self.logger.record("eval/mean_time_to_lift_s", point["mean_time_to_lift_s"])
         return point
+
+
+# --- checkpoints -------------------------------------------------------------------
+
+
+class TrainingInterrupted(Exception):
+    """Training stopped on request (SIGINT/SIGTERM) at a rollout boundary, after a checkpoint."""
+
+    def __init__(self, checkpoint: Path | None) -> None:
+        """Remember where the last checkpoint went."""
+        super().__init__(f"training interrupted; last checkpoint {checkpoint}")
+        self.checkpoint = checkpoint
+
+
+def _monitor_of(env: VecEnv) -> VecMonitor | None:
+    layer: Any = env
+    while layer is not None:
+        if isinstance(layer, VecMonitor):
+            return layer
+        layer = getattr(layer, "venv", None)
+    return None
+
+
+def save_checkpoint(
+    model: BaseAlgorithm,
+    run_dir: str | Path,
+    *,
+    algo: str,
+    env_id: str,
+    extra: dict[str, Any] | None = None,
+    keep: int = 2,
+) -> Path:
+    """Write everything needed to continue training exactly into ``run_dir/checkpoints/step_N/``.
+
+    Taken at a rollout boundary, so nothing half-collected is lost: the model zip (policy,
+    optimiser state, schedules, last observation -- as SB3 saves it -- with the
+    ``VecNormalize`` statistics inside), the replay buffer of off-policy algorithms, and
+    ``state.pkl`` with the RNG states (Python, NumPy, torch, action space), the pickled
+    training envs (mid-episode state), the episode counters of ``VecMonitor``, the size of
+    ``monitor.csv`` and ``extra`` (the caller's own state). The folder appears under its final
+    name only when complete; only the newest ``keep`` are kept.
+
+    Returns:
+        The checkpoint folder.
+    """
+    import torch
+
+    checkpoints = Path(run_dir) / CHECKPOINTS_DIR
+    checkpoints.mkdir(parents=True, exist_ok=True)
+    target = checkpoints / f"step_{int(model.num_timesteps):012d}"
+    env = model.get_env()
+    monitor = _monitor_of(env) if env is not None else None
+    monitor_csv = None
+    if monitor is not None and monitor.results_writer is not None:
+        monitor.results_writer.file_handler.flush()
+        monitor_csv = Path(monitor.results_writer.file_handler.name).stat().st_size
+    state = {
+        "num_timesteps": int(model.num_timesteps),
+        "rng": {
+            "python": random.getstate(),
+            "numpy": np.random.get_state(),
+            "torch": torch.get_rng_state(),
+            "action_space": model.action_space.np_random.bit_generator.state,
+        },
+        "envs": pickle.dumps(monitor.venv) if monitor is not None else None,
+        "monitor": None
+        if monitor is None
+        else {
+            "episode_returns": monitor.episode_returns,
+            "episode_lengths": monitor.episode_lengths,
+            "episode_count": monitor.episode_count,
+            "csv_bytes": monitor_csv,
+        },
+        "extra": dict(extra or {}),
+        # RecurrentPPO's load rebuilds its LSTM state as zeros; the real one is kept here.
+        "lstm_states": getattr(model, "_last_lstm_states", None),
+    }
+    if target.exists():  # the same step again (e.g. the final checkpoint right after a periodic one)
+        shutil.rmtree(target)
+    with atomic_path(target) as temp:
+        temp.mkdir()
+        save_model_bundle(model, temp / MODEL_FILE, algo=algo, env_id=env_id, vec_normalize=find_vec_normalize(env))
+        if getattr(model, "replay_buffer", None) is not None:
+            model.save_replay_buffer(temp / "replay_buffer.pkl")  # type: ignore[attr-defined]
+        (temp / "state.pkl").write_bytes(pickle.dumps(state))
+    for old in sorted(checkpoints.glob("step_*"))[:-keep]:
+        shutil.rmtree(old, ignore_errors=True)
+    return target
+
+
+def latest_checkpoint(run_dir: str | Path) -> Path | None:
+    """The newest complete checkpoint folder of a run (None if there is none)."""
+    found = sorted(p for p in (Path(run_dir) / CHECKPOINTS_DIR).glob("step_*") if (p / "state.pkl").exists())
+    return found[-1] if found else None
+
+
+def restore_checkpoint(checkpoint: str | Path, env: VecEnv) -> tuple[BaseAlgorithm, dict[str, Any]]:
+    """Load a :func:`save_checkpoint` folder onto a freshly built training ``env`` (``VecMonitor`` inside).
+
+    The model continues exactly where it stopped: same envs mid-episode, same normaliser,
+    same optimiser, same RNG streams. ``monitor.csv`` (if ``env`` writes one, in append
+    mode) is cut back to its size at the checkpoint, dropping episodes logged after it.
+
+    Returns:
+        ``(model, extra)``: the model on ``env`` (wrapped in the saved ``VecNormalize`` if
+        there was one) and the caller's ``extra`` state.
+    """
+    import torch
+
+    folder = Path(checkpoint)
+    try:
+        state = pickle.loads((folder / "state.pkl").read_bytes())
+    except (OSError, EOFError, pickle.UnpicklingError) as exc:
+        raise ValueError(f"{folder}: unreadable checkpoint state ({exc})") from None
+    _, stats = read_bundle(folder / MODEL_FILE)
+    monitor = _monitor_of(env)
+    if monitor is not None and state["monitor"] is not None:
+        writer = monitor.results_writer
+        if writer is not None and state["monitor"]["csv_bytes"] is not None:
+            writer.file_handler.flush()
+            writer.file_handler.truncate(state["monitor"]["csv_bytes"])
+            writer.file_handler.seek(0, 2)
+        for key in ("episode_returns", "episode_lengths", "episode_count"):
+            setattr(monitor, key, state["monitor"][key])
+    if stats is not None:
+        stats.set_venv(env)
+        env = stats
+    # force_reset=False keeps the saved last observation: the envs are restored mid-episode below.
+    model, _ = load_model(folder / MODEL_FILE, env=env, force_reset=False)
+    if (folder / "replay_buffer.pkl").exists():
+        model.load_replay_buffer(folder / "replay_buffer.pkl")  # type: ignore[attr-defined]
+    if monitor is not None and state["envs"] is not None:
+        monitor.venv.close()
+        monitor.venv = pickle.loads(state["envs"])
+    if state.get("lstm_states") is not None:
+        model._last_lstm_states = state["lstm_states"]  # type: ignore[attr-defined]
+    # After load: SB3's load re-seeds the global RNGs and the action space from the model's seed.
+    rng = state["rng"]
+    random.setstate(rng["python"])
+    np.random.set_state(rng["numpy"])
+    torch.set_rng_state(rng["torch"])
+    model.action_space.np_random.bit_generator.state = rng["action_space"]
+    return model, dict(state["extra"])
+
+
+class CheckpointCallback(BaseCallback):
+    """Checkpoints every ``every`` env steps and stops cleanly when asked, both at rollout boundaries.
+
+    A checkpoint taken when a rollout starts holds no half-collected data, so training
+    resumed from it follows the same path as training that never stopped.
+
+    Args:
+        run_dir: The run folder (checkpoints go to ``run_dir/checkpoints``).
+        every: Env steps between checkpoints (0: only when stopping).
+        algo: Algorithm name (stored in the checkpoint's model zip).
+        env_id: Env id (stored likewise).
+        stop_requested: Returns True once training should stop (e.g. a signal arrived).
+        extra: Returns the caller's state to store with each checkpoint.
+        start_steps: Step count training starts from.
+    """
+
+    def __init__(
+        self,
+        run_dir: str | Path,
+        every: int,
+        *,
+        algo: str,
+        env_id: str,
+        stop_requested: Callable[[], bool] = lambda: False,
+        extra: Callable[[], dict[str, Any]] = dict,
+        start_steps: int = 0,
+    ) -> None:
+        """Store the settings; checkpoints happen during ``learn``."""
+        super().__init__()
+        self.run_dir, self.every, self.algo, self.env_id = Path(run_dir), every, algo, env_id
+        self.stop_requested, self.extra = stop_requested, extra
+        self._next = (start_steps // every + 1) * every if every > 0 else None
+        self.last: Path | None = None
+
+    def save(self) -> Path:
+        """Write a checkpoint now."""
+        self.last = save_checkpoint(self.model, self.run_dir, algo=self.algo, env_id=self.env_id, extra=self.extra())
+        return self.last
+
+    def _on_rollout_start(self) -> None:
+        stop = self.stop_requested()
+        if stop or (self._next is not None and self.num_timesteps >= self._next):
+            self.save()
+            if self._next is not None:
+                self._next = (self.num_timesteps // self.every + 1) * self.every
+        if stop:
+            raise TrainingInterrupted(self.last)
+
+    def _on_step(self) -> bool:
+        return True

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from coop_gym.envs.config import LiftCriteria
+from coop_gym.io import save_figure
 from estimator.judgment import ThresholdJudgment
 
 __all__ = ["OUTCOME_COLOURS", "Trace", "TraceBuilder", "judgment_events", "plot_timeline"]
@@ -434,5 +435,5 @@ def plot_timeline(
         persona = f", persona {trace.persona}" if trace.persona else ""
         title = f"{who}{where}{seed}{persona}: {trace.outcome} after {end_s:.1f} s, return {trace.episode_return:+.2f}"
     fig.suptitle(title, fontsize=10)
-    fig.savefig(path, dpi=dpi, facecolor="white")
+    save_figure(fig, path, dpi=dpi, facecolor="white")
     return path

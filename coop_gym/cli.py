@@ -9,7 +9,14 @@ import argparse
 import os
 from pathlib import Path
 
-__all__ = ["output_path_problem", "positive_int", "seed"]
+__all__ = ["SEED_LIMIT", "output_path_problem", "positive_int", "seed", "seed_range_problem"]
+
+SEED_LIMIT = 2**32
+"""Every seed a command uses (seed, seed + 1, ... for its episodes or envs) must be below this.
+
+NumPy's legacy global seeding, which Stable-Baselines3 calls, takes 32-bit seeds; one range
+for every command keeps a seed that works in evaluation working in training too.
+"""
 
 
 def positive_int(text: str) -> int:
@@ -31,7 +38,25 @@ def seed(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {value}")
+    if value >= SEED_LIMIT:
+        raise argparse.ArgumentTypeError(f"seeds must be below 2**32, got {value}")
     return value
+
+
+def seed_range_problem(name: str, seed: int, count: int = 1) -> str | None:
+    """Why seeds ``seed .. seed + count - 1`` are unusable (negative, or not below :data:`SEED_LIMIT`), or None.
+
+    Example:
+        >>> seed_range_problem("--seed", 2**32 - 2, count=5)
+        '--seed 4294967294: seeds 4294967294..4294967298 must be below 2**32 (here at most 4294967291)'
+    """
+    if seed < 0:
+        return f"{name} must be >= 0, got {seed}"
+    if seed + count > SEED_LIMIT:
+        return (
+            f"{name} {seed}: seeds {seed}..{seed + count - 1} must be below 2**32 (here at most {SEED_LIMIT - count})"
+        )
+    return None
 
 
 def output_path_problem(path: str | Path, folder: bool = False) -> str | None:

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from coop_gym.io import save_figure
 from experiment.estimators import EstimateResult, estimate
 from experiment.paper import PAPER_RESULTS, XI_NAMES, XI_SHORT, PaperResults, balanced_accuracy, conditional_tables
 from experiment.simulation import ExperimentData
@@ -136,7 +137,7 @@ def plot_trial(
         a.set_xlabel("time [s]")
     fig.suptitle("Fig. 6 style: paper Kalman filter on one simulated trial")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -163,6 +164,6 @@ def plot_confusion(summary: dict[str, Any], path: str, paper: PaperResults = PAP
         ax.set_ylabel("requested")
         ax.set_title(f"{title}\nBA {100 * balanced_accuracy(conf):.1f}%", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path

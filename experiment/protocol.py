@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any, Literal
 
-from coop_gym.cli import output_path_problem
+from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
 from coop_gym.model.difficulty import DIFFICULTIES
@@ -130,6 +130,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = ProtocolConfig(n_subjects=args.subjects, n_trials=args.trials, personas=personas)
     except ValueError as err:
         parser.error(str(err))
+    problem = seed_range_problem("--seed", args.seed, args.seeds)  # runs seed .. seed + seeds - 1
+    if problem:
+        parser.error(problem)
     for path in (args.plot, args.plot_confusion):
         if path is not None and not path.lower().endswith(".png"):
             parser.error(f"plot paths must end in .png, got {path!r}")
@@ -157,10 +160,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "accuracy": PAPER_RESULTS.accuracy,
         "balanced_accuracy": PAPER_RESULTS.balanced_accuracy,
     }
-    if args.plot:
-        plot_trial(first[0], args.plot, estimator=first[1])
-    if args.plot_confusion:
-        plot_confusion(out, args.plot_confusion)
+    try:
+        if args.plot:
+            plot_trial(first[0], args.plot, estimator=first[1])
+        if args.plot_confusion:
+            plot_confusion(out, args.plot_confusion)
+    except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
+        print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
     print(json.dumps(out) if args.json else text)
     return 0
 

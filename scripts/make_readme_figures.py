@@ -58,6 +58,8 @@ from agents.base import action_type_of, features_of
 from agents.record import play_episode
 from agents.scripted import SCRIPTED_AGENTS, make_scripted
 from agents.timeline import Trace, judgment_events, plot_timeline
+from coop_gym.cli import output_path_problem
+from coop_gym.io import save_with
 
 REPO = Path(__file__).resolve().parents[1]
 ENV_ID = "CoopGym/SitToStand-v0"
@@ -72,9 +74,10 @@ def shrink_png(path: Path, max_width: int, max_kb: int) -> Path:
     if image.width > max_width:
         height = round(image.height * max_width / image.width)
         image = image.resize((max_width, height), Image.Resampling.LANCZOS)
-    image.save(path, optimize=True)
+    save_with(path, lambda temp: image.save(temp, optimize=True))
     if path.stat().st_size > max_kb * 1024:
-        image.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(path, optimize=True)
+        palette = image.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        save_with(path, lambda temp: palette.save(temp, optimize=True))
     return path
 
 
@@ -133,7 +136,7 @@ def make_scene(out: Path, trace: Trace, frames: list[np.ndarray]) -> list[Path]:
     """``scene.png``: one frame from the middle of the handbook episode."""
     k = pick_scene_frame(trace)
     path = out / "scene.png"
-    Image.fromarray(frames[k]).save(path)
+    save_with(path, Image.fromarray(frames[k]).save)
     print(f"  scene: frame of t = {trace.time_s[k]:.1f} s, shoulder x = {trace.true_x_m[k]:.3f} m")
     return [path]
 
@@ -218,6 +221,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ):
         if value < low:
             parser.error(f"{flag} must be >= {low}, got {value}")
+    problem = output_path_problem(args.out, folder=True)
+    if problem:
+        parser.error(f"--out: {problem}")
     args.out.mkdir(parents=True, exist_ok=True)
 
     episode: tuple[Trace, list[np.ndarray]] | None = None

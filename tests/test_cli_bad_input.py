@@ -11,9 +11,11 @@ the exit status and stderr end to end.
 from __future__ import annotations
 
 import contextlib
+import errno
 import importlib
 import importlib.util
 import io
+import os
 import re
 import signal
 import subprocess
@@ -25,7 +27,7 @@ from typing import Any
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-ALARM_S = 30  # a rejected flag exits at once; an accepted one would start the real work
+ALARM_S = 120  # a cold numba compile on a loaded machine takes tens of s; an accepted bad flag runs for minutes
 
 
 def _load(name: str) -> Any:
@@ -116,9 +118,70 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("experiment.protocol", "unknown decision", ["--decision", "vote"], r"--decision: invalid choice: 'vote'"),
     ("experiment.protocol", "unknown persona", ["--personas", "nobody"], r"nobody"),
     ("experiment.protocol", "plot not png", ["--plot", "trace.txt"], r"plot paths must end in \.png"),
+    # Issue #13's table: a non-coop_gym env id, seeds outside [0, 2**32), plot types, checkpoints.
+    (
+        "train.py",
+        "env not a coop_gym id",
+        ["--env", "CartPole-v1"],
+        r"--env: unknown env id 'CartPole-v1' \(not a coop_gym",
+    ),
+    ("train.py", "seed 2**64", ["--seed", str(2**64)], r"--seed 18446744073709551616: seeds .* must be below 2\*\*32"),
+    ("train.py", "seed 2**63-1", ["--seed", str(2**63 - 1)], r"--seed 9223372036854775807: .* below 2\*\*32"),
+    ("train.py", "eval-seed 2**64", ["--eval-seed", str(2**64)], r"--eval-seed 18446744073709551616: .* below 2\*\*32"),
+    ("train.py", "checkpoint-every < 0", ["--checkpoint-every", "-5"], r"--checkpoint-every must be >= 0, got -5"),
+    ("train.py", "eval-only with resume", ["--eval-only", "--resume", "x"], r"--eval-only and --resume exclude"),
+    (
+        "agents.evaluate",
+        "env not a coop_gym id",
+        ["--agent", "random", "--env", "CartPole-v1"],
+        r"--env: unknown env id 'CartPole-v1' \(not a coop_gym env\)",
+    ),
+    (
+        "agents.evaluate",
+        "seed 2**64",
+        ["--agent", "random", "--seed", str(2**64)],
+        r"--seed 18446744073709551616: seeds",
+    ),
+    ("agents.evaluate", "seed 2**63-1", ["--agent", "random", "--seed", str(2**63 - 1)], r"must be below 2\*\*32"),
+    (
+        "agents.evaluate",
+        "seed + episodes past 2**32",
+        ["--agent", "random", "--seed", str(2**32 - 5), "--episodes", "10"],
+        r"seeds 4294967291..4294967300 must be below 2\*\*32 \(here at most 4294967286\)",
+    ),
+    (
+        "agents.evaluate",
+        "plot x.txt",
+        ["--agent", "random", "--plot", "x.txt"],
+        r"--plot: unsupported file type '.txt'",
+    ),
+    (
+        "agents.record",
+        "env not a coop_gym id",
+        ["--agent", "handbook", "--env", "CartPole-v1", "--out", "videos"],
+        r"unknown env id 'CartPole-v1' \(not a coop_gym env\)",
+    ),
+    (
+        "agents.record",
+        "seed 2**64",
+        ["--agent", "handbook", "--seed", str(2**64), "--out", "v"],
+        r"--seed: seeds must be below 2\*\*32",
+    ),
+    (
+        "agents.record",
+        "seed 2**63-1",
+        ["--agent", "handbook", "--seed", str(2**63 - 1), "--out", "v"],
+        r"below 2\*\*32",
+    ),
+    ("experiment.protocol", "seed 2**64", ["--seed", str(2**64)], r"--seed: seeds must be below 2\*\*32"),
     ("bench/run.py", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
-    ("bench/run.py", "repeats not a number", ["--repeats", "few"], r"--repeats: expected a positive integer, got 'few'"),  # noqa: E501
+    (
+        "bench/run.py",
+        "repeats not a number",
+        ["--repeats", "few"],
+        r"--repeats: expected a positive integer, got 'few'",
+    ),
 ]
 
 # Bad output paths: found only when the results are written, unless checked up front. The
@@ -138,12 +201,154 @@ LATE_CASES: list[tuple[str, str, list[str], str]] = [
         r"a_file",
     ),
     (
+        "agents.evaluate",
+        "plot in a folder that cannot be created",
+        ["--agent", "random", "--episodes", "1", "--n-envs", "1", "--plot", "{blocked}/rates.png"],
+        r"--plot: .*a_file",
+    ),
+    (
+        "agents.evaluate",
+        "json-out in a folder that cannot be created",
+        ["--agent", "random", "--episodes", "1", "--n-envs", "1", "--json-out", "{blocked}/out.json"],
+        r"--json-out: .*a_file",
+    ),
+    (
+        "agents.record",
+        "out in a folder that cannot be created",
+        ["--agent", "handbook", "--max-steps", "3", "--out", "{blocked}"],
+        r"--out: .*a_file is not a folder",
+    ),
+    (
         "experiment.protocol",
         "plot in a folder that cannot be created",
         ["--subjects", "1", "--trials", "1", "--plot", "{blocked}/trace.png"],
         r"a_file",
     ),
 ]
+
+
+def make_artifacts(folder: Path) -> dict[str, str]:
+    """Saved models for the bad-model cases: one good PPO on SitToStand-v0, and damaged ones.
+
+    ``bad_agent_json`` and ``bad_vecnormalize`` are older-style folders (a plain SB3 zip with the
+    metadata and statistics beside it), where those side files are what is read.
+    """
+    import zipfile
+
+    import torch
+
+    from agents.hyperparams import hyperparams_for
+    from agents.rl import make_model, make_train_env, save_agent
+
+    torch.set_num_threads(1)
+    config = hyperparams_for("ppo")
+    env = make_train_env(config.env_id, 1, 0, normalize=True, backend="dummy")
+    good = folder / "good"
+    save_agent(make_model(config, env, 0), good, algo="ppo", env_id=config.env_id)
+    env.close()
+    paths = {"model": good / "model.zip", "blocked": folder / "a_file" / "sub"}
+    (folder / "a_file").write_text("not a folder")
+    paths["empty"] = folder / "empty" / "model.zip"
+    paths["truncated"] = folder / "truncated" / "model.zip"
+    paths["text"] = folder / "text" / "model.zip"
+    for name in ("empty", "truncated", "text"):
+        paths[name].parent.mkdir()
+    paths["empty"].write_bytes(b"")
+    paths["truncated"].write_bytes(paths["model"].read_bytes()[:3000])
+    paths["text"].write_text("this is not a model")
+    for name in ("bad_agent_json", "bad_vecnormalize"):
+        old = folder / name
+        old.mkdir()
+        with zipfile.ZipFile(paths["model"]) as src, zipfile.ZipFile(old / "model.zip", "w") as dst:
+            for item in src.infolist():
+                if not item.filename.startswith("coop_gym/"):
+                    dst.writestr(item, src.read(item.filename))
+        (old / "agent.json").write_text((good / "agent.json").read_text())
+        (old / "vecnormalize.pkl").write_bytes((good / "vecnormalize.pkl").read_bytes())
+        paths[name] = old
+    (paths["bad_agent_json"] / "agent.json").write_text('{"algo": "ppo", ')
+    (paths["bad_vecnormalize"] / "vecnormalize.pkl").write_bytes(b"\x80\x04 not a pickle")
+    paths["out"] = folder / "out"
+    paths["out"].mkdir()
+    return {k: str(v) for k, v in paths.items()}
+
+
+# Saved models that are damaged or belong to another env id ({name} from make_artifacts).
+_E = ["--eval-only", "--eval-episodes", "1", "--baselines", "", "--out", "{out}"]
+_ORACLE = "CoopGym/SitToStandOracle-v0"
+_DIFFER = r"the model's 11 observation features differ from CoopGym/SitToStandOracle-v0's 12: .* extra \['true_xi'\]"
+MODEL_CASES: list[tuple[str, str, list[str], str]] = [
+    (
+        "train.py",
+        "eval-only: empty model.zip",
+        [*_E, "--model", "{empty}"],
+        r"--model: could not load .*: the file is empty",
+    ),
+    ("train.py", "eval-only: truncated model.zip", [*_E, "--model", "{truncated}"], r"not a complete zip archive"),
+    ("train.py", "eval-only: text as model.zip", [*_E, "--model", "{text}"], r"not a complete zip archive"),
+    ("train.py", "eval-only: bad agent.json", [*_E, "--model", "{bad_agent_json}"], r"agent.json: not valid JSON"),
+    ("train.py", "eval-only: bad vecnormalize.pkl", [*_E, "--model", "{bad_vecnormalize}"], r"vecnormalize.pkl: not a"),
+    ("train.py", "eval-only: model of another id", [*_E, "--model", "{model}", "--env", _ORACLE], _DIFFER),
+    (
+        "train.py",
+        "resume: model of another id",
+        ["--resume", "{model}", "--env", _ORACLE, "--out", "{out}"],
+        r"--env 'CoopGym/SitToStandOracle-v0' \(the run has 'CoopGym/SitToStand-v0'\) contradict the saved run",
+    ),
+    ("train.py", "resume: empty model.zip", ["--resume", "{empty}", "--out", "{out}"], r"--resume: could not load"),
+    ("agents.evaluate", "empty model.zip", ["--model", "{empty}", "--episodes", "1"], r"--model .*: the file is empty"),
+    ("agents.evaluate", "truncated model.zip", ["--model", "{truncated}", "--episodes", "1"], r"not a complete zip"),
+    ("agents.evaluate", "bad agent.json", ["--model", "{bad_agent_json}", "--episodes", "1"], r"agent.json: not valid"),
+    ("agents.evaluate", "bad vecnormalize.pkl", ["--model", "{bad_vecnormalize}"], r"vecnormalize.pkl: not a readable"),
+    ("agents.evaluate", "model of another id", ["--model", "{model}", "--env", _ORACLE, "--episodes", "1"], _DIFFER),
+    ("agents.record", "empty model.zip", ["--model", "{empty}", "--out", "{out}"], r"--model .*could not load"),
+    ("agents.record", "bad agent.json", ["--model", "{bad_agent_json}", "--out", "{out}"], r"agent.json: not valid"),
+    ("agents.record", "model of another id", ["--model", "{model}", "--env", _ORACLE, "--out", "{out}"], _DIFFER),
+]
+
+
+@pytest.fixture(scope="module")
+def artifacts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    return make_artifacts(tmp_path_factory.mktemp("artifacts"))
+
+
+@pytest.mark.parametrize(
+    ("cli", "argv", "match"),
+    [(c[0], c[2], c[3]) for c in MODEL_CASES],
+    ids=[f"{c[0]}: {c[1]}" for c in MODEL_CASES],
+)
+def test_bad_model_exits_2_with_one_line_before_any_work(
+    cli: str, argv: list[str], match: str, artifacts: dict[str, str]
+) -> None:
+    argv = [a.format(**artifacts) for a in argv]
+    code, err = run_main(_main_of(cli), argv)
+    assert code == 2, f"exit status {code!r}, stderr: {err}"
+    assert re.search(match, err), err
+    assert "Traceback" not in err
+    message = [line for line in err.splitlines() if "error" in line]
+    assert len(message) == 1, err  # one line names the problem (argparse may add its usage above it)
+    assert not any(Path(artifacts["out"]).iterdir()), "nothing is written for a bad model"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder anyway")
+def test_record_into_a_read_only_folder_exits_2(tmp_path: Path) -> None:
+    out = tmp_path / "videos"
+    out.mkdir()
+    out.chmod(0o500)
+    try:
+        code, err = run_main(_main_of("agents.record"), ["--agent", "handbook", "--out", str(out)])
+    finally:
+        out.chmod(0o700)
+    assert code == 2 and re.search(r"--out: .* is not writable", err), err
+
+
+def test_read_only_check_names_the_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What a non-root user sees for a read-only --out (root can write anywhere, so access is faked)."""
+    out = tmp_path / "videos"
+    out.mkdir()
+    monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != out)
+    code, err = run_main(_main_of("agents.record"), ["--agent", "handbook", "--out", str(out)])
+    assert code == 2 and re.search(rf"--out: cannot create {re.escape(str(out))}: .* is not writable", err), err
 
 
 def _main_of(cli: str) -> Callable[[list[str]], Any]:
@@ -202,3 +407,79 @@ def test_bad_flag_end_to_end(cli: str) -> None:
     assert "usage:" in done.stderr
     assert re.search(match, done.stderr), done.stderr
     assert done.stdout == ""
+
+
+# --- a full disk -----------------------------------------------------------------
+# The disk is "full" after the bytes are written and before they are flushed (coop_gym.io._fsync
+# raises ENOSPC), the moment a real ENOSPC strikes: each file then exists only as a temporary,
+# and must be gone afterwards; the command exits 1 with one line.
+
+
+@pytest.fixture
+def full_disk(monkeypatch: pytest.MonkeyPatch) -> list[Path]:
+    """Every atomic write fails with ENOSPC once its temporary file holds the data; the files tried."""
+    from coop_gym import io as atomic_io
+
+    tried: list[Path] = []
+
+    def no_space(path: Path) -> None:
+        assert path.exists()  # the partial file is on disk now
+        tried.append(path)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(atomic_io, "_fsync", no_space)
+    return tried
+
+
+def _left(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
+
+
+@pytest.mark.parametrize(
+    ("cli", "argv"),
+    [
+        (
+            "agents.evaluate",
+            ["--agent", "random", "--episodes", "2", "--n-envs", "2", "--csv", "{out}/a.csv",
+             "--json-out", "{out}/a.json", "--plot", "{out}/a.png"],
+        ),
+        ("experiment.protocol", ["--subjects", "1", "--trials", "1", "--plot", "{out}/trace.png"]),
+        ("agents.record", ["--agent", "handbook", "--max-steps", "5", "--out", "{out}"]),
+        ("train.py", ["--timesteps", "64", "--eval-episodes", "1", "--baselines", "", "--out", "{out}"]),
+    ],
+)  # fmt: skip
+def test_a_full_disk_leaves_no_partial_file(cli, argv, tmp_path, full_disk):
+    if cli == "agents.record" and importlib.util.find_spec("pygame") is None:
+        pytest.skip("rendering needs pygame")
+    out = tmp_path / "out"
+    out.mkdir()
+    code, err = run_main(_main_of(cli), [a.format(out=out) for a in argv])
+    assert code == 1, err
+    assert full_disk, "nothing was written through coop_gym.io"
+    assert "No space left on device" in err and "Traceback" not in err
+    assert _left(out) == [], "a file was left behind"
+    assert not any(out.iterdir()), "a folder was left behind"
+
+
+def bad_input_table() -> list[tuple[str, str, Any, str]]:
+    """Run every case above; ``(command, case, exit status, the error line)`` for each."""
+    import tempfile
+
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        paths = make_artifacts(Path(folder))
+        for cli, case, argv, _ in [*CASES, *LATE_CASES, *MODEL_CASES]:
+            code, err = run_main(_main_of(cli), [a.format(**paths) for a in argv])
+            lines = [line for line in err.splitlines() if "error" in line] or err.splitlines()[-1:] or [""]
+            rows.append((cli, case, code, lines[-1].replace(folder, "<tmp>")))
+    return rows
+
+
+if __name__ == "__main__":
+    # python tests/test_cli_bad_input.py: the bad-input table (case -> message -> exit status).
+    # Run as a script, sys.path starts with tests/, whose coop_gym/ folder would shadow the package.
+    sys.path[:] = [str(ROOT)] + [p for p in sys.path if Path(p).resolve() != ROOT / "tests"]
+    print("| command | case | message | exit |")
+    print("|---|---|---|---|")
+    for cli, case, code, message in bad_input_table():
+        print(f"| {cli} | {case} | {message.replace('|', '/')} | {code} |")

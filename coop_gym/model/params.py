@@ -74,7 +74,7 @@ class Biomechanics:
     voluntary_gain_per_s2: float = 9.0
     push_compliance_m_per_s2_n: float = 0.012
     accel_noise_std_m_per_s2: float = 0.02
-    # Calibrated (estimator/calibrate.py) so the paper's thresholded KF on the paper's
+    # Calibrated (experiment/calibrate.py) so the paper's thresholded KF on the paper's
     # protocol lands near its Table I: a disengaged person holds still against a push
     # (0.5), a resisting one stiffens less but leans away (0.8).
     stiffness_factor_uncooperative: float = 0.8

@@ -43,7 +43,7 @@ class Persona:
     name: str
     description: str
     params: PersonParams
-    # Calibrated with estimator/calibrate.py (people differ by about +/-20 %).
+    # Calibrated with experiment/calibrate.py (people differ by about +/-20 %).
     variation_relative_std: float = 0.2
 
     def __post_init__(self) -> None:

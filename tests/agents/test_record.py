@@ -205,7 +205,7 @@ def test_record_runs_a_saved_sb3_model(tmp_path, capsys):
         (["--agent", "handbook", "--out", "o", "--persona", "nobody"], "unknown persona"),
         (["--agent", "handbook", "--out", "o", "--fps", "0"], "positive integer"),
         (["--agent", "handbook", "--out", "o", "--max-steps", "-3"], "positive integer"),
-        (["--agent", "handbook", "--out", "o", "--seed", "x"], "expected an integer"),
+        (["--agent", "handbook", "--out", "o", "--seed", "x"], "expected a non-negative integer seed"),
         (["--model", "missing.zip", "--out", "o"], "no such file or folder"),
     ],
 )

@@ -114,7 +114,7 @@ def test_bad_flag_subprocess_exits_2_and_help_shows_field_docs(tmp_path):
     import train
 
     help_text = train._build_parser().format_help()
-    assert "continue training a saved model" in help_text and "--eval-episodes" in help_text
+    assert "from its last checkpoint" in help_text and "--eval-episodes" in help_text
     assert "--no-progress" in help_text
 
 
