@@ -1,7 +1,8 @@
 """Train a robot-caregiver guidance agent, then score it against the scripted baselines.
 
-``python train.py`` with no arguments trains PPO on ``CoopGym/SitToStand-v0`` (training
-personas only), evaluates it and every scripted baseline -- the oracle on the oracle
+``python train.py`` with no arguments trains PPO on ``CoopGym/SitToStandHard-v1`` (the hard
+level, where reading the mind decides the outcome; training personas only), evaluates it and
+every scripted baseline -- the mental-state-blind policy, the probing caregiver, the oracle on the oracle
 observation of the same episodes -- on the held-out test personas over 1000 seeded
 episodes, prints the comparison table and saves everything in one run folder::
 
@@ -55,7 +56,7 @@ class Args:
     algo: str = "ppo"
     """algorithm: ppo (belief observation), recurrent_ppo (raw observation, LSTM) or dqn (flat Discrete actions)"""
     env: str | None = None
-    """env id to train on (default: the algorithm's own: ppo CoopGym/SitToStand-v0, recurrent_ppo
+    """env id to train on (default: the algorithm's own: ppo CoopGym/SitToStandHard-v1, recurrent_ppo
     CoopGym/SitToStandRaw-v0, dqn CoopGym/SitToStandDiscrete-v0)"""
     timesteps: int | None = None
     """training env steps (default: agents/hyperparams.py); with --resume, steps added to the saved count"""
@@ -78,7 +79,7 @@ class Args:
     """skip training: evaluate --model against the baselines"""
     model: str | None = None
     """saved model (a run folder or its model.zip) for --eval-only"""
-    baselines: str = "random,lift_at_once,push_then_lift,handbook,oracle"
+    baselines: str = "random,lift_at_once,push_then_lift,handbook,blind,prober,oracle"
     """scripted agents to compare with, joined by ',' (empty: none)"""
     eval_points: int = 8
     """evaluations during training for the learning curve (min(200, eval_episodes) episodes each; 0: none)"""
@@ -437,7 +438,7 @@ def _run(
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.evaluate import evaluate, print_table, write_csv, write_json
+    from agents.evaluate import evaluate, headroom, print_table, write_csv, write_json
     from agents.plots import plot_learning_curve, plot_outcome_rates
     from agents.rl import (
         MODEL_FILE,
@@ -587,6 +588,9 @@ def _run(
         results.append(evaluate(name, env_id, eval_personas, args.eval_episodes, args.eval_seed))
     eval_s = time.perf_counter() - started
     print_table(results)
+    room = headroom(results)
+    if room is not None:
+        print("\n".join(room.lines()))
 
     write_json(results, run_dir / "eval.json", episodes=True)
     write_csv(results, run_dir / "eval.csv")
@@ -636,6 +640,13 @@ def _run(
         },
         "learning_curve": curve_points,
         "verdict": verdict,
+        "headroom": None
+        if room is None
+        else {
+            **dataclasses.asdict(room),
+            "value_of_reading_the_mind": room.value_of_reading_the_mind,
+            "achieved_insight": room.achieved_insight,
+        },
         "numpy": np.__version__,
         "torch": torch.__version__,
     }

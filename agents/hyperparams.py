@@ -34,7 +34,8 @@ ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo", "dqn")
 """Algorithms ``train.py`` offers: SB3 PPO, sb3-contrib RecurrentPPO, SB3 DQN."""
 
 DEFAULT_ENV_IDS: dict[str, str] = {
-    "ppo": "CoopGym/SitToStand-v0",
+    # The hard level: where reading the mind decides the outcome (coop_gym/model/difficulty.py).
+    "ppo": "CoopGym/SitToStandHard-v1",
     # Measurements only: the policy must remember the cue responses itself (an LSTM).
     "recurrent_ppo": "CoopGym/SitToStandRaw-v0",
     # DQN needs a flat Discrete action space.
@@ -115,6 +116,29 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
                 "learning_rate": "lin_3e-4",
                 # 0.995 over 0.99: gentler pushes (mean ~10 N vs 11-14 N), fewer premature lifts
                 # of the held-out frail persona, whom a firm push moves whatever they think.
+                "gamma": 0.995,
+                "gae_lambda": 0.95,
+                "clip_range": 0.2,
+                "ent_coef": 0.01,
+                "vf_coef": 0.5,
+                "max_grad_norm": 0.5,
+            },
+            policy_kwargs={"net_arch": [64, 64]},
+        ),
+        "CoopGym/SitToStandHard-v1": TrainingConfig(
+            algo="ppo",
+            env_id="CoopGym/SitToStandHard-v1",
+            n_envs=8,
+            # The -v0 settings; the hard level needs more samples: the policy must learn to
+            # stop pushing, ask, and read the answer (see README, "Difficulty levels").
+            total_timesteps=1_000_000,
+            policy="MlpPolicy",
+            normalize=True,
+            algo_kwargs={
+                "n_steps": 512,
+                "batch_size": 512,
+                "n_epochs": 10,
+                "learning_rate": "lin_3e-4",
                 "gamma": 0.995,
                 "gae_lambda": 0.95,
                 "clip_range": 0.2,
