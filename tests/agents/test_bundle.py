@@ -32,7 +32,7 @@ torch.set_num_threads(1)
 def saved(tmp_path_factory):
     """A tiny PPO run folder (normalised observations), saved the current way."""
     folder = tmp_path_factory.mktemp("agent")
-    config = hyperparams_for("ppo")
+    config = hyperparams_for("ppo", "CoopGym/SitToStand-v0")
     env = make_train_env(config.env_id, 2, 0, normalize=True, backend="dummy")
     model = make_model(config, env, 0, overrides={"n_steps": 32, "batch_size": 32, "n_epochs": 1})
     model.learn(64)

@@ -34,7 +34,7 @@ def first_run(tmp_path_factory) -> Path:
 
 
 def test_run_folder_is_complete_and_the_model_loads(first_run):
-    assert first_run.name.startswith("CoopGym-SitToStand-v0__ppo__0__")
+    assert first_run.name.startswith("CoopGym-SitToStandHard-v1__ppo__0__")  # the default: the hard level
     for name in ("COMPLETE", "results.json", "model.zip", "vecnormalize.pkl", "agent.json", "eval.json", "eval.csv"):
         assert (first_run / name).exists(), name
     for name in ("learning_curve.png", "outcome_rates.png"):
@@ -42,7 +42,20 @@ def test_run_folder_is_complete_and_the_model_loads(first_run):
     assert any((first_run / "tb").iterdir())  # TensorBoard events
     results = json.loads((first_run / "results.json").read_text())
     agents = [r["agent"] for r in results["evaluation"]["results"]]
-    assert agents == ["ppo (learned)", "random", "lift_at_once", "push_then_lift", "handbook", "oracle"]
+    assert agents == [
+        "ppo (learned)",
+        "random",
+        "lift_at_once",
+        "push_then_lift",
+        "handbook",
+        "blind",
+        "prober",
+        "oracle",
+    ]
+    # The report says what the benchmark measures: oracle - best blind, best non-oracle - best blind.
+    room = results["headroom"]
+    assert room["value_of_reading_the_mind"] == pytest.approx(room["oracle"] - room["best_blind"])
+    assert room["achieved_insight"] == pytest.approx(room["best_reader"] - room["best_blind"])
     assert all(r["episodes"] == 8 and r["personas"] == ["frail", "forgetful"] for r in results["evaluation"]["results"])
     assert set(results["verdict"]) >= {"higher_success_than_handbook", "no_more_unsafe_than_handbook"}
     assert results["training"]["timesteps"] >= 256
