@@ -81,7 +81,8 @@ class Difficulty:
             intent,
             passive_follow_rate_per_s=self.passive_follow_rate_per_s,
             spontaneous_lean_rate_per_s=self.spontaneous_lean_rate_per_s,
-            spontaneous_lean_m=max_m,
+            # A spontaneous lean goes as far as the person can (the same depth a cooperative one reaches).
+            spontaneous_lean_m=max_m if self.max_lean_m is not None else intent.spontaneous_lean_m,
             max_m=max_m,
         )
         coop = dataclasses.replace(

@@ -91,9 +91,9 @@ def test_pushed_lapse_acts_only_under_a_push() -> None:
 
 
 def test_knob_validation_names_the_field() -> None:
-    with pytest.raises(ValueError, match="Intention.passive_follow_rate_per_s"):
+    with pytest.raises(ValueError, match=r"Intention\.passive_follow_rate_per_s"):
         Intention(passive_follow_rate_per_s=-1.0)
-    with pytest.raises(ValueError, match="Cooperativeness.lapse_rate_per_s"):
+    with pytest.raises(ValueError, match=r"Cooperativeness\.lapse_rate_per_s"):
         Cooperativeness(lapse_rate_per_s=float("nan"))
 
 
