@@ -16,6 +16,7 @@ Command line::
 
     python -m agents.evaluate --agent handbook --personas test --episodes 1000
     python -m agents.evaluate --model runs/.../model.zip --json
+    python -m agents.evaluate --model runs/...__rllib_ppo__.../    # an RLlib run folder
     python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
         --csv out.csv --plot out.png
 
@@ -763,7 +764,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     who = parser.add_argument_group("agent (one of --agent, --model, --compare)")
     who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
-    who.add_argument("--model", help="path of a saved SB3 model (.zip) to load with agents.rl.load_agent")
+    who.add_argument(
+        "--model",
+        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent) or an RLlib run folder (agents.rllib)",
+    )
     who.add_argument(
         "--compare",
         help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
@@ -832,13 +836,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         env_id = args.env or DEFAULT_ENV_ID
         label = entry
         if entry not in SCRIPTED_AGENTS:
-            from agents.rl import load_agent
+            folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
+            loaded: Any
+            if _is_rllib_run(entry):
+                from agents.rllib import load_rllib_agent
 
-            loaded = load_agent(entry)
+                loaded = load_rllib_agent(entry)
+                algo = "rllib_ppo"
+            else:
+                from agents.rl import load_agent
+
+                loaded = load_agent(entry)
+                algo = loaded.algo
             agent = loaded
             env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
-            folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
-            label = f"{loaded.algo}:{folder.name or Path(entry).stem}"
+            label = f"{algo}:{folder.name or Path(entry).stem}"
         try:
             result = evaluate(
                 agent,
@@ -872,6 +884,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         plot_outcome_rates(results, args.plot)
     return 0
+
+
+def _is_rllib_run(entry: str) -> bool:
+    """A run folder of ``train.py --framework rllib`` (its ``agent.json`` says so); no Ray import."""
+    path = Path(entry)
+    folder = path.parent if path.name == "checkpoint" else path
+    info = folder / "agent.json"
+    return path.is_dir() and info.exists() and json.loads(info.read_text()).get("framework") == "rllib"
 
 
 def _split_named(result: EvaluationResult) -> list[EvaluationResult]:

@@ -6,7 +6,8 @@ r"""Default training hyperparameters, per algorithm and env id -- the one place 
     python -m rl_zoo3.train --algo ppo --env CoopGym/SitToStand-v0 --gym-packages coop_gym \\
         -conf agents/zoo/ppo.yml --num-threads 1
 
-trains with the same settings (one torch thread, as ``train.py --threads`` defaults to). Nothing here imports torch or SB3.
+trains with the same settings (one torch thread, as ``train.py --threads`` defaults to).
+Nothing here imports torch or SB3.
 """
 
 from __future__ import annotations
