@@ -101,6 +101,9 @@ def ppo_config(
             num_envs_per_env_runner=num_envs_per_env_runner,
             gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT,
             num_cpus_per_env_runner=1,
+            # RLlib's default 60 s sampling timeout drops whole batches on a loaded machine
+            # (measured: iterations of 0 env steps, forever); wait for the samples instead.
+            sample_timeout_s=None,
         )
         .learners(num_learners=0)  # the learner runs in the driver process, on CPU
         .training(
@@ -149,6 +152,8 @@ def train(config: PPOConfig, timesteps: int, checkpoint_dir: str | Path, *, verb
     try:
         while steps < timesteps:
             result = algo.train()
+            if _env_steps(result) <= steps:
+                raise RuntimeError(f"RLlib iteration {len(history) + 1} sampled no env steps (env runners failing?)")
             steps = _env_steps(result)
             episode_return = result.get(ENV_RUNNER_RESULTS, {}).get(EPISODE_RETURN_MEAN)
             history.append({"timesteps": steps, "episode_return_mean": episode_return})
