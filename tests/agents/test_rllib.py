@@ -18,10 +18,11 @@ import pytest
 
 pytest.importorskip("ray.rllib")
 
-import coop_gym  # noqa: E402,F401
-from ray.rllib.core import DEFAULT_MODULE_ID  # noqa: E402
-from agents.evaluate import evaluate  # noqa: E402
-from agents.rllib import (  # noqa: E402
+from ray.rllib.core import DEFAULT_MODULE_ID
+
+import coop_gym  # noqa: F401
+from agents.evaluate import evaluate
+from agents.rllib import (
     CHECKPOINT_DIR,
     RLlibAgent,
     _module_path,
@@ -36,9 +37,9 @@ ENV_ID = "CoopGym/SitToStand-v0"
 
 def _module(env_id: str = ENV_ID):
     env = gym.make(env_id)
-    module = ppo_config(env_id).get_rl_module_spec(spaces={DEFAULT_MODULE_ID: (env.observation_space, env.action_space)})
+    spaces = {DEFAULT_MODULE_ID: (env.observation_space, env.action_space)}
     env.close()
-    return module.build()
+    return ppo_config(env_id).get_rl_module_spec(spaces=spaces).build()
 
 
 @pytest.mark.parametrize("env_id", [ENV_ID, "CoopGym/SitToStandDiscrete-v0", "CoopGym/SitToStandContinuous-v0"])
