@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import importlib.util
 import inspect
 import itertools
 import json
@@ -154,6 +155,8 @@ def parse_args(argv: list[str] | None = None) -> Args:
         parser.error(f"--framework must be sb3 or rllib, got {args.framework!r}")
     if args.framework == "rllib" and (args.algo != "ppo" or args.eval_only or args.resume or args.num_env_runners < 0):
         parser.error("--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0")
+    if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
+        parser.error('--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"')
     if args.eval_only and args.model is None:
         parser.error("--eval-only needs --model PATH")
     if args.model is not None and not args.eval_only:
