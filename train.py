@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import importlib.util
 import inspect
 import itertools
 import json
@@ -90,6 +91,12 @@ class Args:
     """torch CPU threads (1 measured fastest for these small networks on a shared 2-core machine)"""
     progress: bool = True
     """show a progress bar while training"""
+    framework: str = "sb3"
+    """sb3 (Stable-Baselines3, in this process) or rllib (Ray RLlib PPO, new API stack; needs the [rllib] extra)"""
+    num_env_runners: int = 2
+    """--framework rllib: sampling actors (0: sample in the driver)"""
+    address: str | None = None
+    """--framework rllib: an existing Ray cluster (ray://head:10001 or auto; default: start a local instance)"""
 
 
 # --- arguments: a typed dataclass whose field docstrings are the --help -------------
@@ -206,6 +213,12 @@ def parse_args(argv: list[str] | None = None) -> Args:
     unknown = [b for b in _baselines(args) if b not in SCRIPTED_AGENTS]
     if unknown:
         parser.error(f"--baselines: unknown agent(s) {unknown}; known: {', '.join(SCRIPTED_AGENTS)}")
+    if args.framework not in ("sb3", "rllib"):
+        parser.error(f"--framework must be sb3 or rllib, got {args.framework!r}")
+    if args.framework == "rllib" and (args.algo != "ppo" or args.eval_only or args.resume or args.num_env_runners < 0):
+        parser.error("--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0")
+    if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
+        parser.error('--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"')
     if args.eval_only and args.model is None:
         parser.error("--eval-only needs --model PATH")
     if args.model is not None and not args.eval_only:
@@ -333,6 +346,10 @@ class _StopSignals:
 def main(argv: list[str] | None = None) -> int:
     """Train (unless --eval-only), evaluate against the baselines, save the run folder."""
     args = parse_args(argv)
+    if args.framework == "rllib":  # Ray RLlib: its own training loop, the same run folder and evaluation
+        from agents.rllib import run
+
+        return run(args)
 
     import torch
 

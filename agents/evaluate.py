@@ -16,6 +16,7 @@ Command line::
 
     python -m agents.evaluate --agent handbook --personas test --episodes 1000
     python -m agents.evaluate --model runs/.../model.zip --json
+    python -m agents.evaluate --model runs/...__rllib_ppo__.../    # an RLlib run folder
     python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
         --csv out.csv --plot out.png
 
@@ -775,7 +776,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     who = parser.add_argument_group("agent (one of --agent, --model, --compare)")
     who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
-    who.add_argument("--model", help="path of a saved SB3 model (.zip) to load with agents.rl.load_agent")
+    who.add_argument(
+        "--model",
+        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent) or an RLlib run folder (agents.rllib)",
+    )
     who.add_argument(
         "--compare",
         help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
@@ -918,6 +922,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         if entry in SCRIPTED_AGENTS:
             planned.append((entry, args.env or DEFAULT_ENV_ID, entry))
             continue
+        folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
+        if _is_rllib_run(entry):
+            from agents.rllib import load_rllib_agent
+
+            try:
+                rllib_agent = load_rllib_agent(entry)
+            except (OSError, ValueError) as exc:
+                parser.error(f"--model {entry}: {exc}")
+            env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
+            planned.append((rllib_agent, env_id, f"rllib_ppo:{folder.name or Path(entry).stem}"))
+            continue
         from agents.base import feature_mismatch
         from agents.rl import load_agent, observation_features
 
@@ -929,7 +944,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         problem = feature_mismatch(loaded.features, observation_features(env_id), env_id)
         if problem:
             parser.error(f"--model {entry}: {problem}")
-        folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
         planned.append((loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"))
 
     results: list[EvaluationResult] = []
@@ -974,6 +988,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def _is_rllib_run(entry: str) -> bool:
+    """A run folder of ``train.py --framework rllib`` (its ``agent.json`` says so); no Ray import."""
+    path = Path(entry)
+    folder = path.parent if path.name == "checkpoint" else path
+    info = folder / "agent.json"
+    if not (path.is_dir() and info.exists()):
+        return False
+    try:
+        return bool(json.loads(info.read_text()).get("framework") == "rllib")
+    except (OSError, ValueError, AttributeError):
+        return False  # not an RLlib run; the SB3 loader names what is wrong with the file
 
 
 def _split_named(result: EvaluationResult) -> list[EvaluationResult]:

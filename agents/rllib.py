@@ -1,0 +1,325 @@
+"""Ray RLlib PPO (new API stack) on the coop_gym envs: the way to scale training out.
+
+* :func:`ppo_config` -- an RLlib ``PPOConfig`` mirroring the SB3 PPO defaults of
+  :mod:`agents.hyperparams` (batch, minibatch, epochs, gamma, lambda, clip, entropy, net).
+  Each env runner steps ``num_envs_per_env_runner`` envs through coop_gym's own batched
+  vector env (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``).
+  The env is named ``coop_gym:<id>``, so every Ray worker imports coop_gym (and so
+  registers the ids) before it makes the env: bare ids fail in fresh workers.
+* :func:`train` -- ``algo.train()`` until the env-step budget is spent, then a checkpoint.
+* :class:`RLlibAgent` / :func:`load_rllib_agent` -- the trained RLModule behind SB3's
+  ``predict(obs, state, episode_start, deterministic) -> (actions, state)``, so
+  :func:`agents.evaluate.evaluate` scores it on the same seeded episodes as every agent.
+* :func:`run` -- what ``python train.py --framework rllib`` does: the same run folder as
+  the SB3 path (``args.json``, ``checkpoint/`` + ``agent.json``, ``eval.json``,
+  ``eval.csv``, ``results.json``, ``COMPLETE``).
+
+Ray starts a local instance by default (``num_env_runners + 1`` CPUs); ``address``
+(``"ray://head:10001"`` or ``"auto"``) joins an existing cluster instead, whose nodes
+must have coop_gym installed. torch and ray are imported only in this module.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.core import COMPONENT_LEARNER, COMPONENT_LEARNER_GROUP, COMPONENT_RL_MODULE, DEFAULT_MODULE_ID, Columns
+from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+from ray.rllib.core.rl_module.rl_module import RLModule
+from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, EPISODE_RETURN_MEAN, NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+import coop_gym
+from agents.hyperparams import hyperparams_for
+
+__all__ = [
+    "CHECKPOINT_DIR",
+    "FRAMEWORK",
+    "RLlibAgent",
+    "is_rllib_run",
+    "load_rllib_agent",
+    "ppo_config",
+    "run",
+    "train",
+]
+
+FRAMEWORK = "rllib"
+CHECKPOINT_DIR = "checkpoint"
+AGENT_FILE = "agent.json"
+
+
+def _module_prefixed(env_id: str) -> str:
+    """``coop_gym:<id>``: gymnasium imports coop_gym (registering the ids) in each worker first."""
+    return env_id if ":" in env_id else f"coop_gym:{env_id}"
+
+
+def ppo_config(
+    env_id: str,
+    *,
+    seed: int = 0,
+    num_env_runners: int = 2,
+    num_envs_per_env_runner: int = 4,
+    personas: str = "train",
+    env_kwargs: dict[str, Any] | None = None,
+) -> PPOConfig:
+    """RLlib PPO on the new API stack, with the SB3 PPO defaults of :mod:`agents.hyperparams`.
+
+    Args:
+        env_id: Registered coop_gym id (bare or ``coop_gym:``-prefixed).
+        seed: Seed of the env runners and the network initialisation.
+        num_env_runners: Remote sampling actors (0: sample in the driver).
+        num_envs_per_env_runner: Envs batched inside each runner (one vector env).
+        personas: Persona set trained on (never ``"test"``).
+        env_kwargs: Extra env kwargs.
+
+    Returns:
+        The config (``.build_algo()`` makes the algorithm).
+    """
+    if env_id.removeprefix("coop_gym:") not in coop_gym.ENV_IDS:
+        raise ValueError(f"env_id must be a coop_gym id ({', '.join(coop_gym.ENV_IDS)}), got {env_id!r}")
+    sb3 = hyperparams_for("ppo")
+    kw = dict(sb3.algo_kwargs)
+    learning_rate = kw["learning_rate"]
+    # SB3's linear decay "lin_3e-4" is kept as its start value: RLlib's schedules count
+    # env steps of a budget the config does not know.
+    lr = float(str(learning_rate).removeprefix("lin_"))
+    # One SB3 rollout (n_envs x n_steps) is one RLlib train batch.
+    train_batch = int(kw["n_steps"]) * sb3.n_envs
+    return (
+        PPOConfig()
+        .environment(_module_prefixed(env_id), env_config={"personas": personas, **(env_kwargs or {})})
+        .env_runners(
+            num_env_runners=num_env_runners,
+            num_envs_per_env_runner=num_envs_per_env_runner,
+            gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT,
+            num_cpus_per_env_runner=1,
+            # RLlib's default 60 s sampling timeout drops whole batches on a loaded machine
+            # (measured: iterations of 0 env steps, forever); wait for the samples instead.
+            sample_timeout_s=None,
+        )
+        .learners(num_learners=0)  # the learner runs in the driver process, on CPU
+        .training(
+            train_batch_size_per_learner=train_batch,
+            minibatch_size=int(kw["batch_size"]),
+            num_epochs=int(kw["n_epochs"]),
+            lr=lr,
+            gamma=float(kw["gamma"]),
+            lambda_=float(kw["gae_lambda"]),
+            clip_param=float(kw["clip_range"]),
+            entropy_coeff=float(kw["ent_coef"]),
+            vf_loss_coeff=float(kw["vf_coef"]),
+            grad_clip=float(kw["max_grad_norm"]),
+            grad_clip_by="global_norm",
+            # SB3 does not clip the value loss; RLlib's default clip (10) would bind on returns of -2..1 rarely.
+            vf_clip_param=float("inf"),
+        )
+        .rl_module(
+            model_config=DefaultModelConfig(
+                fcnet_hiddens=list(sb3.policy_kwargs.get("net_arch", [64, 64])),
+                fcnet_activation="tanh",  # SB3's MlpPolicy activation
+                vf_share_layers=False,
+            )
+        )
+        .debugging(seed=seed, log_level="ERROR")
+    )
+
+
+def _env_steps(result: dict[str, Any]) -> int:
+    return int(result.get(ENV_RUNNER_RESULTS, {}).get(NUM_ENV_STEPS_SAMPLED_LIFETIME, 0))
+
+
+def train(config: PPOConfig, timesteps: int, checkpoint_dir: str | Path, *, verbose: bool = True) -> dict[str, Any]:
+    """Build the algorithm, train until ``timesteps`` env steps are sampled, save a checkpoint.
+
+    Ray must already be initialised (``ray.init``); the algorithm is stopped on return.
+
+    Returns:
+        ``timesteps`` (sampled), ``iterations``, ``wall_time_s``, ``steps_per_s`` and the
+        per-iteration ``history`` (env steps, mean training return).
+    """
+    algo = config.build_algo()
+    history: list[dict[str, Any]] = []
+    started = time.perf_counter()
+    steps = 0
+    try:
+        while steps < timesteps:
+            result = algo.train()
+            if _env_steps(result) <= steps:
+                raise RuntimeError(f"RLlib iteration {len(history) + 1} sampled no env steps (env runners failing?)")
+            steps = _env_steps(result)
+            episode_return = result.get(ENV_RUNNER_RESULTS, {}).get(EPISODE_RETURN_MEAN)
+            history.append({"timesteps": steps, "episode_return_mean": episode_return})
+            if verbose:
+                shown = "n/a" if episode_return is None else f"{episode_return:+.3f}"
+                rate = steps / (time.perf_counter() - started)
+                print(f"iteration {len(history)}: {steps} env steps, mean return {shown}, {rate:.0f} steps/s")
+        wall = time.perf_counter() - started
+        algo.save_to_path(str(Path(checkpoint_dir).resolve()))
+    finally:
+        algo.stop()
+    return {
+        "timesteps": steps,
+        "iterations": len(history),
+        "wall_time_s": wall,
+        "steps_per_s": steps / wall if wall > 0 else None,
+        "history": history,
+    }
+
+
+class RLlibAgent:
+    """A trained RLlib RLModule behind SB3's ``predict`` protocol (no Ray instance needed).
+
+    Args:
+        module: The torch RLModule (PPO's default MLP).
+        env_id: Env id it was trained on (None if unknown).
+    """
+
+    def __init__(self, module: RLModule, env_id: str | None = None) -> None:
+        """Wrap the module; actions are drawn from its inference distribution."""
+        self.module = module
+        self.env_id = env_id
+        self.name = "rllib_ppo"
+        self.observation_space = module.observation_space
+        self.action_space = module.action_space
+        self._dist_cls = module.get_inference_action_dist_cls()
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[NDArray[Any], Any]:
+        """Actions for a batch (or a single) observation; the MLP keeps no state, so ``state`` stays None."""
+        obs = np.asarray(observation, dtype=np.float32)
+        single = obs.ndim == 1
+        batch = obs[None] if single else obs
+        with torch.no_grad():
+            out = self.module.forward_inference({Columns.OBS: torch.from_numpy(batch)})
+            dist = self._dist_cls.from_logits(out[Columns.ACTION_DIST_INPUTS])
+            if deterministic:
+                dist = dist.to_deterministic()
+            actions = dist.sample().cpu().numpy()
+        if isinstance(self.action_space, gym.spaces.Box):
+            actions = np.clip(actions, self.action_space.low, self.action_space.high).astype(np.float32)
+        else:
+            actions = actions.astype(np.int64)
+        return (actions[0] if single else actions), None
+
+
+def _module_path(checkpoint: Path) -> Path:
+    """The RLModule inside an algorithm checkpoint (``learner_group/learner/rl_module/default_policy``)."""
+    return checkpoint / COMPONENT_LEARNER_GROUP / COMPONENT_LEARNER / COMPONENT_RL_MODULE / DEFAULT_MODULE_ID
+
+
+def is_rllib_run(path: str | Path) -> bool:
+    """True for a run folder (or its ``checkpoint/``) written by :func:`run`."""
+    path = Path(path)
+    folder = path.parent if path.name == CHECKPOINT_DIR else path
+    info = folder / AGENT_FILE
+    return info.exists() and json.loads(info.read_text()).get("framework") == FRAMEWORK
+
+
+def load_rllib_agent(path: str | Path) -> RLlibAgent:
+    """Load the agent of an RLlib run folder, its ``checkpoint/``, or any RLlib algorithm checkpoint."""
+    path = Path(path)
+    folder = path.parent if path.name == CHECKPOINT_DIR else path
+    info_file = folder / AGENT_FILE
+    info = json.loads(info_file.read_text()) if info_file.exists() else {}
+    checkpoint = folder / info["checkpoint"] if info.get("checkpoint") else path
+    module_path = _module_path(checkpoint)
+    if not module_path.exists():
+        raise FileNotFoundError(f"no RLlib RLModule checkpoint at {module_path}")
+    module = RLModule.from_checkpoint(str(module_path.resolve()))
+    return RLlibAgent(module, info.get("env_id"))
+
+
+# --- train.py --framework rllib -----------------------------------------------
+
+
+def run(args: Any) -> int:
+    """``python train.py --framework rllib``: train PPO with RLlib, evaluate against the baselines.
+
+    ``args`` is ``train.Args``; the run folder has the SB3 path's layout with ``checkpoint/``
+    (and ``agent.json``) in place of ``model.zip``.
+    """
+    import ray
+
+    from agents.evaluate import evaluate, print_table, write_csv, write_json
+
+    torch.set_num_threads(args.threads)
+    env_id = args.env or hyperparams_for("ppo").env_id
+    sb3 = hyperparams_for("ppo", env_id)
+    n_envs = args.n_envs or sb3.n_envs
+    timesteps = args.timesteps or sb3.total_timesteps
+    runners = args.num_env_runners
+    per_runner = max(1, n_envs // max(1, runners))
+
+    run_name = f"{env_id.replace('/', '-')}__rllib_ppo__{args.seed}__{int(time.time())}"
+    run_dir = Path(args.out) / run_name
+    for k in range(1, 100):  # two runs started in the same second never share a folder
+        try:
+            run_dir.mkdir(parents=True, exist_ok=False)
+            break
+        except FileExistsError:
+            run_dir = Path(args.out) / f"{run_name}_{k}"
+    print(f"run folder: {run_dir}")
+    (run_dir / "args.json").write_text(json.dumps(dataclasses.asdict(args), indent=2) + "\n")
+    eval_personas: Any = args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas
+
+    # A local instance sized to the runners (plus the driver's learner), or the given cluster.
+    if args.address:
+        ray.init(address=args.address, log_to_driver=False)
+    else:
+        ray.init(num_cpus=runners + 1, include_dashboard=False, log_to_driver=False)
+    try:
+        config = ppo_config(
+            env_id, seed=args.seed, num_env_runners=runners, num_envs_per_env_runner=per_runner, personas=sb3.personas
+        )
+        training = train(config, timesteps, run_dir / CHECKPOINT_DIR, verbose=args.progress)
+    finally:
+        ray.shutdown()
+    training |= {"num_env_runners": runners, "num_envs_per_env_runner": per_runner, "address": args.address}
+    info = {"framework": FRAMEWORK, "algo": "ppo", "env_id": env_id, "checkpoint": CHECKPOINT_DIR}
+    (run_dir / AGENT_FILE).write_text(json.dumps(info | {"num_timesteps": training["timesteps"]}, indent=2) + "\n")
+    print(f"trained {training['timesteps']} steps in {training['wall_time_s']:.0f} s")
+
+    # The same evaluation path, the same seeded episodes as every other agent.
+    agent = load_rllib_agent(run_dir)
+    label = "rllib ppo (learned)"
+    results = [evaluate(agent, env_id, eval_personas, args.eval_episodes, args.eval_seed, name=label)]
+    for name in [b.strip() for b in args.baselines.split(",") if b.strip()]:
+        results.append(evaluate(name, env_id, eval_personas, args.eval_episodes, args.eval_seed))
+    print_table(results)
+    write_json(results, run_dir / "eval.json", episodes=True)
+    write_csv(results, run_dir / "eval.csv")
+    summary = {
+        "run": run_dir.name,
+        "framework": FRAMEWORK,
+        "algo": "ppo",
+        "env_id": env_id,
+        "seed": args.seed,
+        "model": str(run_dir / CHECKPOINT_DIR),
+        "training": training,
+        "evaluation": {
+            "personas": args.eval_personas,
+            "episodes": args.eval_episodes,
+            "seed": args.eval_seed,
+            "results": [r.summary() for r in results],
+        },
+        "ray": ray.__version__,
+        "torch": torch.__version__,
+    }
+    # Written last: results.json and COMPLETE mark a finished run, as on the SB3 path.
+    (run_dir / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (run_dir / "COMPLETE").write_text(time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
+    print(f"saved: {run_dir}")
+    return 0

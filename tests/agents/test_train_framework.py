@@ -1,0 +1,32 @@
+"""train.py --framework: usage errors exit 2 before anything starts (no Ray needed)."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import pytest
+
+import train
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--framework", "tf"],
+        ["--framework", "rllib", "--algo", "dqn"],
+        ["--framework", "rllib", "--num-env-runners", "-1"],
+    ],
+)
+def test_bad_framework_arguments_exit_2(argv):
+    with pytest.raises(SystemExit) as info:
+        train.parse_args(argv)
+    assert info.value.code == 2
+
+
+def test_rllib_flags_parse():
+    if importlib.util.find_spec("ray") is None:
+        with pytest.raises(SystemExit):
+            train.parse_args(["--framework", "rllib"])
+        return
+    args = train.parse_args(["--framework", "rllib", "--num-env-runners", "3", "--address", "ray://head:10001"])
+    assert (args.framework, args.num_env_runners, args.address) == ("rllib", 3, "ray://head:10001")
