@@ -116,9 +116,10 @@ class Intention:
             first failure scenario, "bends forward under a push while not cooperative").
             0 = off (the paper's model).
         spontaneous_lean_rate_per_s: While unresponsive (``xi = 0``) and left waiting (no
-            cue for ``Cooperativeness.idle_after_s``) the person now and then leans forward on their own -- to look at their feet, to reach for a
-            stick -- at this rate [1/s]: looking ready while not ready (the paper's
-            second failure scenario). 0 = off.
+            cue for ``Cooperativeness.idle_after_s``) the person now and then leans forward
+            on their own -- to look at their feet, to reach for a stick -- at this rate
+            [1/s]: looking ready while not ready (the paper's second failure scenario).
+            0 = off.
         spontaneous_lean_m: How far such a lean goes: the intention jumps forward to
             at least this [m].
     """
