@@ -46,20 +46,9 @@ from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,
-    P_A00,
-    P_A01,
-    P_A10,
-    P_A11,
-    P_B0,
-    P_B1,
-    P_DT,
-    P_K1,
-    P_LAMBDA1,
     PARAM_COLUMNS,
-    S_ETA,
-    S_X,
-    S_XDOT,
-    S_XI,
+    PERSON,
+    STATE,
     STATE_COLUMNS,
     initial_state_row,
     measure,
@@ -349,13 +338,15 @@ def _reset_rows(
             for j in range(n_varied):
                 column = int(consts[varied_at + j])
                 p[column] = persona[_PT_PARAMS + column] * draws[r, _D_NORMALS + j]
-        a00, a01, a10, a11, b0, b1 = zoh_coefficients(p[P_LAMBDA1], p[P_K1], p[P_DT])
-        p[P_A00] = a00
-        p[P_A01] = a01
-        p[P_A10] = a10
-        p[P_A11] = a11
-        p[P_B0] = b0
-        p[P_B1] = b1
+        a00, a01, a10, a11, b0, b1 = zoh_coefficients(
+            p[PERSON.damping_rate_per_s], p[PERSON.voluntary_gain_per_s2], p[PERSON.dt_s]
+        )
+        p[PERSON.zoh_a00] = a00
+        p[PERSON.zoh_a01] = a01
+        p[PERSON.zoh_a10] = a10
+        p[PERSON.zoh_a11] = a11
+        p[PERSON.zoh_b0] = b0
+        p[PERSON.zoh_b1] = b1
         u = draws[r, _D_UNIFORM]
         xi = -1.0 if u < persona[_PT_XI_CUTS] else (1.0 if u > persona[_PT_XI_CUTS + 1] else 0.0)
         if xi_override != _NO_OVERRIDE:
@@ -364,9 +355,9 @@ def _reset_rows(
         # initial_state_row(xi, x0): at rest at x0, intending to stay.
         s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
         s[:] = consts[template_at : template_at + len(STATE_COLUMNS)]
-        s[S_X] = x0
-        s[S_ETA] = x0
-        s[S_XI] = xi
+        s[STATE.x_m] = x0
+        s[STATE.eta_m] = x0
+        s[STATE.xi] = xi
         # The filter, centred on the first reading with the nominal model's prior.
         nominal_width = len(NOMINAL_COLUMNS)
         row[_ST_NOMINAL : _ST_NOMINAL + nominal_width] = persona[_PT_NOMINAL : _PT_NOMINAL + nominal_width]
@@ -395,9 +386,9 @@ def _reset_rows(
 @njit(cache=True)
 def _lift_outcome(s: NDArray[np.float64], consts: NDArray[np.float64]) -> int:
     # The lift is judged on the true state at the moment it starts (§II).
-    if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
+    if s[STATE.xi] > 0.5 and s[STATE.x_m] >= consts[_C_SUCCESS_LEAN_M]:
         return _SUCCESS
-    if s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
+    if s[STATE.xi] < -0.5 or s[STATE.x_m] < consts[_C_UPRIGHT_M]:
         return _UNSAFE
     return _PREMATURE
 
@@ -426,7 +417,7 @@ def _simulate_action(
     delay_verbal = row[_ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
     f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
     block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
-    dt = p[P_DT]
+    dt = p[PERSON.dt_s]
     # A verbal cue is an utterance of fixed length; one can't talk over oneself.
     if env[E_VERBAL_REMAINING] <= 0.0 and verbal_request != 0.0:
         env[E_VERBAL_VALUE] = verbal_request
@@ -459,7 +450,7 @@ def _simulate_action(
     f[F_XI_STD] = np.sqrt(max(P[3, 3], 0.0))
     f[F_JUDGMENT] = judge[J_JUDGMENT]
     f[F_ELAPSED] = env[E_ELAPSED]
-    f[F_TRUE_XI] = s[S_XI]
+    f[F_TRUE_XI] = s[STATE.xi]
     if env[E_ELAPSED] >= episode_s - 1e-9:
         return _TIMEOUT  # truncation happens on this same step
     return _NONE
@@ -485,10 +476,10 @@ def _write_reward_and_truth(
     f[R_REWARD] = t_success + t_unsafe + t_premature + t_time + t_force
     f[R_OUTCOME] = result
     f[R_PUSH] = 0.0 if lift else cp
-    f[R_TRUE_X] = s[S_X]
-    f[R_TRUE_XDOT] = s[S_XDOT]
-    f[R_TRUE_ETA] = s[S_ETA]
-    f[R_TRUE_XI] = s[S_XI]
+    f[R_TRUE_X] = s[STATE.x_m]
+    f[R_TRUE_XDOT] = s[STATE.xdot_m_per_s]
+    f[R_TRUE_ETA] = s[STATE.eta_m]
+    f[R_TRUE_XI] = s[STATE.xi]
 
 
 @njit(cache=True)
