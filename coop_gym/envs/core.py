@@ -59,7 +59,7 @@ from coop_gym.model.dynamics import (
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import VARIED_PARAMETERS, Persona
 from estimator.judgment import J_JUDGMENT, J_SINCE_ONSET, JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
-from estimator.kalman import NOMINAL_COLUMNS, kalman_step, nominal_row
+from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, kalman_step, nominal_row
 from estimator.nominal import STATE_DIM, NominalModel
 
 __all__ = [
@@ -363,7 +363,7 @@ def _reset_rows(
         row[_ST_NOMINAL : _ST_NOMINAL + nominal_width] = persona[_PT_NOMINAL : _PT_NOMINAL + nominal_width]
         row[_ST_MEAN] = x0
         row[_ST_MEAN + 2] = x0
-        row[_ST_COV] = persona[_PT_NOMINAL + nominal_width - 1]  # P[0, 0] = R
+        row[_ST_COV] = persona[_PT_NOMINAL + NOMINAL.r_position]  # P[0, 0] = R
         row[_ST_COV + STATE_DIM + 1] = consts[_C_XDOT_VAR]
         row[_ST_COV + 2 * (STATE_DIM + 1)] = consts[_C_ETA_VAR]
         row[_ST_COV + 3 * (STATE_DIM + 1)] = consts[_C_XI_VAR]
