@@ -26,18 +26,8 @@ from coop_gym.envs.core import (
     CMD_LIFT,
     CMD_PUSH,
     CMD_VERBAL,
-    F_ELAPSED,
-    F_JUDGMENT,
-    F_P_M1,
-    F_VERBAL,
-    F_XI_HAT,
-    F_XI_STD,
     FEATURES,
-    R_OUTCOME,
-    R_PUSH,
-    R_REWARD,
-    R_TRUE_X,
-    R_TRUE_XI,
+    REPORT,
     REPORT_COLUMNS,
     REWARD_TERMS,
     SitToStandCore,
@@ -411,17 +401,21 @@ def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, ste
     r = core.report[i]
     probs = None
     if core.mm is not None:
-        probs = (float(r[F_P_M1]), float(r[F_P_M1 + 1]), float(r[F_P_M1 + 2]))
+        probs = (
+            float(r[REPORT.p_uncooperative]),
+            float(r[REPORT.p_unresponsive]),
+            float(r[REPORT.p_cooperative]),
+        )
     return RenderState(
-        time_s=float(r[F_ELAPSED]),
-        shoulder_position_m=float(r[R_TRUE_X]),
-        push_force_n=float(r[R_PUSH]) if stepped else 0.0,
-        verbal_cue=int(r[F_VERBAL]),
-        xi_estimate=float(r[F_XI_HAT]),
-        xi_std=float(r[F_XI_STD]),
+        time_s=float(r[REPORT.elapsed_s]),
+        shoulder_position_m=float(r[REPORT.true_x_m]),
+        push_force_n=float(r[REPORT.push_force_n]) if stepped else 0.0,
+        verbal_cue=int(r[REPORT.verbal_cue]),
+        xi_estimate=float(r[REPORT.xi_hat]),
+        xi_std=float(r[REPORT.xi_std]),
         threshold=float(core.judgment.threshold),
-        judgment=int(r[F_JUDGMENT]),
-        true_xi=int(r[R_TRUE_XI]),
+        judgment=int(r[REPORT.judgment]),
+        true_xi=int(r[REPORT.info_true_xi]),
         outcome=_OUTCOME_LABELS[outcome] if outcome != Outcome.NONE else None,
         probabilities=probs,
         lift=lift,
@@ -626,7 +620,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
             raise RuntimeError("SitToStandEnv.step() called before reset() or after the episode ended; call reset()")
         self.core.step_commands(self._command(action))
         r = self._report_row.tolist()
-        self._outcome = outcome = int(r[R_OUTCOME])
+        self._outcome = outcome = int(r[REPORT.outcome])
         # A lift terminates. The episode clock of ``timing`` truncates (the registered
         # TimeLimit agrees with it for the default timing; a custom ``timing`` is honoured too).
         terminated = outcome in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE)
@@ -638,7 +632,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         info = report_info(r, self._persona_names, self._has_mm)
         if self.render_mode == "human":
             self.render()
-        return obs, r[R_REWARD], terminated, truncated, info
+        return obs, r[REPORT.reward], terminated, truncated, info
 
     def render(self) -> NDArray[np.uint8] | None:
         """Draw the person, the cues, the estimate gauge and the true ``xi``."""
@@ -728,7 +722,7 @@ assert REPORT_COLUMNS == (
     "true_x_m",
     "true_xdot_m_per_s",
     "true_eta_m",
-    "true_xi",
+    "info_true_xi",
     "persona_index",
 ), "REPORT_COLUMNS changed: update report_info"
 assert REWARD_TERMS == ("success", "unsafe", "premature", "time", "force"), "update report_info"
