@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
 from compiled.rng import G_STATE, bit_generator_row, integers, random, standard_normal
-from compiled.schema import index_table, offset_table
+from compiled.schema import field_values, index_table, offset_table
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
@@ -215,17 +215,12 @@ def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel |
     and none of the realism knobs -- the gap real people leave.
     """
     base = base or NominalModel()
-    bio, intent, sensors = person.biomechanics, person.intention, person.sensors
-    return base.replace(
-        dt_s=timing.dt_s,
-        damping_rate_per_s=bio.damping_rate_per_s,
-        voluntary_gain_per_s2=bio.voluntary_gain_per_s2,
-        push_compliance_m_per_s2_n=bio.push_compliance_m_per_s2_n,
-        push_gain_m_per_s_n=intent.push_gain_m_per_s_n,
-        verbal_gain_m_per_s=intent.verbal_gain_m_per_s,
-        # A noiseless camera still needs R > 0 for the filter to be well posed.
-        position_noise_std_m=max(sensors.position_noise_std_m, 1e-4),
-    )
+    # The nominal model shares its gains' names with the person's fields: copy every shared one.
+    person_values = {**field_values(person), "dt_s": timing.dt_s}
+    shared = {f.name: person_values[f.name] for f in dataclasses.fields(NominalModel) if f.name in person_values}
+    # A noiseless camera still needs R > 0 for the filter to be well posed.
+    shared["position_noise_std_m"] = max(shared["position_noise_std_m"], 1e-4)
+    return base.replace(**shared)
 
 
 @dataclass

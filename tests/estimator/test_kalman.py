@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from compiled.schema import field_values
 from coop_gym.envs.core import nominal_model_for
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import PersonParams, Timing
@@ -127,3 +128,12 @@ def test_nominal_row_is_named_by_the_model_fields_then_the_derived_variances() -
     np.testing.assert_array_equal(
         row[NOMINAL.q_position : NOMINAL.q_cooperativeness + 1], np.diag(model.process_covariance)
     )
+
+
+def test_nominal_defaults_are_the_typical_persons_gains() -> None:
+    # The filter's default model is the default person's (estimator/ may not import the model,
+    # so the defaults are written twice; this keeps them equal), and nominal_model_for copies
+    # every field the two share by name.
+    assert nominal_model_for(PersonParams(), Timing()) == NominalModel()
+    shared = {f.name for f in dataclasses.fields(NominalModel)} & set(field_values(PersonParams()))
+    assert shared == {*NOMINAL_FIELDS, "position_noise_std_m"} - {"dt_s"}
