@@ -488,7 +488,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
 
     ## Starting State
 
-    A persona is drawn from ``personas`` and a person around it (about 15 % variation
+    A persona is drawn from ``personas`` and a person around it (about 20 % variation
     of every gain). The person sits upright (``x ~ N(0, 5 mm)``), at rest, intending to
     stay; ``xi`` is drawn from the persona's initial probabilities.
 
@@ -708,8 +708,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         return cmd
 
 
-# report_info unpacks report rows by position.
-assert REPORT_COLUMNS == (
+_REPORT_LAYOUT = (
     *FEATURES,
     "reward_success",
     "reward_unsafe",
@@ -724,8 +723,21 @@ assert REPORT_COLUMNS == (
     "true_eta_m",
     "info_true_xi",
     "persona_index",
-), "REPORT_COLUMNS changed: update report_info"
-assert REWARD_TERMS == ("success", "unsafe", "premature", "time", "force"), "update report_info"
+)
+
+
+def _check_report_layout() -> None:
+    """report_info unpacks report rows by position: fail at import if the layout moved.
+
+    An explicit check, not an ``assert``: it must hold under ``python -O`` too.
+    """
+    if REPORT_COLUMNS != _REPORT_LAYOUT:
+        raise RuntimeError("REPORT_COLUMNS changed: update report_info")
+    if REWARD_TERMS != ("success", "unsafe", "premature", "time", "force"):
+        raise RuntimeError("REWARD_TERMS changed: update report_info")
+
+
+_check_report_layout()
 
 
 def _check_choice(name: str, value: Any, choices: Sequence[str]) -> None:
