@@ -69,20 +69,10 @@ FEATURE_BOUNDS: dict[str, tuple[float, float]] = {
     "true_xi": (-1.0, 1.0),
 }
 
-_BELIEF = (
-    "measured_position_m",
-    "measured_force_n",
-    "verbal_cue",
-    "time_since_cue_onset_s",
-    "x_hat_m",
-    "xdot_hat_m_per_s",
-    "eta_hat_m",
-    "xi_hat",
-    "xi_std",
-    "judgment",
-    "elapsed_s",
-)
-_PROBABILITIES = ("p_uncooperative", "p_unresponsive", "p_cooperative")
+# Slices of FEATURES (one list of names): the readings, the filter's belief and the clock; the
+# multiple-model probabilities; the oracle's true xi comes last.
+_BELIEF = FEATURES[: FEATURES.index("p_uncooperative")]
+_PROBABILITIES = FEATURES[FEATURES.index("p_uncooperative") : FEATURES.index("true_xi")]
 _RAW = ("measured_position_m", "measured_force_n", "verbal_cue", "time_since_cue_onset_s", "elapsed_s")
 
 N_FLAT_ACTIONS = 18
