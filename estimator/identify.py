@@ -40,7 +40,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from compiled.cache import guard_kernel_cache
-from estimator.kalman import NOMINAL_COLUMNS, nominal_row
+from estimator.kalman import NOMINAL, nominal_row
 from estimator.multiple_model import N_MODES, _mean_step, _riccati_step
 from estimator.nominal import NominalModel
 
@@ -54,20 +54,19 @@ __all__ = [
     "trial_log_likelihoods",
 ]
 
-_DT, _LAM, _K1, _K2, _K3, _K4, _Q0, _Q1, _Q2, _Q3, _R = range(len(NOMINAL_COLUMNS))
 _LOG_2PI = math.log(2.0 * math.pi)
 
 # NominalModel field -> (column of the packed nominal row, power: 1 for gains, 2 for stds -> variances).
 _FITTABLE: dict[str, tuple[int, int]] = {
-    "damping_rate_per_s": (_LAM, 1),
-    "voluntary_gain_per_s2": (_K1, 1),
-    "push_compliance_m_per_s2_n": (_K2, 1),
-    "push_gain_m_per_s_n": (_K3, 1),
-    "verbal_gain_m_per_s": (_K4, 1),
-    "position_process_std_m": (_Q0, 2),
-    "velocity_process_std_m_per_s": (_Q1, 2),
-    "intention_process_std_m": (_Q2, 2),
-    "position_noise_std_m": (_R, 2),
+    "damping_rate_per_s": (NOMINAL.damping_rate_per_s, 1),
+    "voluntary_gain_per_s2": (NOMINAL.voluntary_gain_per_s2, 1),
+    "push_compliance_m_per_s2_n": (NOMINAL.push_compliance_m_per_s2_n, 1),
+    "push_gain_m_per_s_n": (NOMINAL.push_gain_m_per_s_n, 1),
+    "verbal_gain_m_per_s": (NOMINAL.verbal_gain_m_per_s, 1),
+    "position_process_std_m": (NOMINAL.q_position, 2),
+    "velocity_process_std_m_per_s": (NOMINAL.q_velocity, 2),
+    "intention_process_std_m": (NOMINAL.q_intention, 2),
+    "position_noise_std_m": (NOMINAL.r_position, 2),
 }
 
 DEFAULT_FITTED_FIELDS: tuple[str, ...] = (
@@ -209,10 +208,10 @@ def _trial_mode_log_likelihoods(
             if dts[i] != current_dt:
                 current_dt = dts[i]
                 row[:] = rows[a]
-                row[_DT] = current_dt
+                row[NOMINAL.dt_s] = current_dt
                 # Prior covariance diag(R, var(xdot0), var(eta0)), as FastKalmanFilter.
                 P[:, :] = 0.0
-                P[0, 0] = row[_R]
+                P[0, 0] = row[NOMINAL.r_position]
                 P[1, 1] = initial_velocity_var
                 P[2, 2] = initial_intention_var
                 for t in range(1, t_max):

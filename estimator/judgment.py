@@ -16,8 +16,9 @@ from numba import njit
 from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
+from compiled.schema import index_table
 
-__all__ = ["JUDGMENT_COLUMNS", "ThresholdJudgment", "judgment_substep", "threshold_judgment"]
+__all__ = ["JUDGE", "JUDGMENT_COLUMNS", "ThresholdJudgment", "judgment_substep", "threshold_judgment"]
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,7 @@ def threshold_judgment(xi_estimate: NDArray[np.float64], threshold: float) -> ND
 
 JUDGMENT_COLUMNS = ("since_onset_s", "pending", "judgment", "cue_was_active")
 """Layout of a judgment-tracker row (one per env)."""
-J_SINCE_ONSET, J_PENDING, J_JUDGMENT, J_CUE_ACTIVE = range(len(JUDGMENT_COLUMNS))
+JUDGE = index_table("JudgmentColumns", JUDGMENT_COLUMNS)
 
 
 @njit(cache=True)
@@ -64,22 +65,22 @@ def judgment_substep(
     A cue's *initial onset* is a step with a cue active after a step with none. The
     window then runs ``delay_s``; at its end the current estimate is thresholded.
     """
-    if cue_active and row[J_CUE_ACTIVE] < 0.5:
-        row[J_SINCE_ONSET] = 0.0
-        row[J_PENDING] = 1.0
+    if cue_active and row[JUDGE.cue_was_active] < 0.5:
+        row[JUDGE.since_onset_s] = 0.0
+        row[JUDGE.pending] = 1.0
     else:
-        row[J_SINCE_ONSET] += dt_s
-    row[J_CUE_ACTIVE] = 1.0 if cue_active else 0.0
+        row[JUDGE.since_onset_s] += dt_s
+    row[JUDGE.cue_was_active] = 1.0 if cue_active else 0.0
     # Compare with half a step of slack so a 0.75 s delay at 50 Hz lands on step 37/38
     # deterministically despite floating-point sums.
-    if row[J_PENDING] > 0.5 and row[J_SINCE_ONSET] >= delay_s - 0.5 * dt_s:
-        row[J_PENDING] = 0.0
+    if row[JUDGE.pending] > 0.5 and row[JUDGE.since_onset_s] >= delay_s - 0.5 * dt_s:
+        row[JUDGE.pending] = 0.0
         if xi_estimate >= threshold:
-            row[J_JUDGMENT] = 1.0
+            row[JUDGE.judgment] = 1.0
         elif xi_estimate <= -threshold:
-            row[J_JUDGMENT] = -1.0
+            row[JUDGE.judgment] = -1.0
         else:
-            row[J_JUDGMENT] = 0.0
+            row[JUDGE.judgment] = 0.0
         return True
     return False
 

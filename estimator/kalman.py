@@ -28,51 +28,52 @@ from numba import njit
 from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
+from compiled.schema import index_table
 from estimator.nominal import STATE_DIM, NominalModel
 
 __all__ = [
+    "NOMINAL",
     "NOMINAL_COLUMNS",
+    "NOMINAL_DERIVED_COLUMNS",
+    "NOMINAL_FIELDS",
     "FastKalmanFilter",
     "PaperKalmanFilter",
     "kalman_step",
     "nominal_row",
 ]
 
-# Column layout of a packed nominal model row (one row per env in the batched filter).
-NOMINAL_COLUMNS = (
+NOMINAL_FIELDS: tuple[str, ...] = (
     "dt_s",
     "damping_rate_per_s",
     "voluntary_gain_per_s2",
     "push_compliance_m_per_s2_n",
     "push_gain_m_per_s_n",
     "verbal_gain_m_per_s",
+)
+"""The :class:`NominalModel` fields ``A`` and ``B`` are made of, packed as they are."""
+
+NOMINAL_DERIVED_COLUMNS: tuple[str, ...] = (
     "q_position",
     "q_velocity",
     "q_intention",
     "q_cooperativeness",
     "r_position",
 )
-_DT, _LAM, _K1, _K2, _K3, _K4, _Q0, _Q1, _Q2, _Q3, _R = range(len(NOMINAL_COLUMNS))
+"""Packed from the model's stds: the diagonal of ``Q`` and ``R`` (variances)."""
+
+NOMINAL_COLUMNS: tuple[str, ...] = NOMINAL_FIELDS + NOMINAL_DERIVED_COLUMNS
+"""Column layout of a packed nominal model row (one row per env in the batched filter)."""
+
+NOMINAL = index_table("NominalColumns", NOMINAL_COLUMNS)
+"""Column of each quantity in a packed nominal row: ``nominal[NOMINAL.voluntary_gain_per_s2]``."""
 
 
 def nominal_row(model: NominalModel) -> NDArray[np.float64]:
     """Pack a :class:`NominalModel` into the row layout of :data:`NOMINAL_COLUMNS`."""
     q = np.diag(model.process_covariance)
-    return np.array(
-        [
-            model.dt_s,
-            model.damping_rate_per_s,
-            model.voluntary_gain_per_s2,
-            model.push_compliance_m_per_s2_n,
-            model.push_gain_m_per_s_n,
-            model.verbal_gain_m_per_s,
-            q[0],
-            q[1],
-            q[2],
-            q[3],
-            model.measurement_variance,
-        ]
-    )
+    derived = dict(zip(NOMINAL_DERIVED_COLUMNS, (q[0], q[1], q[2], q[3], model.measurement_variance), strict=True))
+    values = {**{name: getattr(model, name) for name in NOMINAL_FIELDS}, **derived}
+    return np.array([values[name] for name in NOMINAL_COLUMNS])
 
 
 @njit(cache=True, fastmath=False)
@@ -93,14 +94,14 @@ def kalman_step(
         ``(innovation, S)``: the measurement residual and its variance, for
         likelihoods (system identification, multiple-model estimators).
     """
-    dt = nominal[_DT]
+    dt = nominal[NOMINAL.dt_s]
     # --- predict: A from the cues (eqs. 1, 6, 10 Euler-discretised) ---
     a01 = dt
-    a10 = -nominal[_K1] * dt
-    a11 = 1.0 - nominal[_LAM] * dt
-    a12 = nominal[_K1] * dt
-    a23 = (nominal[_K3] * push_force_n + nominal[_K4] * verbal_cue) * dt
-    b1 = nominal[_K2] * dt
+    a10 = -nominal[NOMINAL.voluntary_gain_per_s2] * dt
+    a11 = 1.0 - nominal[NOMINAL.damping_rate_per_s] * dt
+    a12 = nominal[NOMINAL.voluntary_gain_per_s2] * dt
+    a23 = (nominal[NOMINAL.push_gain_m_per_s_n] * push_force_n + nominal[NOMINAL.verbal_gain_m_per_s] * verbal_cue) * dt
+    b1 = nominal[NOMINAL.push_compliance_m_per_s2_n] * dt
     m0, m1, m2, m3 = m[0], m[1], m[2], m[3]
     m[0] = m0 + a01 * m1
     m[1] = a10 * m0 + a11 * m1 + a12 * m2 + b1 * push_force_n
@@ -120,13 +121,13 @@ def kalman_step(
         P[i, 0] = q0 + a01 * q1
         P[i, 1] = a10 * q0 + a11 * q1 + a12 * q2
         P[i, 2] = q2 + a23 * q3
-    P[0, 0] += nominal[_Q0]
-    P[1, 1] += nominal[_Q1]
-    P[2, 2] += nominal[_Q2]
-    P[3, 3] += nominal[_Q3]
+    P[0, 0] += nominal[NOMINAL.q_position]
+    P[1, 1] += nominal[NOMINAL.q_velocity]
+    P[2, 2] += nominal[NOMINAL.q_intention]
+    P[3, 3] += nominal[NOMINAL.q_cooperativeness]
     # --- update with the scalar measurement y = H s + v, H = [1 0 0 0] ---
     innovation = measured_position_m - m[0]
-    R = nominal[_R]
+    R = nominal[NOMINAL.r_position]
     S = P[0, 0] + R
     K = (P[0, 0] / S, P[1, 0] / S, P[2, 0] / S, P[3, 0] / S)
     for i in range(4):
@@ -218,7 +219,7 @@ class FastKalmanFilter:
     """Batched compiled paper filter: ``N`` independent filters stepped together.
 
     Args:
-        nominal_rows: (N, 11) packed nominal models (:func:`nominal_row`), one per filter.
+        nominal_rows: (N, len(NOMINAL_COLUMNS)) packed nominal models (:func:`nominal_row`), one per filter.
         first_position_m: (N,) first shoulder measurements.
 
     Example:
@@ -244,7 +245,7 @@ class FastKalmanFilter:
         self.m[:, 0] = first
         self.m[:, 2] = first
         self.P = np.zeros((n_env, STATE_DIM, STATE_DIM))
-        self.P[:, 0, 0] = self.nominal[:, _R]
+        self.P[:, 0, 0] = self.nominal[:, NOMINAL.r_position]
         self.P[:, 1, 1] = prior.initial_velocity_std_m_per_s**2
         self.P[:, 2, 2] = prior.initial_intention_std_m**2
         self.P[:, 3, 3] = prior.initial_cooperativeness_std**2

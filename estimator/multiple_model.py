@@ -40,7 +40,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from compiled.cache import guard_kernel_cache
-from estimator.kalman import NOMINAL_COLUMNS, nominal_row
+from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, nominal_row
 from estimator.nominal import NominalModel
 
 __all__ = [
@@ -58,8 +58,6 @@ MODE_VALUES: NDArray[np.int64] = np.array([-1, 0, 1], dtype=np.int64)
 
 N_MODES = 3
 _STATE = 3  # [x, xdot, eta] per mode
-# Columns of the packed nominal rows (see estimator.kalman.NOMINAL_COLUMNS).
-_DT, _LAM, _K1, _K2, _K3, _K4, _Q0, _Q1, _Q2, _Q3, _R = range(len(NOMINAL_COLUMNS))
 _LOG_2PI = math.log(2.0 * math.pi)
 
 # Status codes returned by the compiled kernels (checked in Python, so the hot loop
@@ -107,10 +105,10 @@ def _riccati_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArr
     Returns:
         The innovation variance ``S``.
     """
-    dt = nominal[_DT]
-    f10 = -nominal[_K1] * dt
-    f11 = 1.0 - nominal[_LAM] * dt
-    f12 = nominal[_K1] * dt
+    dt = nominal[NOMINAL.dt_s]
+    f10 = -nominal[NOMINAL.voluntary_gain_per_s2] * dt
+    f11 = 1.0 - nominal[NOMINAL.damping_rate_per_s] * dt
+    f12 = nominal[NOMINAL.voluntary_gain_per_s2] * dt
     # P = F P F^T + Q, with F's sparse rows [1, dt, 0], [f10, f11, f12], [0, 0, 1].
     fp00 = P[0, 0] + dt * P[1, 0]
     fp01 = P[0, 1] + dt * P[1, 1]
@@ -121,12 +119,12 @@ def _riccati_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArr
     fp20 = P[2, 0]
     fp21 = P[2, 1]
     fp22 = P[2, 2]
-    p00 = fp00 + dt * fp01 + nominal[_Q0]
+    p00 = fp00 + dt * fp01 + nominal[NOMINAL.q_position]
     p01 = f10 * fp00 + f11 * fp01 + f12 * fp02
     p02 = fp02
-    p11 = f10 * fp10 + f11 * fp11 + f12 * fp12 + nominal[_Q1]
+    p11 = f10 * fp10 + f11 * fp11 + f12 * fp12 + nominal[NOMINAL.q_velocity]
     p12 = fp12
-    p22 = fp22 + nominal[_Q2]
+    p22 = fp22 + nominal[NOMINAL.q_intention]
     # Row 1 and 2 of (F P) F^T, column 0: symmetric counterparts computed from the other side.
     p10 = fp10 + dt * fp11
     p20 = fp20 + dt * fp21
@@ -135,7 +133,7 @@ def _riccati_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArr
     p01 = 0.5 * (p01 + p10)
     p02 = 0.5 * (p02 + p20)
     p12 = 0.5 * (p12 + p21)
-    r = nominal[_R]
+    r = nominal[NOMINAL.r_position]
     # Scalar measurement H = [1, 0, 0]: S = H P H^T + R, K = P H^T / S.
     S = p00 + r
     k0 = p00 / S
@@ -176,13 +174,22 @@ def _mean_step(
     Returns:
         The innovation ``y - H m`` of the predicted mean.
     """
-    dt = nominal[_DT]
+    dt = nominal[NOMINAL.dt_s]
     m0, m1, m2 = m[0], m[1], m[2]
     # eq. 1 (Euler): x' = x + dt xdot ; xdot' = xdot + dt (-lambda1 xdot + k1 (eta - x) + k2 c_p)
     p0 = m0 + dt * m1
-    p1 = m1 + dt * (-nominal[_LAM] * m1 + nominal[_K1] * (m2 - m0) + nominal[_K2] * push_force_n)
+    p1 = m1 + dt * (
+        -nominal[NOMINAL.damping_rate_per_s] * m1
+        + nominal[NOMINAL.voluntary_gain_per_s2] * (m2 - m0)
+        + nominal[NOMINAL.push_compliance_m_per_s2_n] * push_force_n
+    )
     # eq. 6: eta' = eta + xi (k3 c_p + k4 c_v) dt -- the only place the mode enters.
-    p2 = m2 + xi * (nominal[_K3] * push_force_n + nominal[_K4] * verbal_cue) * dt
+    p2 = (
+        m2
+        + xi
+        * (nominal[NOMINAL.push_gain_m_per_s_n] * push_force_n + nominal[NOMINAL.verbal_gain_m_per_s] * verbal_cue)
+        * dt
+    )
     innovation = measured_position_m - p0
     m[0] = p0 + K[0] * innovation
     m[1] = p1 + K[1] * innovation
@@ -427,7 +434,11 @@ class _MultipleModelBase:
             raise ValueError(f"nominal_rows must have shape (N, {len(NOMINAL_COLUMNS)}), got {rows.shape}")
         if not np.all(np.isfinite(rows)):
             raise ValueError("nominal_rows must be finite")
-        if np.any(rows[:, _DT] <= 0) or np.any(rows[:, _R] <= 0) or np.any(rows[:, _Q0 : _R + 1] < 0):
+        if (
+            np.any(rows[:, NOMINAL.dt_s] <= 0)
+            or np.any(rows[:, NOMINAL.r_position] <= 0)
+            or np.any(rows[:, NOMINAL.q_position : NOMINAL.r_position + 1] < 0)
+        ):
             raise ValueError("nominal_rows need dt_s > 0, r_position > 0 and non-negative process variances")
         self.nominal = rows
         self.n_envs = rows.shape[0]
@@ -472,7 +483,7 @@ class _MultipleModelBase:
         self.means[idx, :, 1] = 0.0
         self.means[idx, :, 2] = first[:, None]
         p0 = np.zeros((idx.shape[0], _STATE, _STATE))
-        p0[:, 0, 0] = self.nominal[idx, _R]
+        p0[:, 0, 0] = self.nominal[idx, NOMINAL.r_position]
         p0[:, 1, 1] = self._initial_velocity_var
         p0[:, 2, 2] = self._initial_intention_var
         if self._per_mode_covariance:
@@ -610,7 +621,7 @@ class MultipleModelEstimator(_MultipleModelBase):
     exact posterior ``P(xi = j | y_1..t)`` under the nominal model.
 
     Args:
-        nominal_rows: (N, 11) packed nominal models (:func:`estimator.kalman.nominal_row`),
+        nominal_rows: (N, len(NOMINAL_COLUMNS)) packed nominal models (:func:`estimator.kalman.nominal_row`),
             one per env; the ``xi`` columns are unused.
         first_position_m: (N,) first shoulder measurements [m] (initial means).
         prior: Model whose ``initial_velocity_std_m_per_s`` and ``initial_intention_std_m``
@@ -675,7 +686,7 @@ class IMMEstimator(_MultipleModelBase):
     ``(1 - 3 epsilon) p + epsilon``.
 
     Args:
-        nominal_rows: (N, 11) packed nominal models, one per env.
+        nominal_rows: (N, len(NOMINAL_COLUMNS)) packed nominal models, one per env.
         first_position_m: (N,) first shoulder measurements [m].
         prior: Model giving the prior covariance of ``[xdot, eta]`` (default ``NominalModel()``).
         mode_prior: Prior weights over ``xi = -1, 0, +1`` (default uniform).
@@ -710,7 +721,9 @@ class IMMEstimator(_MultipleModelBase):
         )
         n = self.n_envs
         if transition_matrix is None:
-            trans = np.stack([switching_transition_matrix(switching_rate_per_s, dt) for dt in self.nominal[:, _DT]])
+            trans = np.stack(
+                [switching_transition_matrix(switching_rate_per_s, dt) for dt in self.nominal[:, NOMINAL.dt_s]]
+            )
         else:
             trans = np.broadcast_to(np.asarray(transition_matrix, dtype=np.float64), (n, N_MODES, N_MODES)).copy()
             if not np.all(np.isfinite(trans)) or np.any(trans < 0) or not np.allclose(trans.sum(axis=-1), 1.0):

@@ -102,19 +102,10 @@ CASES: list[tuple[str, str, str, Callable[[], tuple[float, ...]]]] = [
     ),
 ]
 
-_XFAIL = {
-    "env-variation": pytest.mark.xfail(
-        strict=True, reason="docstring in sit_to_stand.py: fixed by the env-contract change"
-    ),
-}
-
 
 @pytest.mark.parametrize(
     ("path", "pattern", "expected"),
-    [
-        pytest.param(path, pattern, expected, id=name, marks=_XFAIL.get(name, ()))
-        for name, path, pattern, expected in CASES
-    ],
+    [pytest.param(path, pattern, expected, id=name) for name, path, pattern, expected in CASES],
 )
 def test_quoted_number_matches_the_code(path: str, pattern: str, expected: Callable[[], tuple[float, ...]]) -> None:
     text = (ROOT / path).read_text(encoding="utf-8")

@@ -42,24 +42,14 @@ from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
 from compiled.rng import G_STATE, bit_generator_row, integers, random, standard_normal
+from compiled.schema import field_values, index_table, offset_table
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,
-    P_A00,
-    P_A01,
-    P_A10,
-    P_A11,
-    P_B0,
-    P_B1,
-    P_DT,
-    P_K1,
-    P_LAMBDA1,
     PARAM_COLUMNS,
-    S_ETA,
-    S_X,
-    S_XDOT,
-    S_XI,
+    PERSON,
+    STATE,
     STATE_COLUMNS,
     initial_state_row,
     measure,
@@ -69,12 +59,13 @@ from coop_gym.model.dynamics import (
 )
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import VARIED_PARAMETERS, Persona
-from estimator.judgment import J_JUDGMENT, J_SINCE_ONSET, JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
-from estimator.kalman import NOMINAL_COLUMNS, kalman_step, nominal_row
+from estimator.judgment import JUDGE, JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
+from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, kalman_step, nominal_row
 from estimator.nominal import STATE_DIM, NominalModel
 
 __all__ = [
     "FEATURES",
+    "REPORT",
     "REPORT_COLUMNS",
     "REWARD_TERMS",
     "SitToStandCore",
@@ -100,23 +91,6 @@ FEATURES: tuple[str, ...] = (
     "true_xi",
 )
 """Every quantity an observation can hold; each observation mode selects some of them."""
-(
-    F_POS,
-    F_FORCE,
-    F_VERBAL,
-    F_SINCE_ONSET,
-    F_X_HAT,
-    F_XDOT_HAT,
-    F_ETA_HAT,
-    F_XI_HAT,
-    F_XI_STD,
-    F_JUDGMENT,
-    F_ELAPSED,
-    F_P_M1,
-    F_P_0,
-    F_P_P1,
-    F_TRUE_XI,
-) = range(len(FEATURES))
 
 REWARD_TERMS: tuple[str, ...] = ("success", "unsafe", "premature", "time", "force")
 """Names of the reward terms, in the column order of :attr:`StepArrays.reward_terms`."""
@@ -130,61 +104,65 @@ REPORT_COLUMNS: tuple[str, ...] = (
     "true_x_m",
     "true_xdot_m_per_s",
     "true_eta_m",
-    "true_xi",
+    "info_true_xi",  # the info's true xi; the oracle's feature "true_xi" is its own column
     "persona_index",
 )
 """Columns of :attr:`SitToStandCore.report`: one float row per env with everything ``info`` needs.
 
 Kept in one row so an env reads it with a single ``tolist()``.
 """
-R_TERMS = len(FEATURES)
-R_REWARD = R_TERMS + len(REWARD_TERMS)
-R_OUTCOME, R_PUSH, R_TRUE_X, R_TRUE_XDOT, R_TRUE_ETA, R_TRUE_XI, R_PERSONA = range(R_REWARD + 1, len(REPORT_COLUMNS))
+REPORT = index_table("ReportColumns", REPORT_COLUMNS)
+"""Column of each quantity in a report row: ``report[REPORT.x_hat_m]``, ``report[REPORT.outcome]``."""
 
-# Per-env bookkeeping of the cue scheduler: the utterance playing and the clock.
-E_VERBAL_VALUE, E_VERBAL_REMAINING, E_ELAPSED, E_IMPULSE = range(4)
-_N_ENV_COLUMNS = 4
+CUE_COLUMNS: tuple[str, ...] = ("verbal_value", "verbal_remaining_s", "elapsed_s", "impulse_n_s")
+"""Per-env bookkeeping of the cue scheduler: the utterance playing, the clock, the step's push impulse."""
+CUES = index_table("CueColumns", CUE_COLUMNS)
 
-# Column blocks of the packed per-env state row (SitToStandCore.state).
-_ST_PERSON = 0
-_ST_CUES = _ST_PERSON + len(STATE_COLUMNS)
-_ST_MEAN = _ST_CUES + _N_ENV_COLUMNS
-_ST_COV = _ST_MEAN + STATE_DIM
-_ST_JUDGE = _ST_COV + STATE_DIM * STATE_DIM
-_ST_NOMINAL = _ST_JUDGE + len(JUDGMENT_COLUMNS)
-_ST_PARAMS = _ST_NOMINAL + len(NOMINAL_COLUMNS)
-_ST_DELAY_PUSH = _ST_PARAMS + len(PARAM_COLUMNS)
-_ST_DELAY_VERBAL = _ST_DELAY_PUSH + DELAY_LINE_LENGTH
-_ST_REPORT = _ST_DELAY_VERBAL + DELAY_LINE_LENGTH
-_ST_BLOCKS = _ST_REPORT + len(REPORT_COLUMNS)  # then 3 x substeps: measured force, verbal cue, position
+BLOCKS = offset_table(
+    "StateBlocks",
+    {
+        "person": len(STATE_COLUMNS),
+        "cues": len(CUE_COLUMNS),
+        "mean": STATE_DIM,
+        "cov": STATE_DIM * STATE_DIM,
+        "judge": len(JUDGMENT_COLUMNS),
+        "nominal": len(NOMINAL_COLUMNS),
+        "params": len(PARAM_COLUMNS),
+        "delay_push": DELAY_LINE_LENGTH,
+        "delay_verbal": DELAY_LINE_LENGTH,
+        "report": len(REPORT_COLUMNS),
+    },
+)
+"""Start of each block of the packed per-env state row (SitToStandCore.state); after ``end`` come
+3 x substeps scratch columns: measured force, verbal cue, position."""
 
-# Scalars the kernels read, packed in one float array (SitToStandCore.consts).
-(
-    _C_SUBSTEPS,
-    _C_VERBAL_S,
-    _C_JUDGE_DELAY_S,
-    _C_JUDGE_THRESHOLD,
-    _C_SUCCESS_LEAN_M,
-    _C_UPRIGHT_M,
-    _C_EPISODE_S,
-    _C_W_SUCCESS,
-    _C_W_UNSAFE,
-    _C_W_PREMATURE,
-    _C_TIME_TERM,
-    _C_W_FORCE,
-    _C_BUILD_OBS,
-    _C_VARY,
-    _C_XDOT_VAR,
-    _C_ETA_VAR,
-    _C_XI_VAR,
-    _C_XI_STD,
-    _C_N_OBS,
-    _C_N_VARIED,
-    _C_OBS_AT,
-    _C_VARIED_AT,
-    _C_TEMPLATE_AT,
-    _N_CONSTS,
-) = range(24)
+CONST_COLUMNS: tuple[str, ...] = (
+    "substeps",
+    "verbal_duration_s",
+    "judgment_delay_s",
+    "judgment_threshold",
+    "success_lean_m",
+    "upright_m",
+    "episode_s",
+    "reward_success",
+    "reward_unsafe",
+    "reward_premature",
+    "time_term",
+    "force_per_n_s",
+    "build_obs",
+    "vary",
+    "xdot_var",
+    "eta_var",
+    "xi_var",
+    "xi_std",
+    "n_obs",
+    "n_varied",
+    "obs_at",
+    "varied_at",
+    "template_at",
+)
+"""Scalars the kernels read, packed in one float array (SitToStandCore.consts)."""
+CONSTS = index_table("ConstColumns", CONST_COLUMNS)
 # After the scalars come the observation spec (feature index, low, high; n_obs each), the
 # columns sample_person varies, and the person's initial state row.
 
@@ -197,10 +175,9 @@ CMD_COLUMNS = 4
 _D_PERSONA, _D_UNIFORM, _D_LEAN, _D_NORMALS = range(4)
 
 # Columns of a persona-table row: the packed person, the filter's nominal row, the initial-xi cuts.
-_PT_PARAMS = 0
-_PT_NOMINAL = _PT_PARAMS + len(PARAM_COLUMNS)
-_PT_XI_CUTS = _PT_NOMINAL + len(NOMINAL_COLUMNS)
-_PT_WIDTH = _PT_XI_CUTS + 2
+PERSONA_BLOCKS = offset_table(
+    "PersonaBlocks", {"params": len(PARAM_COLUMNS), "nominal": len(NOMINAL_COLUMNS), "xi_cuts": 2}
+)
 
 
 def check_outcome_codes(outcome: type[IntEnum]) -> None:
@@ -238,17 +215,12 @@ def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel |
     and none of the realism knobs -- the gap real people leave.
     """
     base = base or NominalModel()
-    bio, intent, sensors = person.biomechanics, person.intention, person.sensors
-    return base.replace(
-        dt_s=timing.dt_s,
-        damping_rate_per_s=bio.damping_rate_per_s,
-        voluntary_gain_per_s2=bio.voluntary_gain_per_s2,
-        push_compliance_m_per_s2_n=bio.push_compliance_m_per_s2_n,
-        push_gain_m_per_s_n=intent.push_gain_m_per_s_n,
-        verbal_gain_m_per_s=intent.verbal_gain_m_per_s,
-        # A noiseless camera still needs R > 0 for the filter to be well posed.
-        position_noise_std_m=max(sensors.position_noise_std_m, 1e-4),
-    )
+    # The nominal model shares its gains' names with the person's fields: copy every shared one.
+    person_values = {**field_values(person), "dt_s": timing.dt_s}
+    shared = {f.name: person_values[f.name] for f in dataclasses.fields(NominalModel) if f.name in person_values}
+    # A noiseless camera still needs R > 0 for the filter to be well posed.
+    shared["position_noise_std_m"] = max(shared["position_noise_std_m"], 1e-4)
+    return base.replace(**shared)
 
 
 @dataclass
@@ -282,10 +254,10 @@ class StepArrays:
 @njit(cache=True)
 def _observe_row(row: NDArray[np.float64], obs_row: NDArray[np.float32], consts: NDArray[np.float64]) -> None:
     # Select the features and clip in float64, then round: as np.clip(f, low, high).astype(float32).
-    n_obs = int(consts[_C_N_OBS])
-    at = int(consts[_C_OBS_AT])
+    n_obs = int(consts[CONSTS.n_obs])
+    at = int(consts[CONSTS.obs_at])
     for k in range(n_obs):
-        value = row[_ST_REPORT + int(consts[at + k])]
+        value = row[BLOCKS.report + int(consts[at + k])]
         obs_row[k] = min(max(value, consts[at + n_obs + k]), consts[at + 2 * n_obs + k])
 
 
@@ -332,10 +304,10 @@ def _reset_rows(
     consts: NDArray[np.float64],
 ) -> None:
     # Start episodes from the draws (their normals columns already turned into variation factors).
-    episode_s = consts[_C_EPISODE_S]
-    n_varied = int(consts[_C_N_VARIED])
-    varied_at = int(consts[_C_VARIED_AT])
-    template_at = int(consts[_C_TEMPLATE_AT])
+    episode_s = consts[CONSTS.episode_s]
+    n_varied = int(consts[CONSTS.n_varied])
+    varied_at = int(consts[CONSTS.varied_at])
+    template_at = int(consts[CONSTS.template_at])
     for r in range(indices.shape[0]):
         i = indices[r]
         k = int(draws[r, _D_PERSONA])
@@ -343,61 +315,65 @@ def _reset_rows(
         row = state[i]
         row[:] = 0.0
         # The person: the persona's packed row with the varied gains scaled (= sample_person + pack_person).
-        p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
-        p[:] = persona[_PT_PARAMS : _PT_PARAMS + len(PARAM_COLUMNS)]
-        if consts[_C_VARY] > 0.5:
+        p = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
+        p[:] = persona[PERSONA_BLOCKS.params : PERSONA_BLOCKS.params + len(PARAM_COLUMNS)]
+        if consts[CONSTS.vary] > 0.5:
             for j in range(n_varied):
                 column = int(consts[varied_at + j])
-                p[column] = persona[_PT_PARAMS + column] * draws[r, _D_NORMALS + j]
-        a00, a01, a10, a11, b0, b1 = zoh_coefficients(p[P_LAMBDA1], p[P_K1], p[P_DT])
-        p[P_A00] = a00
-        p[P_A01] = a01
-        p[P_A10] = a10
-        p[P_A11] = a11
-        p[P_B0] = b0
-        p[P_B1] = b1
+                p[column] = persona[PERSONA_BLOCKS.params + column] * draws[r, _D_NORMALS + j]
+        a00, a01, a10, a11, b0, b1 = zoh_coefficients(
+            p[PERSON.damping_rate_per_s], p[PERSON.voluntary_gain_per_s2], p[PERSON.dt_s]
+        )
+        p[PERSON.zoh_a00] = a00
+        p[PERSON.zoh_a01] = a01
+        p[PERSON.zoh_a10] = a10
+        p[PERSON.zoh_a11] = a11
+        p[PERSON.zoh_b0] = b0
+        p[PERSON.zoh_b1] = b1
         u = draws[r, _D_UNIFORM]
-        xi = -1.0 if u < persona[_PT_XI_CUTS] else (1.0 if u > persona[_PT_XI_CUTS + 1] else 0.0)
+        xi = -1.0 if u < persona[PERSONA_BLOCKS.xi_cuts] else (1.0 if u > persona[PERSONA_BLOCKS.xi_cuts + 1] else 0.0)
         if xi_override != _NO_OVERRIDE:
             xi = float(xi_override)
         x0 = draws[r, _D_LEAN]
         # initial_state_row(xi, x0): at rest at x0, intending to stay.
-        s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
+        s = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
         s[:] = consts[template_at : template_at + len(STATE_COLUMNS)]
-        s[S_X] = x0
-        s[S_ETA] = x0
-        s[S_XI] = xi
+        s[STATE.x_m] = x0
+        s[STATE.eta_m] = x0
+        s[STATE.xi] = xi
         # The filter, centred on the first reading with the nominal model's prior.
         nominal_width = len(NOMINAL_COLUMNS)
-        row[_ST_NOMINAL : _ST_NOMINAL + nominal_width] = persona[_PT_NOMINAL : _PT_NOMINAL + nominal_width]
-        row[_ST_MEAN] = x0
-        row[_ST_MEAN + 2] = x0
-        row[_ST_COV] = persona[_PT_NOMINAL + nominal_width - 1]  # P[0, 0] = R
-        row[_ST_COV + STATE_DIM + 1] = consts[_C_XDOT_VAR]
-        row[_ST_COV + 2 * (STATE_DIM + 1)] = consts[_C_ETA_VAR]
-        row[_ST_COV + 3 * (STATE_DIM + 1)] = consts[_C_XI_VAR]
-        row[_ST_JUDGE + J_SINCE_ONSET] = episode_s
-        rep = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
-        rep[F_POS] = x0
-        rep[F_X_HAT] = x0
-        rep[F_ETA_HAT] = x0
-        rep[F_XI_STD] = consts[_C_XI_STD]
-        rep[F_SINCE_ONSET] = episode_s
-        rep[F_TRUE_XI] = xi
-        rep[R_TRUE_X] = x0
-        rep[R_TRUE_ETA] = x0
-        rep[R_TRUE_XI] = xi
-        rep[R_PERSONA] = k
-        if consts[_C_BUILD_OBS] > 0.5:
+        row[BLOCKS.nominal : BLOCKS.nominal + nominal_width] = persona[
+            PERSONA_BLOCKS.nominal : PERSONA_BLOCKS.nominal + nominal_width
+        ]
+        row[BLOCKS.mean] = x0
+        row[BLOCKS.mean + 2] = x0
+        row[BLOCKS.cov] = persona[PERSONA_BLOCKS.nominal + NOMINAL.r_position]  # P[0, 0] = R
+        row[BLOCKS.cov + STATE_DIM + 1] = consts[CONSTS.xdot_var]
+        row[BLOCKS.cov + 2 * (STATE_DIM + 1)] = consts[CONSTS.eta_var]
+        row[BLOCKS.cov + 3 * (STATE_DIM + 1)] = consts[CONSTS.xi_var]
+        row[BLOCKS.judge + JUDGE.since_onset_s] = episode_s
+        rep = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+        rep[REPORT.measured_position_m] = x0
+        rep[REPORT.x_hat_m] = x0
+        rep[REPORT.eta_hat_m] = x0
+        rep[REPORT.xi_std] = consts[CONSTS.xi_std]
+        rep[REPORT.time_since_cue_onset_s] = episode_s
+        rep[REPORT.true_xi] = xi
+        rep[REPORT.true_x_m] = x0
+        rep[REPORT.true_eta_m] = x0
+        rep[REPORT.info_true_xi] = xi
+        rep[REPORT.persona_index] = k
+        if consts[CONSTS.build_obs] > 0.5:
             _observe_row(row, obs[i], consts)
 
 
 @njit(cache=True)
 def _lift_outcome(s: NDArray[np.float64], consts: NDArray[np.float64]) -> int:
     # The lift is judged on the true state at the moment it starts (§II).
-    if s[S_XI] > 0.5 and s[S_X] >= consts[_C_SUCCESS_LEAN_M]:
+    if s[STATE.xi] > 0.5 and s[STATE.x_m] >= consts[CONSTS.success_lean_m]:
         return _SUCCESS
-    if s[S_XI] < -0.5 or s[S_X] < consts[_C_UPRIGHT_M]:
+    if s[STATE.xi] < -0.5 or s[STATE.x_m] < consts[CONSTS.upright_m]:
         return _UNSAFE
     return _PREMATURE
 
@@ -413,54 +389,56 @@ def _simulate_action(
 ) -> int:
     # One non-lift action of one env: cues -> person -> sensors -> filter -> judgment, x substeps,
     # then the features. Returns the outcome: TIMEOUT at the end of the episode, else NONE.
-    substeps = int(consts[_C_SUBSTEPS])
-    episode_s = consts[_C_EPISODE_S]
-    s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
-    env = row[_ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
-    m = row[_ST_MEAN : _ST_MEAN + STATE_DIM]
-    P = row[_ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
-    judge = row[_ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
-    nominal = row[_ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
-    p = row[_ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
-    delay_push = row[_ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
-    delay_verbal = row[_ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
-    f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
-    block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
-    dt = p[P_DT]
+    substeps = int(consts[CONSTS.substeps])
+    episode_s = consts[CONSTS.episode_s]
+    s = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
+    env = row[BLOCKS.cues : BLOCKS.cues + len(CUE_COLUMNS)]
+    m = row[BLOCKS.mean : BLOCKS.mean + STATE_DIM]
+    P = row[BLOCKS.cov : BLOCKS.cov + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
+    judge = row[BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
+    nominal = row[BLOCKS.nominal : BLOCKS.nominal + len(NOMINAL_COLUMNS)]
+    p = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
+    delay_push = row[BLOCKS.delay_push : BLOCKS.delay_push + DELAY_LINE_LENGTH]
+    delay_verbal = row[BLOCKS.delay_verbal : BLOCKS.delay_verbal + DELAY_LINE_LENGTH]
+    f = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+    block = row[BLOCKS.end : BLOCKS.end + 3 * substeps]
+    dt = p[PERSON.dt_s]
     # A verbal cue is an utterance of fixed length; one can't talk over oneself.
-    if env[E_VERBAL_REMAINING] <= 0.0 and verbal_request != 0.0:
-        env[E_VERBAL_VALUE] = verbal_request
-        env[E_VERBAL_REMAINING] = consts[_C_VERBAL_S]
+    if env[CUES.verbal_remaining_s] <= 0.0 and verbal_request != 0.0:
+        env[CUES.verbal_value] = verbal_request
+        env[CUES.verbal_remaining_s] = consts[CONSTS.verbal_duration_s]
     for k in range(substeps):
-        cv = env[E_VERBAL_VALUE] if env[E_VERBAL_REMAINING] > 1e-9 else 0.0
+        cv = env[CUES.verbal_value] if env[CUES.verbal_remaining_s] > 1e-9 else 0.0
         for j in range(NORMALS_PER_SUBSTEP):
             z[j] = standard_normal(g)
         person_substep(s, p, delay_push, delay_verbal, cp, cv, z)
         pos, force = measure(s, p, cp, z[3], z[4])
         kalman_step(m, P, nominal, force, cv, pos)
-        judgment_substep(judge, cp > 0.0 or cv != 0.0, m[3], consts[_C_JUDGE_DELAY_S], consts[_C_JUDGE_THRESHOLD], dt)
+        judgment_substep(
+            judge, cp > 0.0 or cv != 0.0, m[3], consts[CONSTS.judgment_delay_s], consts[CONSTS.judgment_threshold], dt
+        )
         block[k] = force
         block[substeps + k] = cv
         block[2 * substeps + k] = pos
-        env[E_VERBAL_REMAINING] -= dt
-        env[E_IMPULSE] += cp * dt
-        f[F_POS] = pos
-        f[F_FORCE] = force
-    if env[E_VERBAL_REMAINING] <= 1e-9:
-        env[E_VERBAL_REMAINING] = 0.0
-        env[E_VERBAL_VALUE] = 0.0
-    env[E_ELAPSED] += substeps * dt
-    f[F_VERBAL] = env[E_VERBAL_VALUE]
-    f[F_SINCE_ONSET] = min(judge[J_SINCE_ONSET], episode_s)
-    f[F_X_HAT] = m[0]
-    f[F_XDOT_HAT] = m[1]
-    f[F_ETA_HAT] = m[2]
-    f[F_XI_HAT] = m[3]
-    f[F_XI_STD] = np.sqrt(max(P[3, 3], 0.0))
-    f[F_JUDGMENT] = judge[J_JUDGMENT]
-    f[F_ELAPSED] = env[E_ELAPSED]
-    f[F_TRUE_XI] = s[S_XI]
-    if env[E_ELAPSED] >= episode_s - 1e-9:
+        env[CUES.verbal_remaining_s] -= dt
+        env[CUES.impulse_n_s] += cp * dt
+        f[REPORT.measured_position_m] = pos
+        f[REPORT.measured_force_n] = force
+    if env[CUES.verbal_remaining_s] <= 1e-9:
+        env[CUES.verbal_remaining_s] = 0.0
+        env[CUES.verbal_value] = 0.0
+    env[CUES.elapsed_s] += substeps * dt
+    f[REPORT.verbal_cue] = env[CUES.verbal_value]
+    f[REPORT.time_since_cue_onset_s] = min(judge[JUDGE.since_onset_s], episode_s)
+    f[REPORT.x_hat_m] = m[0]
+    f[REPORT.xdot_hat_m_per_s] = m[1]
+    f[REPORT.eta_hat_m] = m[2]
+    f[REPORT.xi_hat] = m[3]
+    f[REPORT.xi_std] = np.sqrt(max(P[3, 3], 0.0))
+    f[REPORT.judgment] = judge[JUDGE.judgment]
+    f[REPORT.elapsed_s] = env[CUES.elapsed_s]
+    f[REPORT.true_xi] = s[STATE.xi]
+    if env[CUES.elapsed_s] >= episode_s - 1e-9:
         return _TIMEOUT  # truncation happens on this same step
     return _NONE
 
@@ -470,25 +448,25 @@ def _write_reward_and_truth(
     row: NDArray[np.float64], result: int, lift: bool, cp: float, consts: NDArray[np.float64]
 ) -> None:
     # Named reward terms (RewardWeights), then their sum; the outcome, the push and the true state.
-    s = row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
-    f = row[_ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
-    t_success = consts[_C_W_SUCCESS] if result == _SUCCESS else 0.0
-    t_unsafe = -consts[_C_W_UNSAFE] if result == _UNSAFE else 0.0
-    t_premature = -consts[_C_W_PREMATURE] if result == _PREMATURE else 0.0
-    t_time = 0.0 if lift else consts[_C_TIME_TERM]
-    t_force = -consts[_C_W_FORCE] * row[_ST_CUES + E_IMPULSE]
-    f[R_TERMS] = t_success
-    f[R_TERMS + 1] = t_unsafe
-    f[R_TERMS + 2] = t_premature
-    f[R_TERMS + 3] = t_time
-    f[R_TERMS + 4] = t_force
-    f[R_REWARD] = t_success + t_unsafe + t_premature + t_time + t_force
-    f[R_OUTCOME] = result
-    f[R_PUSH] = 0.0 if lift else cp
-    f[R_TRUE_X] = s[S_X]
-    f[R_TRUE_XDOT] = s[S_XDOT]
-    f[R_TRUE_ETA] = s[S_ETA]
-    f[R_TRUE_XI] = s[S_XI]
+    s = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
+    f = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+    t_success = consts[CONSTS.reward_success] if result == _SUCCESS else 0.0
+    t_unsafe = -consts[CONSTS.reward_unsafe] if result == _UNSAFE else 0.0
+    t_premature = -consts[CONSTS.reward_premature] if result == _PREMATURE else 0.0
+    t_time = 0.0 if lift else consts[CONSTS.time_term]
+    t_force = -consts[CONSTS.force_per_n_s] * row[BLOCKS.cues + CUES.impulse_n_s]
+    f[REPORT.reward_success] = t_success
+    f[REPORT.reward_unsafe] = t_unsafe
+    f[REPORT.reward_premature] = t_premature
+    f[REPORT.reward_time] = t_time
+    f[REPORT.reward_force] = t_force
+    f[REPORT.reward] = t_success + t_unsafe + t_premature + t_time + t_force
+    f[REPORT.outcome] = result
+    f[REPORT.push_force_n] = 0.0 if lift else cp
+    f[REPORT.true_x_m] = s[STATE.x_m]
+    f[REPORT.true_xdot_m_per_s] = s[STATE.xdot_m_per_s]
+    f[REPORT.true_eta_m] = s[STATE.eta_m]
+    f[REPORT.info_true_xi] = s[STATE.xi]
 
 
 @njit(cache=True)
@@ -504,7 +482,7 @@ def _advance(
     for i in range(n_envs):
         if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, G_STATE] == 0:
             return i
-    substeps = int(consts[_C_SUBSTEPS])
+    substeps = int(consts[CONSTS.substeps])
     z = np.empty(NORMALS_PER_SUBSTEP)
     for i in range(n_envs):
         if cmd[i, CMD_ACTIVE] < 0.5:
@@ -512,19 +490,19 @@ def _advance(
         row = state[i]
         cp = cmd[i, CMD_PUSH]
         lift = cmd[i, CMD_LIFT] > 0.5
-        row[_ST_CUES + E_IMPULSE] = 0.0
+        row[BLOCKS.cues + CUES.impulse_n_s] = 0.0
         if lift:
-            result = _lift_outcome(row[_ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)], consts)
+            result = _lift_outcome(row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)], consts)
             # The filter's input blocks hold still: no push, no cue, the last reading.
-            block = row[_ST_BLOCKS : _ST_BLOCKS + 3 * substeps]
+            block = row[BLOCKS.end : BLOCKS.end + 3 * substeps]
             for k in range(substeps):
                 block[k] = 0.0
                 block[substeps + k] = 0.0
-                block[2 * substeps + k] = row[_ST_REPORT + F_POS]
+                block[2 * substeps + k] = row[BLOCKS.report + REPORT.measured_position_m]
         else:
             result = _simulate_action(row, cp, cmd[i, CMD_VERBAL], generators[i], z, consts)
         _write_reward_and_truth(row, result, lift, cp, consts)
-        if consts[_C_BUILD_OBS] > 0.5:
+        if consts[CONSTS.build_obs] > 0.5:
             _observe_row(row, obs[i], consts)
     return -1
 
@@ -590,7 +568,7 @@ class SitToStandCore:
         self._allocate(n, len(index), len(varied))
         self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
         # With a multiple-model estimator the observation waits for its probabilities.
-        self.consts[_C_BUILD_OBS] = 1.0 if self.mm is None else 0.0
+        self.consts[CONSTS.build_obs] = 1.0 if self.mm is None else 0.0
 
     def _pack_personas(self) -> list[int]:
         """Fill ``persona_table`` and the variation stds; return the varied columns of a packed person."""
@@ -599,13 +577,15 @@ class SitToStandCore:
         self._persona_nominal = [nominal_row(nominal_model_for(p.params, timing)) for p in personas]
         # Each persona packed once; a reset scales the varied gains (as sample_person does) and
         # recomputes the zero-order hold, instead of building and validating dataclasses.
-        table = np.zeros((len(personas), _PT_WIDTH))
+        table = np.zeros((len(personas), PERSONA_BLOCKS.end))
         for k, persona in enumerate(personas):
             coop = persona.params.cooperativeness
-            table[k, _PT_PARAMS:_PT_NOMINAL] = pack_person(persona.params.with_realism(realism), timing)
-            table[k, _PT_NOMINAL:_PT_XI_CUTS] = self._persona_nominal[k]
-            table[k, _PT_XI_CUTS] = coop.initial_p_uncooperative
-            table[k, _PT_XI_CUTS + 1] = 1.0 - coop.initial_p_cooperative
+            table[k, PERSONA_BLOCKS.params : PERSONA_BLOCKS.nominal] = pack_person(
+                persona.params.with_realism(realism), timing
+            )
+            table[k, PERSONA_BLOCKS.nominal : PERSONA_BLOCKS.xi_cuts] = self._persona_nominal[k]
+            table[k, PERSONA_BLOCKS.xi_cuts] = coop.initial_p_uncooperative
+            table[k, PERSONA_BLOCKS.xi_cuts + 1] = 1.0 - coop.initial_p_cooperative
         self.persona_table = table
         stds = {p.variation_relative_std for p in personas}
         # One shared std (the usual case) broadcasts from a 1-element array (cheaper for a ufunc
@@ -617,20 +597,20 @@ class SitToStandCore:
     def _allocate(self, n: int, n_obs: int, n_varied: int) -> None:
         """The packed per-env state with its views, the command rows and the output buffers."""
         substeps = self.timing.substeps
-        self.state = st = np.zeros((n, _ST_BLOCKS + 3 * substeps))
-        self.person = st[:, _ST_PERSON : _ST_PERSON + len(STATE_COLUMNS)]
-        self.env = st[:, _ST_CUES : _ST_CUES + _N_ENV_COLUMNS]
-        self.m = st[:, _ST_MEAN : _ST_MEAN + STATE_DIM]
-        self.P = st[:, _ST_COV : _ST_COV + STATE_DIM * STATE_DIM].reshape(n, STATE_DIM, STATE_DIM)
-        self.judge = st[:, _ST_JUDGE : _ST_JUDGE + len(JUDGMENT_COLUMNS)]
-        self.nominal = st[:, _ST_NOMINAL : _ST_NOMINAL + len(NOMINAL_COLUMNS)]
-        self.params = st[:, _ST_PARAMS : _ST_PARAMS + len(PARAM_COLUMNS)]
-        self.delay_push = st[:, _ST_DELAY_PUSH : _ST_DELAY_PUSH + DELAY_LINE_LENGTH]
-        self.delay_verbal = st[:, _ST_DELAY_VERBAL : _ST_DELAY_VERBAL + DELAY_LINE_LENGTH]
-        self.report = st[:, _ST_REPORT : _ST_REPORT + len(REPORT_COLUMNS)]
-        self._block_cp = st[:, _ST_BLOCKS : _ST_BLOCKS + substeps]
-        self._block_cv = st[:, _ST_BLOCKS + substeps : _ST_BLOCKS + 2 * substeps]
-        self._block_y = st[:, _ST_BLOCKS + 2 * substeps : _ST_BLOCKS + 3 * substeps]
+        self.state = st = np.zeros((n, BLOCKS.end + 3 * substeps))
+        self.person = st[:, BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
+        self.env = st[:, BLOCKS.cues : BLOCKS.cues + len(CUE_COLUMNS)]
+        self.m = st[:, BLOCKS.mean : BLOCKS.mean + STATE_DIM]
+        self.P = st[:, BLOCKS.cov : BLOCKS.cov + STATE_DIM * STATE_DIM].reshape(n, STATE_DIM, STATE_DIM)
+        self.judge = st[:, BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
+        self.nominal = st[:, BLOCKS.nominal : BLOCKS.nominal + len(NOMINAL_COLUMNS)]
+        self.params = st[:, BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
+        self.delay_push = st[:, BLOCKS.delay_push : BLOCKS.delay_push + DELAY_LINE_LENGTH]
+        self.delay_verbal = st[:, BLOCKS.delay_verbal : BLOCKS.delay_verbal + DELAY_LINE_LENGTH]
+        self.report = st[:, BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+        self._block_cp = st[:, BLOCKS.end : BLOCKS.end + substeps]
+        self._block_cv = st[:, BLOCKS.end + substeps : BLOCKS.end + 2 * substeps]
+        self._block_y = st[:, BLOCKS.end + 2 * substeps : BLOCKS.end + 3 * substeps]
         self.rngs: list[np.random.Generator | None] = [None] * n
         self.generators = np.zeros((n, 4), dtype=np.uint64)
         self.cmd = np.zeros((n, CMD_COLUMNS))
@@ -640,12 +620,12 @@ class SitToStandCore:
         self._terminated = np.zeros(n, dtype=bool)
         self._out = StepArrays(
             features=self.report[:, : len(FEATURES)],
-            reward_terms=self.report[:, R_TERMS:R_REWARD],
-            reward=self.report[:, R_REWARD],
+            reward_terms=self.report[:, REPORT.reward_success : REPORT.reward],
+            reward=self.report[:, REPORT.reward],
             outcome=self._outcome,
             terminated=self._terminated,
-            push_force_n=self.report[:, R_PUSH],
-            verbal_cue=self.report[:, F_VERBAL],
+            push_force_n=self.report[:, REPORT.push_force_n],
+            verbal_cue=self.report[:, REPORT.verbal_cue],
         )
         self._all = np.arange(n, dtype=np.int64)
         self._draws = np.zeros((n, _D_NORMALS + n_varied))
@@ -662,14 +642,14 @@ class SitToStandCore:
     @property
     def out(self) -> StepArrays:
         """What the last step or reset produced, as :class:`StepArrays` (views; outcome and terminated refreshed)."""
-        np.copyto(self._outcome, self.report[:, R_OUTCOME], casting="unsafe")
+        np.copyto(self._outcome, self.report[:, REPORT.outcome], casting="unsafe")
         np.take(_ENDED_BY_LIFT, self._outcome, out=self._terminated)
         return self._out
 
     @property
     def persona_index(self) -> NDArray[np.int64]:
         """(N,) index into ``personas`` of each env's current persona."""
-        return self.report[:, R_PERSONA].astype(np.int64)
+        return self.report[:, REPORT.persona_index].astype(np.int64)
 
     # --- episodes -------------------------------------------------------------
 
@@ -730,7 +710,7 @@ class SitToStandCore:
             # The persona (and so the nominal model) may change from episode to episode.
             self.mm.nominal[indices] = self.nominal[indices]
             self.mm.reset(indices, draws[:, _D_LEAN])
-            self.report[indices, F_P_M1 : F_P_P1 + 1] = self.mm.probabilities[indices]
+            self.report[indices, REPORT.p_uncooperative : REPORT.p_cooperative + 1] = self.mm.probabilities[indices]
             _observe(indices, self.state, self.obs, self.consts)
 
     # --- stepping -------------------------------------------------------------
@@ -759,7 +739,7 @@ class SitToStandCore:
             raise RuntimeError(f"env {failed} was stepped before it was reset")
         if self.mm is not None:
             probs = self.mm.run(self._block_cp, self._block_cv, self._block_y)
-            self.report[:, F_P_M1 : F_P_P1 + 1] = probs[:, -1]
+            self.report[:, REPORT.p_uncooperative : REPORT.p_cooperative + 1] = probs[:, -1]
             _observe(self._all, self.state, self.obs, self.consts)
 
     # --- pickling -----------------------------------------------------------------
@@ -794,39 +774,45 @@ def _pack_consts(
     observation_high: NDArray[np.float64] | None,
     varied: list[int],
 ) -> NDArray[np.float64]:
-    """The scalars the kernels read (``_C_*``), then the observation spec, varied columns and initial state row."""
+    """The scalars the kernels read (:data:`CONST_COLUMNS`), then observation spec, varied columns, initial state."""
     timing, reward, prior = core.timing, core.reward_weights, core._nominal_prior
     n_obs = len(index)
     template = initial_state_row(0, 0.0)
-    consts = np.zeros(_N_CONSTS + 3 * n_obs + len(varied) + len(template))
-    consts[_C_SUBSTEPS] = timing.substeps
-    consts[_C_VERBAL_S] = core.cues.verbal_duration_s
-    consts[_C_JUDGE_DELAY_S] = core.judgment.delay_s
-    consts[_C_JUDGE_THRESHOLD] = core.judgment.threshold
-    consts[_C_SUCCESS_LEAN_M] = core.lift.success_lean_m
-    consts[_C_UPRIGHT_M] = core.lift.upright_m
-    consts[_C_EPISODE_S] = timing.episode_s
-    consts[_C_W_SUCCESS] = reward.success
-    consts[_C_W_UNSAFE] = reward.unsafe
-    consts[_C_W_PREMATURE] = reward.premature
-    consts[_C_TIME_TERM] = -reward.time_per_s * timing.action_period_s
-    consts[_C_W_FORCE] = reward.force_per_n_s
-    consts[_C_VARY] = 1.0 if core.realism.person_variation else 0.0
-    consts[_C_XDOT_VAR] = prior.initial_velocity_std_m_per_s**2
-    consts[_C_ETA_VAR] = prior.initial_intention_std_m**2
-    consts[_C_XI_VAR] = prior.initial_cooperativeness_std**2
-    consts[_C_XI_STD] = prior.initial_cooperativeness_std
-    consts[_C_N_OBS] = n_obs
-    consts[_C_N_VARIED] = len(varied)
-    at = _N_CONSTS
-    consts[_C_OBS_AT] = at
-    consts[at : at + n_obs] = index
-    consts[at + n_obs : at + 2 * n_obs] = -np.inf if observation_low is None else observation_low
-    consts[at + 2 * n_obs : at + 3 * n_obs] = np.inf if observation_high is None else observation_high
-    consts[_C_VARIED_AT] = at = at + 3 * n_obs
-    consts[at : at + len(varied)] = varied
-    consts[_C_TEMPLATE_AT] = at = at + len(varied)
-    consts[at : at + len(template)] = template
+    obs_at = len(CONST_COLUMNS)
+    varied_at = obs_at + 3 * n_obs
+    template_at = varied_at + len(varied)
+    scalars = {
+        "substeps": timing.substeps,
+        "verbal_duration_s": core.cues.verbal_duration_s,
+        "judgment_delay_s": core.judgment.delay_s,
+        "judgment_threshold": core.judgment.threshold,
+        "success_lean_m": core.lift.success_lean_m,
+        "upright_m": core.lift.upright_m,
+        "episode_s": timing.episode_s,
+        "reward_success": reward.success,
+        "reward_unsafe": reward.unsafe,
+        "reward_premature": reward.premature,
+        "time_term": -reward.time_per_s * timing.action_period_s,
+        "force_per_n_s": reward.force_per_n_s,
+        "build_obs": 0.0,  # set by the core once its estimator exists
+        "vary": 1.0 if core.realism.person_variation else 0.0,
+        "xdot_var": prior.initial_velocity_std_m_per_s**2,
+        "eta_var": prior.initial_intention_std_m**2,
+        "xi_var": prior.initial_cooperativeness_std**2,
+        "xi_std": prior.initial_cooperativeness_std,
+        "n_obs": n_obs,
+        "n_varied": len(varied),
+        "obs_at": obs_at,
+        "varied_at": varied_at,
+        "template_at": template_at,
+    }
+    consts = np.zeros(template_at + len(template))
+    consts[:obs_at] = [scalars[name] for name in CONST_COLUMNS]
+    consts[obs_at : obs_at + n_obs] = index
+    consts[obs_at + n_obs : obs_at + 2 * n_obs] = -np.inf if observation_low is None else observation_low
+    consts[obs_at + 2 * n_obs : varied_at] = np.inf if observation_high is None else observation_high
+    consts[varied_at:template_at] = varied
+    consts[template_at:] = template
     return consts
 
 

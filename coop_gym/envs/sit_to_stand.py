@@ -26,18 +26,8 @@ from coop_gym.envs.core import (
     CMD_LIFT,
     CMD_PUSH,
     CMD_VERBAL,
-    F_ELAPSED,
-    F_JUDGMENT,
-    F_P_M1,
-    F_VERBAL,
-    F_XI_HAT,
-    F_XI_STD,
     FEATURES,
-    R_OUTCOME,
-    R_PUSH,
-    R_REWARD,
-    R_TRUE_X,
-    R_TRUE_XI,
+    REPORT,
     REPORT_COLUMNS,
     REWARD_TERMS,
     SitToStandCore,
@@ -79,20 +69,10 @@ FEATURE_BOUNDS: dict[str, tuple[float, float]] = {
     "true_xi": (-1.0, 1.0),
 }
 
-_BELIEF = (
-    "measured_position_m",
-    "measured_force_n",
-    "verbal_cue",
-    "time_since_cue_onset_s",
-    "x_hat_m",
-    "xdot_hat_m_per_s",
-    "eta_hat_m",
-    "xi_hat",
-    "xi_std",
-    "judgment",
-    "elapsed_s",
-)
-_PROBABILITIES = ("p_uncooperative", "p_unresponsive", "p_cooperative")
+# Slices of FEATURES (one list of names): the readings, the filter's belief and the clock; the
+# multiple-model probabilities; the oracle's true xi comes last.
+_BELIEF = FEATURES[: FEATURES.index("p_uncooperative")]
+_PROBABILITIES = FEATURES[FEATURES.index("p_uncooperative") : FEATURES.index("true_xi")]
 _RAW = ("measured_position_m", "measured_force_n", "verbal_cue", "time_since_cue_onset_s", "elapsed_s")
 
 N_FLAT_ACTIONS = 18
@@ -411,17 +391,21 @@ def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, ste
     r = core.report[i]
     probs = None
     if core.mm is not None:
-        probs = (float(r[F_P_M1]), float(r[F_P_M1 + 1]), float(r[F_P_M1 + 2]))
+        probs = (
+            float(r[REPORT.p_uncooperative]),
+            float(r[REPORT.p_unresponsive]),
+            float(r[REPORT.p_cooperative]),
+        )
     return RenderState(
-        time_s=float(r[F_ELAPSED]),
-        shoulder_position_m=float(r[R_TRUE_X]),
-        push_force_n=float(r[R_PUSH]) if stepped else 0.0,
-        verbal_cue=int(r[F_VERBAL]),
-        xi_estimate=float(r[F_XI_HAT]),
-        xi_std=float(r[F_XI_STD]),
+        time_s=float(r[REPORT.elapsed_s]),
+        shoulder_position_m=float(r[REPORT.true_x_m]),
+        push_force_n=float(r[REPORT.push_force_n]) if stepped else 0.0,
+        verbal_cue=int(r[REPORT.verbal_cue]),
+        xi_estimate=float(r[REPORT.xi_hat]),
+        xi_std=float(r[REPORT.xi_std]),
         threshold=float(core.judgment.threshold),
-        judgment=int(r[F_JUDGMENT]),
-        true_xi=int(r[R_TRUE_XI]),
+        judgment=int(r[REPORT.judgment]),
+        true_xi=int(r[REPORT.info_true_xi]),
         outcome=_OUTCOME_LABELS[outcome] if outcome != Outcome.NONE else None,
         probabilities=probs,
         lift=lift,
@@ -494,7 +478,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
 
     ## Starting State
 
-    A persona is drawn from ``personas`` and a person around it (about 15 % variation
+    A persona is drawn from ``personas`` and a person around it (about 20 % variation
     of every gain). The person sits upright (``x ~ N(0, 5 mm)``), at rest, intending to
     stay; ``xi`` is drawn from the persona's initial probabilities.
 
@@ -626,7 +610,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
             raise RuntimeError("SitToStandEnv.step() called before reset() or after the episode ended; call reset()")
         self.core.step_commands(self._command(action))
         r = self._report_row.tolist()
-        self._outcome = outcome = int(r[R_OUTCOME])
+        self._outcome = outcome = int(r[REPORT.outcome])
         # A lift terminates. The episode clock of ``timing`` truncates (the registered
         # TimeLimit agrees with it for the default timing; a custom ``timing`` is honoured too).
         terminated = outcome in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE)
@@ -638,7 +622,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         info = report_info(r, self._persona_names, self._has_mm)
         if self.render_mode == "human":
             self.render()
-        return obs, r[R_REWARD], terminated, truncated, info
+        return obs, r[REPORT.reward], terminated, truncated, info
 
     def render(self) -> NDArray[np.uint8] | None:
         """Draw the person, the cues, the estimate gauge and the true ``xi``."""
@@ -714,8 +698,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         return cmd
 
 
-# report_info unpacks report rows by position.
-assert REPORT_COLUMNS == (
+_REPORT_LAYOUT = (
     *FEATURES,
     "reward_success",
     "reward_unsafe",
@@ -728,10 +711,23 @@ assert REPORT_COLUMNS == (
     "true_x_m",
     "true_xdot_m_per_s",
     "true_eta_m",
-    "true_xi",
+    "info_true_xi",
     "persona_index",
-), "REPORT_COLUMNS changed: update report_info"
-assert REWARD_TERMS == ("success", "unsafe", "premature", "time", "force"), "update report_info"
+)
+
+
+def _check_report_layout() -> None:
+    """report_info unpacks report rows by position: fail at import if the layout moved.
+
+    An explicit check, not an ``assert``: it must hold under ``python -O`` too.
+    """
+    if REPORT_COLUMNS != _REPORT_LAYOUT:
+        raise RuntimeError("REPORT_COLUMNS changed: update report_info")
+    if REWARD_TERMS != ("success", "unsafe", "premature", "time", "force"):
+        raise RuntimeError("REWARD_TERMS changed: update report_info")
+
+
+_check_report_layout()
 
 
 def _check_choice(name: str, value: Any, choices: Sequence[str]) -> None:

@@ -18,21 +18,7 @@ from coop_gym.envs.core import (
     CMD_LIFT,
     CMD_PUSH,
     CMD_VERBAL,
-    F_ELAPSED,
-    F_JUDGMENT,
-    F_P_M1,
-    F_P_P1,
-    F_VERBAL,
-    F_XI_HAT,
-    R_OUTCOME,
-    R_PERSONA,
-    R_PUSH,
-    R_REWARD,
-    R_TERMS,
-    R_TRUE_ETA,
-    R_TRUE_X,
-    R_TRUE_XDOT,
-    R_TRUE_XI,
+    REPORT,
     REWARD_TERMS,
 )
 from coop_gym.envs.sit_to_stand import SitToStandConfig, decode_actions, parse_reset_options, render_state_for
@@ -271,11 +257,11 @@ class SitToStandVectorEnv(VectorEnv):
             self._env0_stepped = True
             self._env0_lift = bool(cmd[0, CMD_LIFT] > 0.5)
         report = core.report
-        rewards = np.where(stepped, report[:, R_REWARD], 0.0)
+        rewards = np.where(stepped, report[:, REPORT.reward], 0.0)
         # A lift always ends the episode (success, unsafe or premature); nothing else terminates.
         terminated = stepped & (cmd[:, CMD_LIFT] > 0.5)
         # Truncated by the step limit or by the episode clock of ``timing``, whichever comes first.
-        clock_out = report[:, R_OUTCOME] == Outcome.TIMEOUT
+        clock_out = report[:, REPORT.outcome] == Outcome.TIMEOUT
         truncated = stepped & ~terminated & ((self._episode_steps >= self.max_episode_steps) | clock_out)
         done = terminated | truncated
         final = None
@@ -299,7 +285,7 @@ class SitToStandVectorEnv(VectorEnv):
 
         if self._renderer is None:
             self._renderer = SitToStandRenderer()
-        outcome = int(self.core.report[0, R_OUTCOME])
+        outcome = int(self.core.report[0, REPORT.outcome])
         state = render_state_for(self.core, 0, outcome, self._env0_lift, self._env0_stepped)
         if self.render_mode == "rgb_array":
             return self._renderer.render_rgb(state)  # type: ignore[no-any-return]
@@ -391,26 +377,26 @@ class SitToStandVectorEnv(VectorEnv):
         """
         n = self.num_envs
         r = report
-        outcome = r[:, R_OUTCOME].astype(np.int64)
-        persona = r[:, R_PERSONA].astype(np.int64)
+        outcome = r[:, REPORT.outcome].astype(np.int64)
+        persona = r[:, REPORT.persona_index].astype(np.int64)
         values: dict[str, NDArray[Any]] = {
-            "true_x_m": r[:, R_TRUE_X].copy(),
-            "true_xdot_m_per_s": r[:, R_TRUE_XDOT].copy(),
-            "true_eta_m": r[:, R_TRUE_ETA].copy(),
-            "true_xi": r[:, R_TRUE_XI].astype(np.int64),
+            "true_x_m": r[:, REPORT.true_x_m].copy(),
+            "true_xdot_m_per_s": r[:, REPORT.true_xdot_m_per_s].copy(),
+            "true_eta_m": r[:, REPORT.true_eta_m].copy(),
+            "true_xi": r[:, REPORT.info_true_xi].astype(np.int64),
             "persona": self._persona_names[persona],
             "persona_index": persona,
             "outcome": _OUTCOME_LABELS[outcome],
             "outcome_code": outcome,
-            "judgment": r[:, F_JUDGMENT].astype(np.int64),
-            "xi_estimate": r[:, F_XI_HAT].copy(),
-            "push_force_n": r[:, R_PUSH].copy(),
-            "verbal_cue": r[:, F_VERBAL].astype(np.int64),
-            "elapsed_s": r[:, F_ELAPSED].copy(),
+            "judgment": r[:, REPORT.judgment].astype(np.int64),
+            "xi_estimate": r[:, REPORT.xi_hat].copy(),
+            "push_force_n": r[:, REPORT.push_force_n].copy(),
+            "verbal_cue": r[:, REPORT.verbal_cue].astype(np.int64),
+            "elapsed_s": r[:, REPORT.elapsed_s].copy(),
         }
         if self.core.mm is not None:
-            values["xi_probabilities"] = r[:, F_P_M1 : F_P_P1 + 1].copy()
-        terms = {name: r[:, R_TERMS + k].copy() for k, name in enumerate(REWARD_TERMS)}
+            values["xi_probabilities"] = r[:, REPORT.p_uncooperative : REPORT.p_cooperative + 1].copy()
+        terms = {name: r[:, REPORT.reward_success + k].copy() for k, name in enumerate(REWARD_TERMS)}
         if mask is None:
             mask = np.ones(n, dtype=bool)
         elif not mask.all():

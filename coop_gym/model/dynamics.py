@@ -30,12 +30,16 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from compiled.schema import field_names, field_values, index_table
 from coop_gym.model.params import MAX_REACTION_DELAY_S, PersonParams, Timing
 
 __all__ = [
     "DELAY_LINE_LENGTH",
     "NORMALS_PER_SUBSTEP",
     "PARAM_COLUMNS",
+    "PERSON",
+    "PERSON_DERIVED_COLUMNS",
+    "STATE",
     "STATE_COLUMNS",
     "Trajectory",
     "initial_state_row",
@@ -47,104 +51,25 @@ __all__ = [
     "zoh_matrices",
 ]
 
-PARAM_COLUMNS: tuple[str, ...] = (
+PERSON_DERIVED_COLUMNS: tuple[str, ...] = (
     "dt_s",
-    "damping_rate_per_s",
-    "voluntary_gain_per_s2",
-    "push_compliance_m_per_s2_n",
-    "accel_noise_std_m_per_s2",
-    "stiffness_factor_uncooperative",
-    "stiffness_factor_unresponsive",
     "zoh_a00",
     "zoh_a01",
     "zoh_a10",
     "zoh_a11",
     "zoh_b0",
     "zoh_b1",
-    "push_gain_m_per_s_n",
-    "verbal_gain_m_per_s",
     "intention_noise_std_per_step_m",
     "delay_steps",
-    "saturate",
-    "eta_min_m",
-    "eta_max_m",
-    "relaxation_rate_per_s",
-    "explain_calm_rate_per_s",
-    "words_alone_rate_per_s",
-    "guided_push_rate_per_s",
-    "guided_calm_rate_per_s",
-    "push_alone_rate_per_s",
-    "startle_rate_per_s",
-    "prepared_startle_rate_per_s",
-    "confusion_rate_per_s",
-    "drift_rate_per_s",
-    "explanation_memory_s",
-    "idle_after_s",
-    "touch_threshold_n",
-    "firm_push_threshold_n",
-    "persuadability",
-    "startle_sensitivity",
-    "hearing",
-    "baseline",
-    "position_noise_std_m",
-    "force_noise_std_n",
     "hold_xi",
-    "passive_follow_rate_per_s",
-    "lapse_rate_per_s",
-    "refusal_rate_per_s",
-    "spontaneous_lean_rate_per_s",
-    "spontaneous_lean_m",
-    "pushed_lapse_rate_per_s",
 )
-(
-    P_DT,
-    P_LAMBDA1,
-    P_K1,
-    P_K2,
-    P_ACCEL_STD,
-    P_STIFF_UNCOOP,
-    P_STIFF_UNRESP,
-    P_A00,
-    P_A01,
-    P_A10,
-    P_A11,
-    P_B0,
-    P_B1,
-    P_K3,
-    P_K4,
-    P_ETA_STD,
-    P_DELAY,
-    P_SATURATE,
-    P_ETA_MIN,
-    P_ETA_MAX,
-    P_RELAX,
-    P_R_EXPLAIN_CALM,
-    P_R_WORDS,
-    P_R_GUIDED,
-    P_R_GUIDED_CALM,
-    P_R_PUSH_ALONE,
-    P_R_STARTLE,
-    P_R_PREP_STARTLE,
-    P_R_CONFUSION,
-    P_R_DRIFT,
-    P_EXPLAIN_MEMORY,
-    P_IDLE_AFTER,
-    P_TOUCH,
-    P_FIRM,
-    P_PERSUADE,
-    P_STARTLE_SENS,
-    P_HEARING,
-    P_BASELINE,
-    P_POS_STD,
-    P_FORCE_STD,
-    P_HOLD_XI,
-    P_FOLLOW,
-    P_R_LAPSE,
-    P_R_REFUSAL,
-    P_R_SPONTANEOUS,
-    P_SPONTANEOUS_M,
-    P_R_PUSHED_LAPSE,
-) = range(len(PARAM_COLUMNS))
+"""Columns :func:`pack_person` computes: the step, eq. 1's exact ZOH matrices, per-step scales, the hold switch."""
+
+PARAM_COLUMNS: tuple[str, ...] = field_names(PersonParams) + PERSON_DERIVED_COLUMNS
+"""Every field of :class:`PersonParams` (levels flattened, in order), then the derived columns."""
+
+PERSON = index_table("PersonColumns", PARAM_COLUMNS)
+"""Column of each parameter in a packed row: ``p[PERSON.damping_rate_per_s]``."""
 
 STATE_COLUMNS: tuple[str, ...] = (
     "x_m",
@@ -155,7 +80,8 @@ STATE_COLUMNS: tuple[str, ...] = (
     "since_cue_s",
     "delay_index",
 )
-S_X, S_XDOT, S_ETA, S_XI, S_SINCE_EXPLAIN, S_SINCE_CUE, S_DELAY_INDEX = range(len(STATE_COLUMNS))
+STATE = index_table("StateColumns", STATE_COLUMNS)
+"""Column of each person-state quantity: ``s[STATE.x_m]``."""
 
 NORMALS_PER_SUBSTEP = 5
 """Standard normals one simulation step consumes: accel, intention, chain, position, force."""
@@ -240,7 +166,7 @@ def pack_person(person: PersonParams, timing: Timing, hold_xi: bool = False) -> 
         timing: Time base (the simulation step ``dt``).
         hold_xi: Keep ``xi`` fixed (the paper's experiment requests a state per trial).
     """
-    bio, intent, coop, sensors = person.biomechanics, person.intention, person.cooperativeness, person.sensors
+    bio, intent = person.biomechanics, person.intention
     dt = timing.dt_s
     zoh = zoh_matrices(bio.damping_rate_per_s, bio.voluntary_gain_per_s2, dt)
     delay_steps = round(intent.reaction_delay_s / dt)
@@ -249,66 +175,31 @@ def pack_person(person: PersonParams, timing: Timing, hold_xi: bool = False) -> 
             f"Intention.reaction_delay_s={intent.reaction_delay_s} is {delay_steps} steps of {dt} s; "
             f"at most {DELAY_LINE_LENGTH - 1} are supported (<= {MAX_REACTION_DELAY_S} s at 50 Hz)"
         )
-    values = {
+    derived = {
         "dt_s": dt,
-        "damping_rate_per_s": bio.damping_rate_per_s,
-        "voluntary_gain_per_s2": bio.voluntary_gain_per_s2,
-        "push_compliance_m_per_s2_n": bio.push_compliance_m_per_s2_n,
-        "accel_noise_std_m_per_s2": bio.accel_noise_std_m_per_s2,
-        "stiffness_factor_uncooperative": bio.stiffness_factor_uncooperative,
-        "stiffness_factor_unresponsive": bio.stiffness_factor_unresponsive,
         "zoh_a00": zoh[0, 0],
         "zoh_a01": zoh[0, 1],
         "zoh_a10": zoh[1, 0],
         "zoh_a11": zoh[1, 1],
         "zoh_b0": zoh[0, 2],
         "zoh_b1": zoh[1, 2],
-        "push_gain_m_per_s_n": intent.push_gain_m_per_s_n,
-        "verbal_gain_m_per_s": intent.verbal_gain_m_per_s,
         "intention_noise_std_per_step_m": intent.noise_std_m_per_sqrt_s * math.sqrt(dt),
         "delay_steps": float(delay_steps),
-        "saturate": 1.0 if intent.saturate else 0.0,
-        "eta_min_m": intent.min_m,
-        "eta_max_m": intent.max_m,
-        "relaxation_rate_per_s": intent.relaxation_rate_per_s,
-        "explain_calm_rate_per_s": coop.explain_calm_rate_per_s,
-        "words_alone_rate_per_s": coop.words_alone_rate_per_s,
-        "guided_push_rate_per_s": coop.guided_push_rate_per_s,
-        "guided_calm_rate_per_s": coop.guided_calm_rate_per_s,
-        "push_alone_rate_per_s": coop.push_alone_rate_per_s,
-        "startle_rate_per_s": coop.startle_rate_per_s,
-        "prepared_startle_rate_per_s": coop.prepared_startle_rate_per_s,
-        "confusion_rate_per_s": coop.confusion_rate_per_s,
-        "drift_rate_per_s": coop.drift_rate_per_s,
-        "explanation_memory_s": coop.explanation_memory_s,
-        "idle_after_s": coop.idle_after_s,
-        "touch_threshold_n": coop.touch_threshold_n,
-        "firm_push_threshold_n": coop.firm_push_threshold_n,
-        "persuadability": coop.persuadability,
-        "startle_sensitivity": coop.startle_sensitivity,
-        "hearing": coop.hearing,
-        "baseline": float(coop.baseline),
-        "position_noise_std_m": sensors.position_noise_std_m,
-        "force_noise_std_n": sensors.force_noise_std_n,
         "hold_xi": 1.0 if hold_xi else 0.0,
-        "passive_follow_rate_per_s": intent.passive_follow_rate_per_s,
-        "lapse_rate_per_s": coop.lapse_rate_per_s,
-        "refusal_rate_per_s": coop.refusal_rate_per_s,
-        "spontaneous_lean_rate_per_s": intent.spontaneous_lean_rate_per_s,
-        "spontaneous_lean_m": intent.spontaneous_lean_m,
-        "pushed_lapse_rate_per_s": coop.pushed_lapse_rate_per_s,
     }
+    # Bools (``saturate``) and ints (``baseline``) become 1.0/0.0 and floats.
+    values = {**{name: float(value) for name, value in field_values(person).items()}, **derived}
     return np.array([values[name] for name in PARAM_COLUMNS], dtype=np.float64)
 
 
 def initial_state_row(xi: int, x0_m: float = 0.0) -> NDArray[np.float64]:
     """A person sitting still at ``x0_m``, intending to stay there, with cooperativeness ``xi``."""
     row = np.zeros(len(STATE_COLUMNS))
-    row[S_X] = x0_m
-    row[S_ETA] = x0_m
-    row[S_XI] = float(xi)
-    row[S_SINCE_EXPLAIN] = _LONG_AGO_S
-    row[S_SINCE_CUE] = _LONG_AGO_S
+    row[STATE.x_m] = x0_m
+    row[STATE.eta_m] = x0_m
+    row[STATE.xi] = float(xi)
+    row[STATE.since_explanation_s] = _LONG_AGO_S
+    row[STATE.since_cue_s] = _LONG_AGO_S
     return row
 
 
@@ -331,36 +222,40 @@ def cooperativeness_rates(
     """Rates [1/s] of one level up and one level down of the chain (eq. 8, handbook rules §II)."""
     up = 0.0
     down = 0.0
-    hearing = p[P_HEARING]
-    persuade = p[P_PERSUADE]
-    startle = p[P_STARTLE_SENS]
+    hearing = p[PERSON.hearing]
+    persuade = p[PERSON.persuadability]
+    startle = p[PERSON.startle_sensitivity]
     # Explaining first ("lean forward") calms a resisting person; words alone rarely suffice.
     if verbal_cue > 0.5:
-        up += hearing * persuade * (p[P_R_EXPLAIN_CALM] if xi < -0.5 else p[P_R_WORDS])
+        up += (
+            hearing * persuade * (p[PERSON.explain_calm_rate_per_s] if xi < -0.5 else p[PERSON.words_alone_rate_per_s])
+        )
     # "Lean back" confuses.
     elif verbal_cue < -0.5:
-        down += hearing * startle * p[P_R_CONFUSION]
-    if push_force_n >= p[P_TOUCH]:
+        down += hearing * startle * p[PERSON.confusion_rate_per_s]
+    if push_force_n >= p[PERSON.touch_threshold_n]:
         # How well a push is prepared: the part of a recent explanation that was heard.
-        prepared = hearing if since_explain_s <= p[P_EXPLAIN_MEMORY] else 0.0
-        guided = p[P_R_GUIDED_CALM] if xi < -0.5 else p[P_R_GUIDED]
-        alone = p[P_R_PUSH_ALONE] if abs(xi) < 0.5 else 0.0
+        prepared = hearing if since_explain_s <= p[PERSON.explanation_memory_s] else 0.0
+        guided = p[PERSON.guided_calm_rate_per_s] if xi < -0.5 else p[PERSON.guided_push_rate_per_s]
+        alone = p[PERSON.push_alone_rate_per_s] if abs(xi) < 0.5 else 0.0
         up += persuade * (prepared * guided + (1.0 - prepared) * alone)
-        if push_force_n >= p[P_FIRM]:
+        if push_force_n >= p[PERSON.firm_push_threshold_n]:
             # A firm push without preparation startles.
-            down += startle * (prepared * p[P_R_PREP_STARTLE] + (1.0 - prepared) * p[P_R_STARTLE])
+            down += startle * (
+                prepared * p[PERSON.prepared_startle_rate_per_s] + (1.0 - prepared) * p[PERSON.startle_rate_per_s]
+            )
     # Long idle periods let engagement drift back to the person's baseline.
-    if since_cue_s >= p[P_IDLE_AFTER]:
-        if xi < p[P_BASELINE] - 0.5:
-            up += p[P_R_DRIFT]
-        elif xi > p[P_BASELINE] + 0.5:
-            down += p[P_R_DRIFT]
+    if since_cue_s >= p[PERSON.idle_after_s]:
+        if xi < p[PERSON.baseline] - 0.5:
+            up += p[PERSON.drift_rate_per_s]
+        elif xi > p[PERSON.baseline] + 0.5:
+            down += p[PERSON.drift_rate_per_s]
     if xi > 0.5:
         up = 0.0
         # Willingness is not absorbing: it lapses (see also the refusal jump in person_substep).
-        down += p[P_R_LAPSE]
-        if push_force_n >= p[P_TOUCH]:
-            down += p[P_R_PUSHED_LAPSE]
+        down += p[PERSON.lapse_rate_per_s]
+        if push_force_n >= p[PERSON.touch_threshold_n]:
+            down += p[PERSON.pushed_lapse_rate_per_s]
     if xi < -0.5:
         down = 0.0
     return up, down
@@ -387,75 +282,77 @@ def person_substep(
         verbal_cue: Verbal cue heard during the step ``c_v`` in {-1, 0, +1}.
         z: At least 3 standard normals: acceleration, intention and chain noise.
     """
-    dt = p[P_DT]
-    xi = s[S_XI]
+    dt = p[PERSON.dt_s]
+    xi = s[STATE.xi]
     # The person's memory of cues (used by the chain below).
-    felt = push_force_n >= p[P_TOUCH]
-    s[S_SINCE_EXPLAIN] = 0.0 if verbal_cue > 0.5 else s[S_SINCE_EXPLAIN] + dt
-    s[S_SINCE_CUE] = 0.0 if (felt or verbal_cue != 0.0) else s[S_SINCE_CUE] + dt
+    felt = push_force_n >= p[PERSON.touch_threshold_n]
+    s[STATE.since_explanation_s] = 0.0 if verbal_cue > 0.5 else s[STATE.since_explanation_s] + dt
+    s[STATE.since_cue_s] = 0.0 if (felt or verbal_cue != 0.0) else s[STATE.since_cue_s] + dt
 
     # Reaction delay: the intention answers the cues of `delay_steps` ago.
-    k = int(s[S_DELAY_INDEX])
+    k = int(s[STATE.delay_index])
     delay_push[k] = push_force_n
     delay_verbal[k] = verbal_cue
-    j = (k - int(p[P_DELAY])) % DELAY_LINE_LENGTH
+    j = (k - int(p[PERSON.delay_steps])) % DELAY_LINE_LENGTH
     push_seen = delay_push[j]
     verbal_seen = delay_verbal[j]
-    s[S_DELAY_INDEX] = float((k + 1) % DELAY_LINE_LENGTH)
+    s[STATE.delay_index] = float((k + 1) % DELAY_LINE_LENGTH)
 
     # eq. 1, exact zero-order hold: [x, xdot] <- Ad [x, xdot] + Bd u,
     # u = k1*eta + k2_eff*c_p + w_x; an uncooperative person stiffens (k2_eff < k2).
-    k2 = p[P_K2]
+    k2 = p[PERSON.push_compliance_m_per_s2_n]
     if xi < -0.5:
-        k2 *= p[P_STIFF_UNCOOP]
+        k2 *= p[PERSON.stiffness_factor_uncooperative]
     elif xi < 0.5:
-        k2 *= p[P_STIFF_UNRESP]
-    u = p[P_K1] * s[S_ETA] + k2 * push_force_n + p[P_ACCEL_STD] * z[0]
-    x, xdot = s[S_X], s[S_XDOT]
-    s[S_X] = p[P_A00] * x + p[P_A01] * xdot + p[P_B0] * u
-    s[S_XDOT] = p[P_A10] * x + p[P_A11] * xdot + p[P_B1] * u
+        k2 *= p[PERSON.stiffness_factor_unresponsive]
+    u = p[PERSON.voluntary_gain_per_s2] * s[STATE.eta_m] + k2 * push_force_n + p[PERSON.accel_noise_std_m_per_s2] * z[0]
+    x, xdot = s[STATE.x_m], s[STATE.xdot_m_per_s]
+    s[STATE.x_m] = p[PERSON.zoh_a00] * x + p[PERSON.zoh_a01] * xdot + p[PERSON.zoh_b0] * u
+    s[STATE.xdot_m_per_s] = p[PERSON.zoh_a10] * x + p[PERSON.zoh_a11] * xdot + p[PERSON.zoh_b1] * u
 
     # eq. 6: eta[t+1] = eta[t] + xi*(k3*c_p + k4*c_v)*dt + w_eta (cues as perceived, delayed);
     # with no cue acting the intention relaxes toward upright.
-    eta = s[S_ETA]
-    if push_seen >= p[P_TOUCH] or verbal_seen != 0.0:
-        eta += xi * (p[P_K3] * push_seen + p[P_K4] * verbal_seen) * dt
+    eta = s[STATE.eta_m]
+    if push_seen >= p[PERSON.touch_threshold_n] or verbal_seen != 0.0:
+        eta += xi * (p[PERSON.push_gain_m_per_s_n] * push_seen + p[PERSON.verbal_gain_m_per_s] * verbal_seen) * dt
     else:
         # Euler step, capped: with rate*dt > 2 it would overshoot and diverge (relaxation
         # 100/s at dt 0.1 s is valid); a full relaxation in one step is the stable limit.
-        eta -= min(p[P_RELAX] * dt, 1.0) * eta
-    eta += p[P_ETA_STD] * z[1]
-    if p[P_FOLLOW] > 0.0 and abs(xi) < 0.5:
+        eta -= min(p[PERSON.relaxation_rate_per_s] * dt, 1.0) * eta
+    eta += p[PERSON.intention_noise_std_per_step_m] * z[1]
+    if p[PERSON.passive_follow_rate_per_s] > 0.0 and abs(xi) < 0.5:
         # A passive (unresponsive) person's intention follows the body: bent forward by a
         # push, a weak trunk stays bent instead of pulling back upright (capped as above).
-        eta += min(p[P_FOLLOW] * dt, 1.0) * (s[S_X] - eta)
-    if p[P_SATURATE] > 0.5:
-        eta = min(max(eta, p[P_ETA_MIN]), p[P_ETA_MAX])
-    s[S_ETA] = eta
+        eta += min(p[PERSON.passive_follow_rate_per_s] * dt, 1.0) * (s[STATE.x_m] - eta)
+    if p[PERSON.saturate] > 0.5:
+        eta = min(max(eta, p[PERSON.min_m]), p[PERSON.max_m])
+    s[STATE.eta_m] = eta
 
     # Looking ready while not ready: an unresponsive person left waiting (idle) now and then
     # leans forward on their own. The chain's uniform decides it from the top of [0, 1) (the chain's jumps
     # come from the bottom), so the person still draws 5 normals per step.
-    if p[P_R_SPONTANEOUS] > 0.0 and abs(xi) < 0.5 and s[S_SINCE_CUE] >= p[P_IDLE_AFTER]:
-        if _normal_cdf(z[2]) >= math.exp(-p[P_R_SPONTANEOUS] * dt):
-            s[S_ETA] = max(s[S_ETA], p[P_SPONTANEOUS_M])
+    if p[PERSON.spontaneous_lean_rate_per_s] > 0.0 and abs(xi) < 0.5 and s[STATE.since_cue_s] >= p[PERSON.idle_after_s]:
+        if _normal_cdf(z[2]) >= math.exp(-p[PERSON.spontaneous_lean_rate_per_s] * dt):
+            s[STATE.eta_m] = max(s[STATE.eta_m], p[PERSON.spontaneous_lean_m])
 
     # eq. 8: one exact step of the cue-driven chain, rates held over dt.
-    if p[P_HOLD_XI] < 0.5:
-        up, down = cooperativeness_rates(p, xi, push_force_n, verbal_cue, s[S_SINCE_EXPLAIN], s[S_SINCE_CUE])
-        refuse = p[P_R_REFUSAL] if xi > 0.5 else 0.0
+    if p[PERSON.hold_xi] < 0.5:
+        up, down = cooperativeness_rates(
+            p, xi, push_force_n, verbal_cue, s[STATE.since_explanation_s], s[STATE.since_cue_s]
+        )
+        refuse = p[PERSON.refusal_rate_per_s] if xi > 0.5 else 0.0
         total = up + down + refuse
         if total > 0.0:
             leave = 1.0 - math.exp(-total * dt)
             uniform = _normal_cdf(z[2])
             if uniform < leave * up / total:
-                s[S_XI] = xi + 1.0
+                s[STATE.xi] = xi + 1.0
             elif uniform < leave:
                 # A sudden refusal jumps from +1 straight to -1.
                 if refuse > 0.0 and uniform >= leave * (up + down) / total:
-                    s[S_XI] = -1.0
+                    s[STATE.xi] = -1.0
                 else:
-                    s[S_XI] = xi - 1.0
+                    s[STATE.xi] = xi - 1.0
 
 
 @njit(cache=True)
@@ -463,7 +360,9 @@ def measure(
     s: NDArray[np.float64], p: NDArray[np.float64], push_force_n: float, z_position: float, z_force: float
 ) -> tuple[float, float]:
     """The robot's readings: shoulder position [m] (camera) and push force [N] (force sensor)."""
-    return s[S_X] + p[P_POS_STD] * z_position, push_force_n + p[P_FORCE_STD] * z_force
+    return s[STATE.x_m] + p[PERSON.position_noise_std_m] * z_position, push_force_n + p[
+        PERSON.force_noise_std_n
+    ] * z_force
 
 
 @njit(cache=True)

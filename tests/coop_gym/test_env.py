@@ -291,3 +291,12 @@ def test_core_step_library_api_matches_the_env_step() -> None:
         out = twin.unwrapped.core.step(push, verbal, np.array([action[2] == 1]))
         assert np.array_equal(twin.unwrapped.core.obs[0], obs)
         assert out.reward[0] == reward and bool(out.terminated[0]) == terminated
+
+
+def test_report_layout_check_is_not_an_assert(monkeypatch: pytest.MonkeyPatch) -> None:
+    # report_info unpacks by position; the import-time check must also run under ``python -O``.
+    from coop_gym.envs import sit_to_stand
+
+    monkeypatch.setattr(sit_to_stand, "REPORT_COLUMNS", sit_to_stand.REPORT_COLUMNS[:-1])
+    with pytest.raises(RuntimeError, match="update report_info"):
+        sit_to_stand._check_report_layout()

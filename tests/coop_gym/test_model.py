@@ -8,22 +8,29 @@ import math
 import numpy as np
 import pytest
 
+from compiled.schema import field_values
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,
-    S_ETA,
-    S_SINCE_CUE,
-    S_SINCE_EXPLAIN,
-    S_X,
-    S_XDOT,
-    S_XI,
+    PARAM_COLUMNS,
+    PERSON,
+    PERSON_DERIVED_COLUMNS,
+    STATE,
     cooperativeness_rates,
     initial_state_row,
     pack_person,
     person_substep,
     simulate,
 )
-from coop_gym.model.params import Biomechanics, Cooperativeness, Intention, PersonParams, Realism, Timing
+from coop_gym.model.params import (
+    Biomechanics,
+    Cooperativeness,
+    Intention,
+    PersonParams,
+    Realism,
+    Sensors,
+    Timing,
+)
 from coop_gym.model.personas import (
     PERSONAS,
     TEST_PERSONAS,
@@ -42,13 +49,13 @@ def _free_response(bio: Biomechanics, x0: float, eta: float, n_steps: int) -> np
     person = dataclasses.replace(IDEAL, biomechanics=bio)
     p = pack_person(person, TIMING, hold_xi=True)
     s = initial_state_row(0, x0)
-    s[S_ETA] = eta
+    s[STATE.eta_m] = eta
     xs = np.empty(n_steps)
     z = np.zeros(NORMALS_PER_SUBSTEP)
     dp, dv = np.zeros(DELAY_LINE_LENGTH), np.zeros(DELAY_LINE_LENGTH)
     for t in range(n_steps):
         person_substep(s, p, dp, dv, 0.0, 0.0, z)
-        xs[t] = s[S_X]
+        xs[t] = s[STATE.x_m]
     return xs
 
 
@@ -141,10 +148,10 @@ def _transition_counts(xi: int, push: float, verbal: float, since_explain: float
     dp, dv = np.zeros(DELAY_LINE_LENGTH), np.zeros(DELAY_LINE_LENGTH)
     for k in range(n):
         s = initial_state_row(xi)
-        s[S_SINCE_EXPLAIN] = since_explain
-        s[S_SINCE_CUE] = 0.0
+        s[STATE.since_explanation_s] = since_explain
+        s[STATE.since_cue_s] = 0.0
         person_substep(s, p, dp, dv, push, verbal, z[k])
-        counts[int(s[S_XI]) - xi + 1] += 1
+        counts[int(s[STATE.xi]) - xi + 1] += 1
     return counts
 
 
@@ -282,4 +289,18 @@ def test_person_variation_is_seeded_and_multiplicative() -> None:
 
 def test_state_columns_are_consistent() -> None:
     s = initial_state_row(1, 0.01)
-    assert (s[S_X], s[S_XDOT], s[S_ETA], s[S_XI]) == (0.01, 0.0, 0.01, 1.0)
+    assert (s[STATE.x_m], s[STATE.xdot_m_per_s], s[STATE.eta_m], s[STATE.xi]) == (0.01, 0.0, 0.01, 1.0)
+
+
+def test_parameter_row_is_every_person_field_then_the_derived_columns() -> None:
+    # One schema: a new field of any level lands in the packed row under its own name.
+    levels = (Biomechanics, Intention, Cooperativeness, Sensors)
+    fields = tuple(f.name for level in levels for f in dataclasses.fields(level))
+    assert PARAM_COLUMNS == fields + PERSON_DERIVED_COLUMNS
+    assert PERSON._fields == PARAM_COLUMNS and tuple(PERSON) == tuple(range(len(PARAM_COLUMNS)))
+    person = PersonParams(intention=Intention(saturate=False), cooperativeness=Cooperativeness(baseline=-1))
+    row = pack_person(person, Timing(), hold_xi=True)
+    assert row.shape == (len(PARAM_COLUMNS),)
+    for name, value in field_values(person).items():
+        assert row[getattr(PERSON, name)] == float(value), name
+    assert row[PERSON.hold_xi] == 1.0 and row[PERSON.dt_s] == Timing().dt_s

@@ -14,7 +14,7 @@ import pytest
 
 from coop_gym.envs import core
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
-from coop_gym.model.dynamics import S_X
+from coop_gym.model.dynamics import STATE
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import PERSONAS
 from estimator.judgment import ThresholdJudgment
@@ -69,7 +69,7 @@ def test_a_lift_ends_with_the_enums_outcome(xi: int, lean_m: float, expected: Ou
     person = (PERSONAS["typical"],)
     c = core.SitToStandCore(1, person, Timing(), Cues(), Realism(), lift, RewardWeights(), ThresholdJudgment())
     c.reset_env(0, np.random.default_rng(0), initial_xi=xi)
-    c.person[0, S_X] = lean_m  # place the shoulder
+    c.person[0, STATE.x_m] = lean_m  # place the shoulder
     out = c.step(np.zeros(1), np.zeros(1), np.ones(1, dtype=bool))
     assert Outcome(int(out.outcome[0])) is expected
     assert bool(out.terminated[0])

@@ -4,11 +4,13 @@ A change of dynamics, observation or reward gets a new ``-vN``; the old ids stay
 This test replays fixed action sequences (drawn from their own seeded generator, not from the
 spaces, so a Gymnasium upgrade cannot change them) through each ``-v0`` id, single env and the
 native vector env, and compares observations, rewards, termination, truncation and every info
-value to the recording in ``data/recorded_v0.npz`` exactly.
+value to the recording in ``data/recorded_v0.npz`` exactly. A selection of the ``-v1`` ids
+(difficulty levels, oracle, IMM) is held the same way by ``data/recorded_v1.npz``.
 
-Re-record (only when a change is *meant* to alter ``-v0``, which the versioning rule forbids)::
+Re-record (only when a change is *meant* to alter a version, which the versioning rule forbids)::
 
-    COOP_GYM_RECORD=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py
+    COOP_GYM_RECORD=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py     # -v0
+    COOP_GYM_RECORD_V1=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py  # -v1
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import pytest
 import coop_gym  # noqa: F401  (registers the ids)
 
 DATA = Path(__file__).parent / "data" / "recorded_v0.npz"
+DATA_V1 = Path(__file__).parent / "data" / "recorded_v1.npz"
 V0_IDS = (
     "CoopGym/SitToStand-v0",
     "CoopGym/SitToStandRaw-v0",
@@ -33,6 +36,13 @@ V0_IDS = (
     "CoopGym/SitToStandMM-v0",
     "CoopGym/SitToStandIMM-v0",
     "CoopGym/SitToStandHeldOut-v0",
+)
+V1_IDS = (
+    "CoopGym/SitToStandEasy-v1",
+    "CoopGym/SitToStandMedium-v1",
+    "CoopGym/SitToStandHard-v1",
+    "CoopGym/SitToStandHardOracle-v1",
+    "CoopGym/SitToStandHardIMM-v1",
 )
 SINGLE_SEEDS = (0, 3, 11)
 SINGLE_STEPS = 400  # crosses several episode ends (lifts and a 300-step truncation)
@@ -113,9 +123,9 @@ def _record_vector(env_id: str) -> dict[str, np.ndarray]:
     return {k: _as_array(v) for k, v in {**rows, **infos}.items()}
 
 
-def _cases() -> list[tuple[str, str, int | None]]:
+def _cases(env_ids: tuple[str, ...] = V0_IDS) -> list[tuple[str, str, int | None]]:
     cases: list[tuple[str, str, int | None]] = []
-    for env_id in V0_IDS:
+    for env_id in env_ids:
         cases += [(env_id, "single", seed) for seed in SINGLE_SEEDS]
         cases.append((env_id, "vector", None))
     return cases
@@ -129,29 +139,37 @@ def _record(env_id: str, kind: str, seed: int | None) -> dict[str, np.ndarray]:
     return _record_single(env_id, seed) if kind == "single" and seed is not None else _record_vector(env_id)
 
 
-def _record_all() -> None:
+def _record_all(path: Path, env_ids: tuple[str, ...]) -> None:
     arrays: dict[str, np.ndarray] = {}
-    for env_id, kind, seed in _cases():
+    for env_id, kind, seed in _cases(env_ids):
         for name, array in _record(env_id, kind, seed).items():
             arrays[f"{_key(env_id, kind, seed)}|{name}"] = array
-    DATA.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(DATA, **arrays)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(path, **arrays)
 
 
 if os.environ.get("COOP_GYM_RECORD") == "1":  # pragma: no cover - re-recording is a deliberate act
-    _record_all()
+    _record_all(DATA, V0_IDS)
+if os.environ.get("COOP_GYM_RECORD_V1") == "1":  # pragma: no cover - re-recording is a deliberate act
+    _record_all(DATA_V1, V1_IDS)
+
+
+def _load(path: Path) -> dict[str, np.ndarray]:
+    with np.load(path, allow_pickle=False) as data:
+        return {name: data[name] for name in data.files}
 
 
 @pytest.fixture(scope="module")
 def recording() -> dict[str, np.ndarray]:
-    with np.load(DATA, allow_pickle=False) as data:
-        return {name: data[name] for name in data.files}
+    return _load(DATA)
 
 
-@pytest.mark.parametrize(("env_id", "kind", "seed"), _cases(), ids=lambda v: str(v))
-def test_v0_trajectory_is_bit_identical_to_the_recording(
-    recording: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None
-) -> None:
+@pytest.fixture(scope="module")
+def recording_v1() -> dict[str, np.ndarray]:
+    return _load(DATA_V1)
+
+
+def _assert_replays(recording: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None) -> None:
     prefix = f"{_key(env_id, kind, seed)}|"
     expected = {name[len(prefix) :]: array for name, array in recording.items() if name.startswith(prefix)}
     assert expected, f"no recording for {prefix}"
@@ -163,6 +181,20 @@ def test_v0_trajectory_is_bit_identical_to_the_recording(
         assert got.dtype == array.dtype, f"{name}: dtype {got.dtype} != recorded {array.dtype}"
         # Exact, NaN-aware: bit-identical is the contract, not "close".
         assert np.array_equal(got, array, equal_nan=got.dtype.kind == "f"), f"{name} differs from the recording"
+
+
+@pytest.mark.parametrize(("env_id", "kind", "seed"), _cases(), ids=lambda v: str(v))
+def test_v0_trajectory_is_bit_identical_to_the_recording(
+    recording: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None
+) -> None:
+    _assert_replays(recording, env_id, kind, seed)
+
+
+@pytest.mark.parametrize(("env_id", "kind", "seed"), _cases(V1_IDS), ids=lambda v: str(v))
+def test_v1_trajectory_is_bit_identical_to_the_recording(
+    recording_v1: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None
+) -> None:
+    _assert_replays(recording_v1, env_id, kind, seed)
 
 
 def test_recording_covers_episode_ends(recording: dict[str, np.ndarray]) -> None:

@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from compiled.schema import field_values
 from coop_gym.envs.core import nominal_model_for
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import PersonParams, Timing
 from estimator.judgment import ThresholdJudgment, judgment_substep, threshold_judgment
-from estimator.kalman import FastKalmanFilter, PaperKalmanFilter, nominal_row
+from estimator.kalman import (
+    NOMINAL,
+    NOMINAL_COLUMNS,
+    NOMINAL_DERIVED_COLUMNS,
+    NOMINAL_FIELDS,
+    FastKalmanFilter,
+    PaperKalmanFilter,
+    nominal_row,
+)
 from estimator.nominal import NominalModel
 
 
@@ -101,3 +112,28 @@ def test_judgment_is_sampled_a_fixed_delay_after_the_initial_onset() -> None:
     # One judgment, 37 steps (0.74 s of slack-rounded 0.75 s) after the onset step.
     assert made_at == [10 + 37]
     assert row[2] == 1.0  # 0.47 >= 0.3
+
+
+def test_nominal_row_is_named_by_the_model_fields_then_the_derived_variances() -> None:
+    # One schema: the packed row's direct columns are NominalModel fields, by name.
+    fields = {f.name for f in dataclasses.fields(NominalModel)}
+    assert set(NOMINAL_FIELDS) <= fields
+    assert NOMINAL_COLUMNS == NOMINAL_FIELDS + NOMINAL_DERIVED_COLUMNS
+    assert NOMINAL._fields == NOMINAL_COLUMNS and tuple(NOMINAL) == tuple(range(len(NOMINAL_COLUMNS)))
+    model = NominalModel(push_gain_m_per_s_n=0.01, position_noise_std_m=0.003)
+    row = nominal_row(model)
+    for name in NOMINAL_FIELDS:
+        assert row[getattr(NOMINAL, name)] == getattr(model, name), name
+    assert row[NOMINAL.r_position] == model.measurement_variance
+    np.testing.assert_array_equal(
+        row[NOMINAL.q_position : NOMINAL.q_cooperativeness + 1], np.diag(model.process_covariance)
+    )
+
+
+def test_nominal_defaults_are_the_typical_persons_gains() -> None:
+    # The filter's default model is the default person's (estimator/ may not import the model,
+    # so the defaults are written twice; this keeps them equal), and nominal_model_for copies
+    # every field the two share by name.
+    assert nominal_model_for(PersonParams(), Timing()) == NominalModel()
+    shared = {f.name for f in dataclasses.fields(NominalModel)} & set(field_values(PersonParams()))
+    assert shared == {*NOMINAL_FIELDS, "position_noise_std_m"} - {"dt_s"}
