@@ -549,11 +549,11 @@ class BlindAgent(ScriptedAgent):
 
 
 # Winners of `python -m agents.tune_baselines blind --level LEVEL` (training personas, 300 episodes
-# from seed 1,000,000 per candidate, the 648 settings of GRID). Rerun after a model change.
+# from seed 1,000,000 per candidate, the 648 settings of agents.tune_baselines.blind_grid). Rerun after a model change.
 TUNED_BLIND: dict[str, BlindSettings] = {
     "v0": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
     "easy": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
-    "medium": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=0.0),
+    "medium": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=4.0),
     "hard": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=0.0),
 }
 """The tuned blind policy of each level (``v0``: the ``-v0`` ids)."""
