@@ -96,59 +96,43 @@ class TrainingConfig:
         return kwargs
 
 
+_PPO = TrainingConfig(
+    algo="ppo",
+    env_id="CoopGym/SitToStand-v0",
+    n_envs=8,
+    total_timesteps=300_000,
+    policy="MlpPolicy",
+    normalize=True,
+    algo_kwargs={
+        # 8 x 512 = 4096 steps per update in minibatches of 512: half the gradient steps
+        # per sample of 256/256, which overfitted the training personas less (6 of 6 seeds
+        # 1000/1000 on held-out personas vs 991-1000) and trains faster.
+        "n_steps": 512,
+        "batch_size": 512,
+        "n_epochs": 10,
+        # Decaying to 0 settles the final policy: with a constant rate the final policies
+        # of 2 of 3 seeds lifted 1-7 % of held-out people prematurely.
+        "learning_rate": "lin_3e-4",
+        # 0.995 over 0.99: gentler pushes (mean ~10 N vs 11-14 N), fewer premature lifts
+        # of the held-out frail persona, whom a firm push moves whatever they think.
+        "gamma": 0.995,
+        "gae_lambda": 0.95,
+        "clip_range": 0.2,
+        "ent_coef": 0.01,
+        "vf_coef": 0.5,
+        "max_grad_norm": 0.5,
+    },
+    policy_kwargs={"net_arch": [64, 64]},
+)
+"""PPO's settings (tuned on the ``-v0`` ids)."""
+
+
 HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
     "ppo": {
-        "CoopGym/SitToStand-v0": TrainingConfig(
-            algo="ppo",
-            env_id="CoopGym/SitToStand-v0",
-            n_envs=8,
-            total_timesteps=300_000,
-            policy="MlpPolicy",
-            normalize=True,
-            algo_kwargs={
-                # 8 x 512 = 4096 steps per update in minibatches of 512: half the gradient steps
-                # per sample of 256/256, which overfitted the training personas less (6 of 6 seeds
-                # 1000/1000 on held-out personas vs 991-1000) and trains faster.
-                "n_steps": 512,
-                "batch_size": 512,
-                "n_epochs": 10,
-                # Decaying to 0 settles the final policy: with a constant rate the final policies
-                # of 2 of 3 seeds lifted 1-7 % of held-out people prematurely.
-                "learning_rate": "lin_3e-4",
-                # 0.995 over 0.99: gentler pushes (mean ~10 N vs 11-14 N), fewer premature lifts
-                # of the held-out frail persona, whom a firm push moves whatever they think.
-                "gamma": 0.995,
-                "gae_lambda": 0.95,
-                "clip_range": 0.2,
-                "ent_coef": 0.01,
-                "vf_coef": 0.5,
-                "max_grad_norm": 0.5,
-            },
-            policy_kwargs={"net_arch": [64, 64]},
-        ),
-        "CoopGym/SitToStandHard-v1": TrainingConfig(
-            algo="ppo",
-            env_id="CoopGym/SitToStandHard-v1",
-            n_envs=8,
-            # The -v0 settings; the hard level needs more samples: the policy must learn to
-            # stop pushing, ask, and read the answer (see README, "Difficulty levels").
-            total_timesteps=1_000_000,
-            policy="MlpPolicy",
-            normalize=True,
-            algo_kwargs={
-                "n_steps": 512,
-                "batch_size": 512,
-                "n_epochs": 10,
-                "learning_rate": "lin_3e-4",
-                "gamma": 0.995,
-                "gae_lambda": 0.95,
-                "clip_range": 0.2,
-                "ent_coef": 0.01,
-                "vf_coef": 0.5,
-                "max_grad_norm": 0.5,
-            },
-            policy_kwargs={"net_arch": [64, 64]},
-        ),
+        "CoopGym/SitToStand-v0": _PPO,
+        # The same settings; the hard level needs more samples: the policy must learn to stop
+        # pushing, ask, and read the answer (README, "Difficulty levels": 3 seeds measured).
+        "CoopGym/SitToStandHard-v1": _PPO.replace(env_id="CoopGym/SitToStandHard-v1", total_timesteps=1_000_000),
     },
     "recurrent_ppo": {
         "CoopGym/SitToStandRaw-v0": TrainingConfig(
