@@ -237,8 +237,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [c for c in contenders if c not in CONTENDERS]
     if unknown or not contenders:
         parser.error(f"--contenders: unknown {unknown or 'empty'}; known: {', '.join(CONTENDERS)}")
-    import coop_gym  # noqa: F401  (registers the ids)
     import gymnasium as gym
+
+    import coop_gym  # noqa: F401  (registers the ids)
 
     if args.env not in gym.registry:
         parser.error(f"--env: unknown env id {args.env!r}")
@@ -250,7 +251,8 @@ def main(argv: list[str] | None = None) -> int:
     _plot(report, out / f"time_to_quality_{stem}.png")
     for r in report["runs"]:
         reached = "not within the budget" if r["time_to_target_s"] is None else f"{r['time_to_target_s']:.0f} s"
-        print(f"{r['contender']:>13}: handbook level after {reached} ({r['timesteps']} steps, {r['steps_per_s']:.0f} steps/s)")
+        rate = f"{r['steps_per_s']:.0f} steps/s"
+        print(f"{r['contender']:>13}: handbook level after {reached} ({r['timesteps']} steps, {rate})")
     ratio = report["time_ratio_default_vs_first_script"]
     if ratio is not None:
         print(f"time ratio default / first script: {ratio['value']:.3f} ({ratio['bound']})")
