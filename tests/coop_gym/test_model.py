@@ -35,6 +35,7 @@ from coop_gym.model.personas import (
     PERSONAS,
     TEST_PERSONAS,
     TRAIN_PERSONAS,
+    WIDE_VARIATION_STD,
     get_persona,
     resolve_personas,
     sample_person,
@@ -261,6 +262,34 @@ def test_persona_sets_and_split() -> None:
     assert set(TRAIN_PERSONAS) | set(TEST_PERSONAS) == set(PERSONAS)
     assert [p.name for p in resolve_personas("test")] == list(TEST_PERSONAS)
     assert [p.name for p in resolve_personas(["frail", "typical"])] == ["frail", "typical"]
+
+
+def test_train_wide_is_the_training_personas_with_a_wider_spread() -> None:
+    wide = resolve_personas("train_wide")
+    assert [p.name for p in wide] == list(TRAIN_PERSONAS)  # never a held-out persona
+    assert all(p.variation_relative_std == WIDE_VARIATION_STD > 0.2 for p in wide)
+    assert [p.params for p in wide] == [p.params for p in resolve_personas("train")]
+
+
+def test_train_wide_people_spread_wider_in_the_env() -> None:
+    # The compiled reset applies each persona's variation: the push compliance of the
+    # people drawn spreads about WIDE_VARIATION_STD / 0.2 times wider (log-std).
+    import gymnasium as gym
+
+    import coop_gym  # noqa: F401
+    from coop_gym.model.dynamics import PERSON
+
+    def log_spread(personas: str) -> float:
+        envs = gym.make_vec("CoopGym/SitToStandHard-v1", 1000, "vector_entry_point", personas=personas)
+        envs.reset(seed=0)
+        core = envs.unwrapped.core
+        typical = core.persona_index == 0
+        spread = float(np.std(np.log(core.params[typical, PERSON.push_compliance_m_per_s2_n])))
+        envs.close()
+        return spread
+
+    narrow, wide = log_spread("train"), log_spread("train_wide")
+    assert 0.17 < narrow < 0.23 and 0.44 < wide < 0.56
 
 
 def test_frail_persona_is_moved_by_a_firm_push_whatever_they_think() -> None:
