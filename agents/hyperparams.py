@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from coop_gym.io import write_text
+from coop_gym.model.personas import TEST_PERSONAS, resolve_personas
 
 __all__ = [
     "ALGORITHMS",
@@ -60,7 +61,8 @@ class TrainingConfig:
         policy: SB3 policy name.
         normalize: Normalise observations with ``VecNormalize`` (running mean/std; rewards
             are left alone -- they are already O(1)). Saved and loaded with the model.
-        personas: Persona set trained on (the held-out ``"test"`` set is never trained on).
+        personas: Persona set trained on: ``"train"`` or ``"train_wide"`` (the same personas,
+            wider person-to-person variation); the held-out ``"test"`` set is never trained on.
         algo_kwargs: Keyword arguments of the SB3 algorithm's constructor.
         policy_kwargs: The policy's ``policy_kwargs`` (network sizes).
     """
@@ -83,6 +85,9 @@ class TrainingConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"TrainingConfig.{name} must be a positive int, got {value!r}")
+        held_out = {p.name for p in resolve_personas(self.personas)} & set(TEST_PERSONAS)
+        if held_out:
+            raise ValueError(f"TrainingConfig.personas must not include held-out personas, got {sorted(held_out)}")
 
     def replace(self, **changes: Any) -> TrainingConfig:
         """A copy with some fields changed."""
@@ -131,8 +136,13 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
     "ppo": {
         "CoopGym/SitToStand-v0": _PPO,
         # The same settings; the hard level needs more samples: the policy must learn to stop
-        # pushing, ask, and read the answer (README, "Difficulty levels": 3 seeds measured).
-        "CoopGym/SitToStandHard-v1": _PPO.replace(env_id="CoopGym/SitToStandHard-v1", total_timesteps=1_000_000),
+        # pushing, ask, and read the answer -- and a wider spread of people: on the training
+        # personas' own +/-20 % one of three seeds learned their exact push compliance and
+        # lifted 9.8 % of held-out people unsafely, reading a frail person's pushed lean as
+        # cooperation (README, "Difficulty levels": the seeds measured both ways).
+        "CoopGym/SitToStandHard-v1": _PPO.replace(
+            env_id="CoopGym/SitToStandHard-v1", total_timesteps=1_000_000, personas="train_wide"
+        ),
     },
     "recurrent_ppo": {
         "CoopGym/SitToStandRaw-v0": TrainingConfig(

@@ -110,15 +110,17 @@ def test_hyperparams_are_consistent():
     for algo in ALGORITHMS:
         config = hyperparams_for(algo)
         assert config.env_id == DEFAULT_ENV_IDS[algo] and config.env_id in gym.registry
-        assert config.personas == "train"
         for env_id, cfg in HYPERPARAMS[algo].items():
             assert env_id in gym.registry and cfg.algo == algo
+            assert cfg.personas in ("train", "train_wide")  # never a held-out persona
     other = hyperparams_for("ppo", "CoopGym/SitToStandMM-v0")
     assert other.env_id == "CoopGym/SitToStandMM-v0" and other.algo_kwargs == hyperparams_for("ppo").algo_kwargs
     with pytest.raises(ValueError, match="unknown algorithm"):
         hyperparams_for("a2c")
     with pytest.raises(ValueError, match="n_envs"):
         TrainingConfig("ppo", "CoopGym/SitToStand-v0", 0, 10, "MlpPolicy", False)
+    with pytest.raises(ValueError, match="must not include held-out personas.*frail"):
+        TrainingConfig("ppo", "CoopGym/SitToStand-v0", 8, 10, "MlpPolicy", False, personas=["typical", "frail"])
 
 
 def test_zoo_files_are_generated_from_hyperparams():
@@ -132,7 +134,7 @@ def test_zoo_files_are_generated_from_hyperparams():
         config = hyperparams_for(algo)
         entry = loaded[config.env_id]
         assert entry["n_envs"] == config.n_envs and entry["policy"] == config.policy
-        assert entry["env_kwargs"] == {"personas": "train"}
+        assert entry["env_kwargs"] == {"personas": config.personas}
         for key, value in config.algo_kwargs.items():
             assert entry[key] == value
 
