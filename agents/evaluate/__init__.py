@@ -59,10 +59,10 @@ __all__ = [
 DEFAULT_ENV_ID = "CoopGym/SitToStand-v0"
 PLOT_SUFFIXES: tuple[str, ...] = (".png", ".pdf", ".svg")
 """File types ``--plot`` writes (matplotlib picks the format from the suffix)."""
-OUTCOMES: tuple[str, ...] = ("success", "unsafe", "premature", "timeout")
-"""Episode outcomes, in report order."""
+OUTCOMES: tuple[str, ...] = tuple(o.label for o in Outcome if o is not Outcome.NONE)
+"""Episode outcomes (labels of :class:`~coop_gym.envs.config.Outcome`), in report order."""
 
-_LIFT_OUTCOMES = {Outcome.SUCCESS.label, Outcome.UNSAFE.label, Outcome.PREMATURE.label}
+_LIFT_OUTCOMES = {o.label for o in Outcome if o.terminates}
 
 
 def wilson_interval(successes: int, trials: int, z: float = 1.959963984540054) -> tuple[float, float]:
