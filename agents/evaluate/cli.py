@@ -82,6 +82,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (usage errors exit 2)."""
     parser = _parser()
     args = parser.parse_args(argv)
+    entries = _checked_entries(parser, args)
+    # Every model is loaded and matched to its env before any episode is played.
+    planned = [_planned(parser, args, entry) for entry in entries]
+    results: list[EvaluationResult] = []
+    for agent, env_id, label in planned:
+        try:
+            result = evaluate(
+                agent,
+                env_id,
+                _personas_arg(args.personas),
+                args.episodes,
+                args.seed,
+                n_envs=args.n_envs,
+                deterministic=not args.stochastic,
+                name=label,
+                backend=args.backend,
+            )
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        results.append(result)
+    return _report(args, results)
+
+
+def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The agents to evaluate (scripted names, model paths); a usage error for any bad argument."""
     entries: list[str] = []
     if args.agent:
         entries.append(args.agent)
@@ -98,9 +124,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     problem = seed_range_problem("--seed", args.seed, args.episodes)  # episode k uses seed + k
     if problem:
         parser.error(problem)
-    personas = _personas_arg(args.personas)
     try:
-        resolve_personas(personas)
+        resolve_personas(_personas_arg(args.personas))
     except ValueError as exc:
         parser.error(f"--personas: {exc}")
     if args.env is not None and args.env not in coop_gym.ENV_IDS:
@@ -120,55 +145,38 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error(
                 f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
             )
+    return entries
 
-    # Every model is loaded and matched to its env before any episode is played.
-    planned: list[tuple[Agent | str, str, str]] = []
-    for entry in entries:
-        if entry in SCRIPTED_AGENTS:
-            planned.append((entry, args.env or DEFAULT_ENV_ID, entry))
-            continue
-        folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
-        if _is_rllib_run(entry):
-            from agents.rllib import load_rllib_agent
 
-            try:
-                rllib_agent = load_rllib_agent(entry)
-            except (OSError, ValueError) as exc:
-                parser.error(f"--model {entry}: {exc}")
-            env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
-            planned.append((rllib_agent, env_id, f"rllib_ppo:{folder.name or Path(entry).stem}"))
-            continue
-        from agents.rl import load_agent, observation_features
+def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: str) -> tuple[Agent | str, str, str]:
+    """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env."""
+    if entry in SCRIPTED_AGENTS:
+        return entry, args.env or DEFAULT_ENV_ID, entry
+    folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
+    if _is_rllib_run(entry):
+        from agents.rllib import load_rllib_agent
 
         try:
-            loaded = load_agent(entry)
+            rllib_agent = load_rllib_agent(entry)
         except (OSError, ValueError) as exc:
             parser.error(f"--model {entry}: {exc}")
-        env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
-        problem = feature_mismatch(loaded.features, observation_features(env_id), env_id)
-        if problem:
-            parser.error(f"--model {entry}: {problem}")
-        planned.append((loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"))
+        env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
+        return rllib_agent, env_id, f"rllib_ppo:{folder.name or Path(entry).stem}"
+    from agents.rl import load_agent, observation_features
 
-    results: list[EvaluationResult] = []
-    for agent, env_id, label in planned:
-        try:
-            result = evaluate(
-                agent,
-                env_id,
-                personas,
-                args.episodes,
-                args.seed,
-                n_envs=args.n_envs,
-                deterministic=not args.stochastic,
-                name=label,
-                backend=args.backend,
-            )
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        results.append(result)
+    try:
+        loaded = load_agent(entry)
+    except (OSError, ValueError) as exc:
+        parser.error(f"--model {entry}: {exc}")
+    env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
+    problem = feature_mismatch(loaded.features, observation_features(env_id), env_id)
+    if problem:
+        parser.error(f"--model {entry}: {problem}")
+    return loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"
 
+
+def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
+    """Print the results (table or JSON) and write the files asked for; the exit code."""
     if args.json:
         print(json.dumps(results_json(results)))
     else:
