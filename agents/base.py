@@ -16,8 +16,18 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.envs.config import ACTION_TYPES
-from coop_gym.model.params import Cues
+# The action encoding is the env contract's (coop_gym.envs.contract), re-exported for the agents.
+from coop_gym.envs.contract import (
+    LIFT,
+    PUSH_FIRM,
+    PUSH_NONE,
+    PUSH_SOFT,
+    VERBAL_BACK,
+    VERBAL_FORWARD,
+    VERBAL_NONE,
+    WAIT,
+    encode_actions,
+)
 
 __all__ = [
     "LIFT",
@@ -36,13 +46,6 @@ __all__ = [
     "require_features",
 ]
 
-# Component indices of the default MultiDiscrete([3, 3, 2]) action (docs/ARCHITECTURE.md).
-PUSH_NONE, PUSH_SOFT, PUSH_FIRM = 0, 1, 2
-VERBAL_NONE, VERBAL_BACK, VERBAL_FORWARD = 0, 1, 2
-WAIT, LIFT = 0, 1
-
-_MULTI_SHAPE = (3, 3, 2)
-
 
 @runtime_checkable
 class Agent(Protocol):
@@ -57,44 +60,6 @@ class Agent(Protocol):
     ) -> tuple[NDArray[Any], Any]:
         """Actions for a batch of observations, and the state to pass back next call."""
         ...
-
-
-def encode_actions(
-    push: NDArray[np.integer[Any]],
-    verbal: NDArray[np.integer[Any]],
-    lift: NDArray[np.integer[Any]],
-    action_type: str,
-    cues: Cues | None = None,
-) -> NDArray[Any]:
-    """Turn per-env component choices into actions of ``action_type``.
-
-    Args:
-        push: (N,) push level 0 none, 1 soft, 2 firm.
-        verbal: (N,) verbal cue 0 none, 1 "lean back", 2 "lean forward".
-        lift: (N,) 0 wait, 1 lift.
-        action_type: ``"multidiscrete"`` -> (N, 3) int64; ``"discrete"`` -> (N,) int64
-            flat index; ``"continuous"`` -> (N, 3) float32 in [-1, 1].
-        cues: Push forces of the continuous variant (default :class:`Cues`).
-
-    Returns:
-        The batch of actions.
-    """
-    push = np.asarray(push, dtype=np.int64)
-    verbal = np.asarray(verbal, dtype=np.int64)
-    lift = np.asarray(lift, dtype=np.int64)
-    if action_type == "multidiscrete":
-        return np.stack([push, verbal, lift], axis=-1)
-    if action_type == "discrete":
-        return np.asarray(np.ravel_multi_index((push, verbal, lift), _MULTI_SHAPE), dtype=np.int64)
-    if action_type == "continuous":
-        cues = cues or Cues()
-        # Inverse of the env's map push = (a0 + 1) / 2 * firm_push_n.
-        force = np.array([0.0, cues.soft_push_n, cues.firm_push_n])[push]
-        a0 = 2.0 * force / cues.firm_push_n - 1.0
-        a1 = np.array([0.0, -1.0, 1.0])[verbal]
-        a2 = np.where(lift == 1, 1.0, -1.0)
-        return np.clip(np.stack([a0, a1, a2], axis=-1), -1.0, 1.0).astype(np.float32)
-    raise ValueError(f"action_type must be one of {list(ACTION_TYPES)}, got {action_type!r}")
 
 
 def features_of(env: Any) -> tuple[str, ...]:

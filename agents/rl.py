@@ -50,6 +50,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, Ve
 
 import coop_gym  # registers the env ids
 from agents.hyperparams import ALGORITHMS, TrainingConfig
+from coop_gym.envs.config import Outcome
 from coop_gym.io import atomic_path, write_bytes, write_json
 
 __all__ = [
@@ -603,7 +604,7 @@ class OutcomeStatsCallback(BaseCallback):
     def _on_rollout_end(self) -> None:
         if not self.outcomes:
             return
-        for outcome in ("success", "unsafe", "premature", "timeout"):
+        for outcome in (o.label for o in Outcome if o is not Outcome.NONE):
             self.logger.record(f"charts/{outcome}_rate", self.outcomes.count(outcome) / len(self.outcomes))
 
 

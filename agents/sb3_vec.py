@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from coop_gym.envs.sit_to_stand import report_info
+from coop_gym.envs.contract import report_info
 from coop_gym.envs.vector import SitToStandVectorEnv
 
 __all__ = ["SB3VecEnvAdapter", "make_sb3_vec_env"]

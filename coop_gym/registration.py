@@ -6,6 +6,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from coop_gym.envs.contract import EnvArguments
 from coop_gym.model.params import Timing
 
 __all__ = ["ENV_IDS", "register_envs"]
@@ -13,7 +14,7 @@ __all__ = ["ENV_IDS", "register_envs"]
 MAX_EPISODE_STEPS = Timing().max_episode_steps
 """30 s at one action per 0.1 s: the ``TimeLimit`` of every registered id."""
 
-# id -> kwargs of SitToStandEnv
+# id -> keywords of the env (coop_gym.envs.contract.EnvArguments: the single and the vector env take them)
 ENV_IDS: dict[str, dict[str, Any]] = {
     "CoopGym/SitToStand-v0": {},
     "CoopGym/SitToStandRaw-v0": {"observation_mode": "raw"},
@@ -40,6 +41,7 @@ def register_envs() -> None:
     for env_id, kwargs in ENV_IDS.items():
         if env_id in gym.registry:
             continue
+        EnvArguments.from_keywords(env_id, kwargs)  # a misspelt keyword fails here, not at make()
         gym.register(
             id=env_id,
             entry_point="coop_gym.envs.sit_to_stand:SitToStandEnv",

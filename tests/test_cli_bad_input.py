@@ -351,8 +351,13 @@ def test_read_only_check_names_the_folder(tmp_path: Path, monkeypatch: pytest.Mo
     assert code == 2 and re.search(rf"--out: cannot create {re.escape(str(out))}: .* is not writable", err), err
 
 
+# Where a command line's main(argv) lives when it is not the module ``python -m`` names (that one's
+# __main__ calls it): agents.evaluate keeps its CLI apart so that its imports run one way.
+_MAIN_MODULE = {"agents.evaluate": "agents.evaluate.cli"}
+
+
 def _main_of(cli: str) -> Callable[[list[str]], Any]:
-    module = _load(cli)
+    module = _load(_MAIN_MODULE.get(cli, cli))
     main = getattr(module, "main", None)
     if main is None:
         pytest.skip(f"{cli} has no main(argv) yet")

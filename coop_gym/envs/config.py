@@ -42,6 +42,16 @@ class Outcome(IntEnum):
         """Lower-case name used in ``info["outcome"]`` and reports."""
         return self.name.lower()
 
+    @property
+    def terminates(self) -> bool:
+        """The robot lifted (success, unsafe or premature): Gymnasium's ``terminated``."""
+        return self in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE)
+
+    @property
+    def truncates(self) -> bool:
+        """The episode clock ran out: Gymnasium's ``truncated``."""
+        return self is Outcome.TIMEOUT
+
 
 def _finite(owner: str, name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):

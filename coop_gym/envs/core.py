@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from enum import IntEnum
 from typing import Any
 
 import numpy as np
@@ -44,6 +43,15 @@ from compiled.cache import guard_kernel_cache
 from compiled.rng import G_STATE, bit_generator_row, integers, random, standard_normal
 from compiled.schema import field_values, index_table, offset_table
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
+from coop_gym.envs.contract import (
+    CMD,
+    CMD_COLUMNS,
+    FEATURES,
+    REPORT,
+    REPORT_COLUMNS,
+    REWARD_TERMS,
+    TERMINATES,
+)
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,
@@ -64,7 +72,7 @@ from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, kalman_step, nominal_row
 from estimator.nominal import STATE_DIM, NominalModel
 
 __all__ = [
-    "FEATURES",
+    "FEATURES",  # the env contract's (coop_gym.envs.contract), for the importers of this module
     "REPORT",
     "REPORT_COLUMNS",
     "REWARD_TERMS",
@@ -72,47 +80,6 @@ __all__ = [
     "StepArrays",
     "nominal_model_for",
 ]
-
-FEATURES: tuple[str, ...] = (
-    "measured_position_m",
-    "measured_force_n",
-    "verbal_cue",
-    "time_since_cue_onset_s",
-    "x_hat_m",
-    "xdot_hat_m_per_s",
-    "eta_hat_m",
-    "xi_hat",
-    "xi_std",
-    "judgment",
-    "elapsed_s",
-    "p_uncooperative",
-    "p_unresponsive",
-    "p_cooperative",
-    "true_xi",
-)
-"""Every quantity an observation can hold; each observation mode selects some of them."""
-
-REWARD_TERMS: tuple[str, ...] = ("success", "unsafe", "premature", "time", "force")
-"""Names of the reward terms, in the column order of :attr:`StepArrays.reward_terms`."""
-
-REPORT_COLUMNS: tuple[str, ...] = (
-    *FEATURES,
-    *(f"reward_{name}" for name in REWARD_TERMS),
-    "reward",
-    "outcome",
-    "push_force_n",
-    "true_x_m",
-    "true_xdot_m_per_s",
-    "true_eta_m",
-    "info_true_xi",  # the info's true xi; the oracle's feature "true_xi" is its own column
-    "persona_index",
-)
-"""Columns of :attr:`SitToStandCore.report`: one float row per env with everything ``info`` needs.
-
-Kept in one row so an env reads it with a single ``tolist()``.
-"""
-REPORT = index_table("ReportColumns", REPORT_COLUMNS)
-"""Column of each quantity in a report row: ``report[REPORT.x_hat_m]``, ``report[REPORT.outcome]``."""
 
 CUE_COLUMNS: tuple[str, ...] = ("verbal_value", "verbal_remaining_s", "elapsed_s", "impulse_n_s")
 """Per-env bookkeeping of the cue scheduler: the utterance playing, the clock, the step's push impulse."""
@@ -166,13 +133,10 @@ CONSTS = index_table("ConstColumns", CONST_COLUMNS)
 # After the scalars come the observation spec (feature index, low, high; n_obs each), the
 # columns sample_person varies, and the person's initial state row.
 
-# Columns of the command row: push [N], verbal request {-1, 0, 1}, lift {0, 1}, active {0, 1}
-# (an inactive env is not stepped).
-CMD_PUSH, CMD_VERBAL, CMD_LIFT, CMD_ACTIVE = range(4)
-CMD_COLUMNS = 4
-
-# Columns of the scratch rows of a reset: the draws, then the variation normals (turned into factors).
-_D_PERSONA, _D_UNIFORM, _D_LEAN, _D_NORMALS = range(4)
+# Columns of the scratch rows of a reset: the draws, then (from ``normals`` on) the variation
+# normals, turned into factors.
+DRAW_COLUMNS: tuple[str, ...] = ("persona", "uniform", "lean", "normals")
+DRAWS = index_table("DrawColumns", DRAW_COLUMNS)
 
 # Columns of a persona-table row: the packed person, the filter's nominal row, the initial-xi cuts.
 PERSONA_BLOCKS = offset_table(
@@ -180,27 +144,12 @@ PERSONA_BLOCKS = offset_table(
 )
 
 
-def check_outcome_codes(outcome: type[IntEnum]) -> None:
-    """Raise ``ValueError`` unless the enum's values are ``0 .. n-1`` in order.
-
-    The kernel writes outcome codes into a float report column and the envs index label
-    tables with them, so they must be small consecutive integers. An explicit check, not
-    an ``assert``: it must hold under ``python -O`` too.
-    """
-    codes = [int(member) for member in outcome]
-    if codes != list(range(len(codes))):
-        raise ValueError(f"{outcome.__name__} values must be 0 .. {len(codes) - 1} in order, got {codes}")
-
-
-check_outcome_codes(Outcome)
 # Outcome codes the kernel writes, from the enum (Numba freezes them into the machine code).
 _NONE = int(Outcome.NONE)
 _SUCCESS = int(Outcome.SUCCESS)
 _UNSAFE = int(Outcome.UNSAFE)
 _PREMATURE = int(Outcome.PREMATURE)
 _TIMEOUT = int(Outcome.TIMEOUT)
-_ENDED_BY_LIFT = np.array([member in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE) for member in Outcome])
-"""Indexed by outcome code: does the episode terminate (the robot lifted)?"""
 
 INITIAL_LEAN_STD_M = 0.005
 """People sit a little differently: std of the initial forward lean [m]."""
@@ -285,11 +234,11 @@ def _draw_reset(
     for r in range(indices.shape[0]):
         g = generators[indices[r]]
         drawn = integers(g, n_personas)
-        draws[r, _D_PERSONA] = drawn if persona_override == _NO_OVERRIDE else persona_override
-        for j in range(_D_NORMALS, draws.shape[1]):
+        draws[r, DRAWS.persona] = drawn if persona_override == _NO_OVERRIDE else persona_override
+        for j in range(DRAWS.normals, draws.shape[1]):
             draws[r, j] = standard_normal(g)
-        draws[r, _D_UNIFORM] = random(g)
-        draws[r, _D_LEAN] = 0.0 + INITIAL_LEAN_STD_M * standard_normal(g)
+        draws[r, DRAWS.uniform] = random(g)
+        draws[r, DRAWS.lean] = 0.0 + INITIAL_LEAN_STD_M * standard_normal(g)
     return -1
 
 
@@ -310,7 +259,7 @@ def _reset_rows(
     template_at = int(consts[CONSTS.template_at])
     for r in range(indices.shape[0]):
         i = indices[r]
-        k = int(draws[r, _D_PERSONA])
+        k = int(draws[r, DRAWS.persona])
         persona = persona_table[k]
         row = state[i]
         row[:] = 0.0
@@ -320,7 +269,7 @@ def _reset_rows(
         if consts[CONSTS.vary] > 0.5:
             for j in range(n_varied):
                 column = int(consts[varied_at + j])
-                p[column] = persona[PERSONA_BLOCKS.params + column] * draws[r, _D_NORMALS + j]
+                p[column] = persona[PERSONA_BLOCKS.params + column] * draws[r, DRAWS.normals + j]
         a00, a01, a10, a11, b0, b1 = zoh_coefficients(
             p[PERSON.damping_rate_per_s], p[PERSON.voluntary_gain_per_s2], p[PERSON.dt_s]
         )
@@ -330,11 +279,11 @@ def _reset_rows(
         p[PERSON.zoh_a11] = a11
         p[PERSON.zoh_b0] = b0
         p[PERSON.zoh_b1] = b1
-        u = draws[r, _D_UNIFORM]
+        u = draws[r, DRAWS.uniform]
         xi = -1.0 if u < persona[PERSONA_BLOCKS.xi_cuts] else (1.0 if u > persona[PERSONA_BLOCKS.xi_cuts + 1] else 0.0)
         if xi_override != _NO_OVERRIDE:
             xi = float(xi_override)
-        x0 = draws[r, _D_LEAN]
+        x0 = draws[r, DRAWS.lean]
         # initial_state_row(xi, x0): at rest at x0, intending to stay.
         s = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
         s[:] = consts[template_at : template_at + len(STATE_COLUMNS)]
@@ -480,16 +429,16 @@ def _advance(
     # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
     n_envs = cmd.shape[0]
     for i in range(n_envs):
-        if cmd[i, CMD_ACTIVE] > 0.5 and generators[i, G_STATE] == 0:
+        if cmd[i, CMD.active] > 0.5 and generators[i, G_STATE] == 0:
             return i
     substeps = int(consts[CONSTS.substeps])
     z = np.empty(NORMALS_PER_SUBSTEP)
     for i in range(n_envs):
-        if cmd[i, CMD_ACTIVE] < 0.5:
+        if cmd[i, CMD.active] < 0.5:
             continue
         row = state[i]
-        cp = cmd[i, CMD_PUSH]
-        lift = cmd[i, CMD_LIFT] > 0.5
+        cp = cmd[i, CMD.push_force_n]
+        lift = cmd[i, CMD.lift] > 0.5
         row[BLOCKS.cues + CUES.impulse_n_s] = 0.0
         if lift:
             result = _lift_outcome(row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)], consts)
@@ -500,7 +449,7 @@ def _advance(
                 block[substeps + k] = 0.0
                 block[2 * substeps + k] = row[BLOCKS.report + REPORT.measured_position_m]
         else:
-            result = _simulate_action(row, cp, cmd[i, CMD_VERBAL], generators[i], z, consts)
+            result = _simulate_action(row, cp, cmd[i, CMD.verbal_cue], generators[i], z, consts)
         _write_reward_and_truth(row, result, lift, cp, consts)
         if consts[CONSTS.build_obs] > 0.5:
             _observe_row(row, obs[i], consts)
@@ -525,7 +474,7 @@ class SitToStandCore:
             ``params``, ``delay_push``, ``delay_verbal`` and ``report`` are views into it.
         report: (N, len(REPORT_COLUMNS)) what the last step or reset of each env produced.
         obs: (N, len(observation_index)) float32 observation of the last step or reset.
-        cmd: (N, 4) command rows (:data:`CMD_PUSH` ...) for :meth:`step_commands`.
+        cmd: (N, 4) command rows (columns :data:`~coop_gym.envs.contract.CMD`) for :meth:`step_commands`.
         generators: (N, 4) uint64 addresses of each env's bit generator (0: none yet).
     """
 
@@ -613,8 +562,8 @@ class SitToStandCore:
         self._block_y = st[:, BLOCKS.end + 2 * substeps : BLOCKS.end + 3 * substeps]
         self.rngs: list[np.random.Generator | None] = [None] * n
         self.generators = np.zeros((n, 4), dtype=np.uint64)
-        self.cmd = np.zeros((n, CMD_COLUMNS))
-        self.cmd[:, CMD_ACTIVE] = 1.0
+        self.cmd = np.zeros((n, len(CMD_COLUMNS)))
+        self.cmd[:, CMD.active] = 1.0
         self.obs = np.zeros((n, n_obs), dtype=np.float32)
         self._outcome = np.zeros(n, dtype=np.int64)
         self._terminated = np.zeros(n, dtype=bool)
@@ -628,7 +577,7 @@ class SitToStandCore:
             verbal_cue=self.report[:, REPORT.verbal_cue],
         )
         self._all = np.arange(n, dtype=np.int64)
-        self._draws = np.zeros((n, _D_NORMALS + n_varied))
+        self._draws = np.zeros((n, DRAWS.normals + n_varied))
 
     def _make_multiple_model(self, options: dict[str, Any]) -> Any:
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
@@ -643,7 +592,7 @@ class SitToStandCore:
     def out(self) -> StepArrays:
         """What the last step or reset produced, as :class:`StepArrays` (views; outcome and terminated refreshed)."""
         np.copyto(self._outcome, self.report[:, REPORT.outcome], casting="unsafe")
-        np.take(_ENDED_BY_LIFT, self._outcome, out=self._terminated)
+        np.take(TERMINATES, self._outcome, out=self._terminated)
         return self._out
 
     @property
@@ -691,10 +640,10 @@ class SitToStandCore:
             raise RuntimeError(f"env {failed} has no random generator; call reset_env(i, rng) or set_rng first")
         # The variation factors exp(std * z) with NumPy's exp, not a compiled one: NumPy's SIMD
         # exp can differ in the last bit, and the person must equal sample_person's exactly.
-        factors = draws[:, _D_NORMALS:]
+        factors = draws[:, DRAWS.normals :]
         std = self._variation_std
         if std is None:
-            std = self._persona_variation_std[draws[:, _D_PERSONA].astype(np.int64)][:, None]
+            std = self._persona_variation_std[draws[:, DRAWS.persona].astype(np.int64)][:, None]
         np.multiply(factors, std, out=factors)
         np.exp(factors, out=factors)
         _reset_rows(
@@ -709,7 +658,7 @@ class SitToStandCore:
         if self.mm is not None:
             # The persona (and so the nominal model) may change from episode to episode.
             self.mm.nominal[indices] = self.nominal[indices]
-            self.mm.reset(indices, draws[:, _D_LEAN])
+            self.mm.reset(indices, draws[:, DRAWS.lean])
             self.report[indices, REPORT.p_uncooperative : REPORT.p_cooperative + 1] = self.mm.probabilities[indices]
             _observe(indices, self.state, self.obs, self.consts)
 
@@ -720,10 +669,10 @@ class SitToStandCore:
     ) -> StepArrays:
         """Advance every env by one agent action (already decoded and validated)."""
         cmd = self.cmd
-        cmd[:, CMD_PUSH] = push_force_n
-        cmd[:, CMD_VERBAL] = verbal_cue
-        cmd[:, CMD_LIFT] = lift
-        cmd[:, CMD_ACTIVE] = 1.0
+        cmd[:, CMD.push_force_n] = push_force_n
+        cmd[:, CMD.verbal_cue] = verbal_cue
+        cmd[:, CMD.lift] = lift
+        cmd[:, CMD.active] = 1.0
         self.step_commands(cmd)
         return self.out
 

@@ -34,12 +34,14 @@ import numpy as np
 from gymnasium.error import DependencyNotInstalled
 from numpy.typing import NDArray
 
+from coop_gym.envs.config import Outcome
+
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pygame
 
 __all__ = ["OUTCOMES", "RenderState", "SitToStandRenderer"]
 
-OUTCOMES: Final[tuple[str, ...]] = ("success", "unsafe", "premature", "timeout")
+OUTCOMES: Final[tuple[str, ...]] = tuple(o.label for o in Outcome if o is not Outcome.NONE)
 """Episode outcomes the renderer can show as a banner."""
 
 # ---------------------------------------------------------------------------------------------

@@ -12,23 +12,18 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
-from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
-from coop_gym.envs.core import (
-    CMD_ACTIVE,
-    CMD_LIFT,
-    CMD_PUSH,
-    CMD_VERBAL,
+from coop_gym.envs.contract import (
+    CMD,
     REPORT,
-    REWARD_TERMS,
+    ActionDecoder,
+    EnvArguments,
+    batched_infos,
+    episode_ends,
+    parse_reset_options,
 )
-from coop_gym.envs.sit_to_stand import SitToStandConfig, decode_actions, parse_reset_options, render_state_for
-from coop_gym.model.params import Cues, Realism, Timing
-from coop_gym.model.personas import Persona
-from estimator.judgment import ThresholdJudgment
+from coop_gym.envs.sit_to_stand import make_core, render_state_for
 
 __all__ = ["SitToStandVectorEnv"]
-
-_OUTCOME_LABELS = np.array([o.label for o in Outcome], dtype=object)
 
 
 class SitToStandVectorEnv(VectorEnv):
@@ -42,7 +37,8 @@ class SitToStandVectorEnv(VectorEnv):
     ## Arguments
 
     ``gymnasium.make_vec(id, num_envs=N, autoreset_mode=..., **env_kwargs)`` (or the class
-    directly): ``num_envs``; every :class:`SitToStandEnv` keyword; ``max_episode_steps``
+    directly): ``num_envs``; every :class:`SitToStandEnv` keyword (the contract's
+    :class:`~coop_gym.envs.contract.EnvArguments`); ``max_episode_steps``
     (truncation, inside this env; default 30 s of steps, what ``make_vec`` passes from the
     registration); ``autoreset_mode``: an ``AutoresetMode`` or its value:
 
@@ -95,41 +91,15 @@ class SitToStandVectorEnv(VectorEnv):
     def __init__(
         self,
         num_envs: int = 1,
-        personas: str | Persona | Sequence[str | Persona] = "train",
-        observation_mode: str = "belief",
-        action_type: str = "multidiscrete",
-        estimator: str = "kalman",
-        realism: Realism | dict[str, Any] | None = None,
-        reward: RewardWeights | dict[str, Any] | None = None,
-        lift: LiftCriteria | dict[str, Any] | None = None,
-        judgment: ThresholdJudgment | dict[str, Any] | None = None,
-        timing: Timing | dict[str, Any] | None = None,
-        cues: Cues | dict[str, Any] | None = None,
-        estimator_options: dict[str, Any] | None = None,
-        render_mode: str | None = None,
+        *,
         max_episode_steps: int | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        difficulty: str | None = None,
+        **kwargs: Any,
     ) -> None:
-        """Create ``num_envs`` envs; see the class docstring and :class:`SitToStandEnv`."""
+        """Create ``num_envs`` envs; ``kwargs``: the keywords of :class:`~coop_gym.envs.contract.EnvArguments`."""
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
-        config = SitToStandConfig.from_arguments(
-            personas,
-            observation_mode,
-            action_type,
-            estimator,
-            realism,
-            reward,
-            lift,
-            judgment,
-            timing,
-            cues,
-            estimator_options,
-            render_mode,
-            self.metadata["render_modes"],
-            difficulty=difficulty,
-        )
+        config = EnvArguments.from_keywords(type(self).__name__, kwargs).resolve(self.metadata["render_modes"])
         if max_episode_steps is None:
             max_episode_steps = config.timing.max_episode_steps
         if isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer)):
@@ -141,21 +111,20 @@ class SitToStandVectorEnv(VectorEnv):
         self.config = config
         self.num_envs = n = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
-        self.render_mode = render_mode
-        self.observation_mode = observation_mode
-        self.action_type = action_type
+        self.render_mode = config.render_mode
+        self.observation_mode = config.observation_mode
+        self.action_type = config.action_type
         self.personas = config.personas
         self.timing = config.timing
         self.cues = config.cues
         self.features = config.features
-        self.core = config.make_core(n)
+        self.core = make_core(config, n)
         self.single_observation_space = config.observation_space()
         self.single_action_space = config.action_space()
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
         self._persona_names = np.array([p.name for p in self.personas], dtype=object)
-        # [push, verbal, lift] of each flat discrete action.
-        self._flat_commands = config.command_table()[:, 0, :CMD_ACTIVE].copy()
+        self._actions = ActionDecoder(config.action_type, config.cues)
         self._episode_steps = np.zeros(n, dtype=np.int64)
         self._done = np.zeros(n, dtype=bool)  # finished, waiting for an (auto)reset
         self._started = np.zeros(n, dtype=bool)  # reset at least once
@@ -238,8 +207,8 @@ class SitToStandVectorEnv(VectorEnv):
         if not self._started.all():
             never = np.flatnonzero(~self._started).tolist()
             raise RuntimeError(f"step() called before reset(): envs {never} were never reset; call reset()")
-        self._write_commands(actions)
         core = self.core
+        self._actions.batch(actions, core.cmd)
         mode = self.autoreset_mode
         pending = self._done
         if mode == AutoresetMode.DISABLED and pending.any():
@@ -250,19 +219,17 @@ class SitToStandVectorEnv(VectorEnv):
         # NEXT_STEP: the envs that finished last step are reset now instead of stepped.
         stepped = ~pending
         cmd = core.cmd
-        cmd[:, CMD_ACTIVE] = stepped
+        cmd[:, CMD.active] = stepped
         core.step_commands(cmd)
         self._episode_steps += stepped
         if stepped[0]:
             self._env0_stepped = True
-            self._env0_lift = bool(cmd[0, CMD_LIFT] > 0.5)
+            self._env0_lift = bool(cmd[0, CMD.lift] > 0.5)
         report = core.report
         rewards = np.where(stepped, report[:, REPORT.reward], 0.0)
-        # A lift always ends the episode (success, unsafe or premature); nothing else terminates.
-        terminated = stepped & (cmd[:, CMD_LIFT] > 0.5)
         # Truncated by the step limit or by the episode clock of ``timing``, whichever comes first.
-        clock_out = report[:, REPORT.outcome] == Outcome.TIMEOUT
-        truncated = stepped & ~terminated & ((self._episode_steps >= self.max_episode_steps) | clock_out)
+        out_of_steps = self._episode_steps >= self.max_episode_steps
+        terminated, truncated = episode_ends(report[:, REPORT.outcome], stepped, out_of_steps)
         done = terminated | truncated
         final = None
         if mode == AutoresetMode.NEXT_STEP:
@@ -299,33 +266,6 @@ class SitToStandVectorEnv(VectorEnv):
             self._renderer = None
 
     # --- helpers ----------------------------------------------------------------
-
-    def _write_commands(self, actions: Any) -> None:
-        """Validate the batch of actions and write their cues into the core's command rows.
-
-        Integer arrays of the right shape and range (what ``action_space.sample()`` and SB3
-        give) take a table look-up; anything else goes through :func:`decode_actions`, which
-        names what is wrong.
-        """
-        n = self.num_envs
-        cmd = self.core.cmd
-        kind = self.action_type
-        a = actions
-        if type(a) is np.ndarray and a.dtype.kind in "iu" and kind != "continuous":
-            try:
-                if kind == "multidiscrete" and a.shape == (n, 3):
-                    # One C call checks every range and flattens (ValueError when out of range).
-                    cmd[:, :CMD_ACTIVE] = self._flat_commands[np.ravel_multi_index(a.T, (3, 3, 2))]
-                    return
-                if kind == "discrete" and a.shape == (n,):
-                    cmd[:, :CMD_ACTIVE] = self._flat_commands[np.ravel_multi_index((a,), (len(self._flat_commands),))]
-                    return
-            except (ValueError, TypeError):
-                pass  # out of range or an unusual integer type: decode_actions decides and names the problem
-        push, verbal, lift = decode_actions(actions, kind, self.cues, n)
-        cmd[:, CMD_PUSH] = push
-        cmd[:, CMD_VERBAL] = verbal
-        cmd[:, CMD_LIFT] = lift
 
     def _reset_finished(self, mask: NDArray[np.bool_]) -> None:
         """Autoreset the envs of ``mask``, each continuing its own generator."""
@@ -370,50 +310,8 @@ class SitToStandVectorEnv(VectorEnv):
         return mask.copy()
 
     def _infos(self, report: NDArray[np.float64], mask: NDArray[np.bool_] | None) -> dict[str, Any]:
-        """Infos of the envs of ``mask`` (default all) from report rows, Gymnasium style.
-
-        Entries of envs outside the mask are zero (``None`` for labels), as Gymnasium's
-        ``_add_info`` leaves them.
-        """
-        n = self.num_envs
-        r = report
-        outcome = r[:, REPORT.outcome].astype(np.int64)
-        persona = r[:, REPORT.persona_index].astype(np.int64)
-        values: dict[str, NDArray[Any]] = {
-            "true_x_m": r[:, REPORT.true_x_m].copy(),
-            "true_xdot_m_per_s": r[:, REPORT.true_xdot_m_per_s].copy(),
-            "true_eta_m": r[:, REPORT.true_eta_m].copy(),
-            "true_xi": r[:, REPORT.info_true_xi].astype(np.int64),
-            "persona": self._persona_names[persona],
-            "persona_index": persona,
-            "outcome": _OUTCOME_LABELS[outcome],
-            "outcome_code": outcome,
-            "judgment": r[:, REPORT.judgment].astype(np.int64),
-            "xi_estimate": r[:, REPORT.xi_hat].copy(),
-            "push_force_n": r[:, REPORT.push_force_n].copy(),
-            "verbal_cue": r[:, REPORT.verbal_cue].astype(np.int64),
-            "elapsed_s": r[:, REPORT.elapsed_s].copy(),
-        }
-        if self.core.mm is not None:
-            values["xi_probabilities"] = r[:, REPORT.p_uncooperative : REPORT.p_cooperative + 1].copy()
-        terms = {name: r[:, REPORT.reward_success + k].copy() for k, name in enumerate(REWARD_TERMS)}
-        if mask is None:
-            mask = np.ones(n, dtype=bool)
-        elif not mask.all():
-            outside = ~mask
-            for array in (*values.values(), *terms.values()):
-                array[outside] = None if array.dtype == object else 0
-        infos: dict[str, Any] = {}
-        for key, array in values.items():
-            infos[key] = array
-            infos[f"_{key}"] = mask.copy()
-        reward_terms: dict[str, Any] = {}
-        for key, array in terms.items():
-            reward_terms[key] = array
-            reward_terms[f"_{key}"] = mask.copy()
-        infos["reward_terms"] = reward_terms
-        infos["_reward_terms"] = mask.copy()
-        return infos
+        """Infos of the envs of ``mask`` (default all) from report rows (the contract's :func:`batched_infos`)."""
+        return batched_infos(report, mask, self._persona_names, self.core.mm is not None)
 
 
 def _autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:

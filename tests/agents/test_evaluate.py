@@ -17,11 +17,11 @@ from agents.evaluate import (
     EvaluationResult,
     env_kwargs_for,
     evaluate,
-    main,
     vector_env_available,
     wilson_interval,
     write_csv,
 )
+from agents.evaluate.cli import main
 from agents.scripted import HandbookCaregiver, OracleAgent
 
 

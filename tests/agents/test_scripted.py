@@ -197,7 +197,7 @@ def test_discrete_action_type_plays_the_same_episodes():
 
 
 def test_encode_actions_continuous_matches_env_decoding():
-    from coop_gym.envs.sit_to_stand import decode_actions
+    from coop_gym.envs.contract import decode_actions
     from coop_gym.model.params import Cues
 
     push, verbal, lift = np.array([0, 1, 2]), np.array([2, 0, 1]), np.array([0, 0, 1])

@@ -212,6 +212,9 @@ BAD_ACTIONS: list[tuple[str, str, Any, str]] = [
     ("discrete", "a triple", [1, 2, 0], r"action has shape \(1, 3\); the discrete action space needs \(\)"),
     ("discrete", "string", "3", r"action must be numeric"),
     ("discrete", "None", None, r"action must be numeric, got dtype object"),
+    ("discrete", "True", True, r"discrete action must be numbers, not bools, got \[True\]"),
+    ("discrete", "numpy False", np.bool_(False), r"discrete action must be numbers, not bools"),
+    ("multidiscrete", "bools", np.array([True, False, True]), r"multidiscrete action must be numbers, not bools"),
     ("continuous", "above 1", np.array([0.0, 0.0, 1.5], dtype=np.float32), r"continuous action must lie in \[-1, 1\]"),
     ("continuous", "below -1", [-2.0, 0.0, 0.0], r"continuous action must lie in \[-1, 1\]"),
     ("continuous", "NaN", np.array([math.nan, 0, 0], dtype=np.float32), r"action contains NaN or inf"),
@@ -341,6 +344,22 @@ def test_step_after_termination(make: Callable[[], gym.Env[Any, Any]]) -> None:
     assert_same_future(env, twin, valid_actions("multidiscrete", 30))
 
 
+def test_step_after_truncation_raises_like_after_termination() -> None:
+    """The episode clock truncates; the raw env then refuses steps until reset, as after a lift."""
+    env, twin = SitToStandEnv(timing={"episode_s": 0.5}), SitToStandEnv(timing={"episode_s": 0.5})
+    for e in (env, twin):
+        e.reset(seed=6)
+        ends = [e.step([1, 2, 0])[2:4] for _ in range(5)]
+        assert ends == [(False, False)] * 4 + [(False, True)]  # 5 steps of 0.1 s: truncated, not terminated
+    with pytest.raises(RuntimeError, match=r"after the episode ended; call reset\(\)"):
+        env.step([0, 0, 0])
+    with pytest.raises(RuntimeError):  # still refused, however often
+        env.step([0, 0, 1])
+    for e in (env, twin):
+        e.reset()
+    assert_same_future(env, twin, valid_actions("multidiscrete", 30))
+
+
 def test_close_twice_and_step_after_close_reset() -> None:
     env = SitToStandEnv(render_mode="rgb_array")
     env.reset(seed=0)
@@ -384,6 +403,7 @@ BAD_VECTOR_ACTIONS: list[tuple[str, Any, str]] = [
     ("out of range in one env", np.array([[0, 0, 0], [0, 3, 0], [0, 0, 0]]), r"multidiscrete action must be"),
     ("strings", np.array([["1", "2", "0"]] * 3), r"action must be numeric"),
     ("None", None, r"action must be numeric"),
+    ("bools", np.ones((3, 3), dtype=bool), r"multidiscrete action must be numbers, not bools"),
 ]
 
 

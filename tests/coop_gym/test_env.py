@@ -295,8 +295,8 @@ def test_core_step_library_api_matches_the_env_step() -> None:
 
 def test_report_layout_check_is_not_an_assert(monkeypatch: pytest.MonkeyPatch) -> None:
     # report_info unpacks by position; the import-time check must also run under ``python -O``.
-    from coop_gym.envs import sit_to_stand
+    from coop_gym.envs import contract
 
-    monkeypatch.setattr(sit_to_stand, "REPORT_COLUMNS", sit_to_stand.REPORT_COLUMNS[:-1])
+    monkeypatch.setattr(contract, "REPORT_COLUMNS", contract.REPORT_COLUMNS[:-1])
     with pytest.raises(RuntimeError, match="update report_info"):
-        sit_to_stand._check_report_layout()
+        contract._check_report_layout()

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coop_gym.envs import core
+from coop_gym.envs import contract, core
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import STATE
 from coop_gym.model.params import Cues, Realism, Timing
@@ -40,7 +40,9 @@ def test_the_core_has_no_assert_and_its_kernel_no_outcome_literal() -> None:
 def test_the_kernel_codes_are_the_enums() -> None:
     codes = (core._NONE, core._SUCCESS, core._UNSAFE, core._PREMATURE, core._TIMEOUT)
     assert codes == tuple(Outcome)
-    assert core._ENDED_BY_LIFT.tolist() == [o in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE) for o in Outcome]
+    lifts = [o in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE) for o in Outcome]
+    assert contract.TERMINATES.tolist() == lifts and [o.terminates for o in Outcome] == lifts
+    assert contract.TRUNCATES.tolist() == [o is Outcome.TIMEOUT for o in Outcome]
 
 
 def test_outcome_codes_that_are_not_consecutive_are_refused() -> None:
@@ -49,12 +51,15 @@ def test_outcome_codes_that_are_not_consecutive_are_refused() -> None:
         SUCCESS = 2
 
     with pytest.raises(ValueError, match=r"Gapped values must be 0 \.\. 1"):
-        core.check_outcome_codes(Gapped)
-    core.check_outcome_codes(Outcome)
+        contract.check_outcome_codes(Gapped)
+    contract.check_outcome_codes(Outcome)
 
 
 def test_the_package_imports_and_checks_under_python_optimize() -> None:
-    code = "import coop_gym.envs.core as c; c.check_outcome_codes(c.Outcome); print(c._SUCCESS)"
+    code = (
+        "import coop_gym.envs.core as c, coop_gym.envs.contract as k; k.check_outcome_codes(k.Outcome); "
+        "print(c._SUCCESS)"
+    )
     out = subprocess.run([sys.executable, "-O", "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == str(int(Outcome.SUCCESS))

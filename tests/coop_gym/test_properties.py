@@ -271,7 +271,7 @@ def rollout_checked(env: SitToStandEnv, seed: int, actions: list[Any]) -> None:
         obs, reward, terminated, truncated, info = env.step(action)
         assert isinstance(terminated, bool) and isinstance(truncated, bool)
         check_step(env, obs, reward, info, f"step {t} action {action!r}")
-        if terminated:
+        if terminated or truncated:  # the raw env refuses to step past either
             obs, info = env.reset()
             check_step(env, obs, 0.0, info, f"reset after step {t}")
 

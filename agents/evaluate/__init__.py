@@ -12,24 +12,17 @@ seeded ``s``).
 Metrics: success, unsafe-lift, premature and timeout rates (95 % Wilson intervals),
 mean time to lift, mean and peak push force, number of cues, and return (mean, std).
 
-Command line::
+Command line: ``python -m agents.evaluate --agent handbook --personas test`` (see
+:mod:`agents.evaluate.cli`, kept apart because it loads saved models through
+:mod:`agents.rl` and :mod:`agents.rllib`, which evaluate through this module).
 
-    python -m agents.evaluate --agent handbook --personas test --episodes 1000
-    python -m agents.evaluate --model runs/.../model.zip --json
-    python -m agents.evaluate --model runs/...__rllib_ppo__.../    # an RLlib run folder
-    python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
-        --csv out.csv --plot out.png
-
-Importing this module does not import torch; ``--model`` loads SB3 lazily.
+Importing this module does not import torch.
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
-import json
 import math
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -40,10 +33,10 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-import coop_gym  # registers the env ids
+import coop_gym  # noqa: F401 -- registers the env ids
 from agents.base import Agent, action_type_of, feature_mismatch, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
-from coop_gym.cli import SEED_LIMIT, output_path_problem, seed_range_problem
+from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.envs.config import Outcome
 from coop_gym.io import atomic_open
 from coop_gym.io import write_json as atomic_write_json
@@ -56,7 +49,6 @@ __all__ = [
     "EvaluationResult",
     "env_kwargs_for",
     "evaluate",
-    "main",
     "output_path_problem",
     "results_table",
     "wilson_interval",
@@ -67,10 +59,10 @@ __all__ = [
 DEFAULT_ENV_ID = "CoopGym/SitToStand-v0"
 PLOT_SUFFIXES: tuple[str, ...] = (".png", ".pdf", ".svg")
 """File types ``--plot`` writes (matplotlib picks the format from the suffix)."""
-OUTCOMES: tuple[str, ...] = ("success", "unsafe", "premature", "timeout")
-"""Episode outcomes, in report order."""
+OUTCOMES: tuple[str, ...] = tuple(o.label for o in Outcome if o is not Outcome.NONE)
+"""Episode outcomes (labels of :class:`~coop_gym.envs.config.Outcome`), in report order."""
 
-_LIFT_OUTCOMES = {Outcome.SUCCESS.label, Outcome.UNSAFE.label, Outcome.PREMATURE.label}
+_LIFT_OUTCOMES = {o.label for o in Outcome if o.terminates}
 
 
 def wilson_interval(successes: int, trials: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -766,46 +758,6 @@ def results_json(results: Sequence[EvaluationResult], episodes: bool = False) ->
     return {"results": summaries}
 
 
-# --- command line -------------------------------------------------------------
-
-
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python -m agents.evaluate",
-        description="Score agents on the same seeded sit-to-stand episodes (episode k uses seed + k).",
-    )
-    who = parser.add_argument_group("agent (one of --agent, --model, --compare)")
-    who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
-    who.add_argument(
-        "--model",
-        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent) or an RLlib run folder (agents.rllib)",
-    )
-    who.add_argument(
-        "--compare",
-        help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
-        "(--agent/--model, if given, are added first)",
-    )
-    parser.add_argument("--env", default=None, help=f"env id (default: the model's, else {DEFAULT_ENV_ID})")
-    parser.add_argument("--personas", default="test", help="train, test, all, a persona name or names joined by ','")
-    parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (default 1000)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of episode 0 (default 0)")
-    parser.add_argument("--n-envs", type=int, default=64, help="episodes played side by side (default 64)")
-    parser.add_argument(
-        "--backend", choices=("auto", "vector", "single"), default="auto", help="batched vector env or single envs"
-    )
-    parser.add_argument("--stochastic", action="store_true", help="sample actions instead of deterministic ones")
-    parser.add_argument("--by-persona", action="store_true", help="also show one row per agent and persona")
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
-    parser.add_argument("--csv", help="write the summary rows to this CSV file")
-    parser.add_argument("--json-out", help="write the summaries and episode records to this JSON file")
-    parser.add_argument("--plot", help="write a bar chart of outcome rates per agent to this PNG file")
-    return parser
-
-
-def _personas_arg(text: str) -> str | list[str]:
-    return text if "," not in text else [p.strip() for p in text.split(",") if p.strip()]
-
-
 ORACLE_AGENTS = ("oracle",)
 """Agents that see the true mental state: upper bounds, never the "best non-oracle"."""
 BLIND_AGENTS = ("blind", "push_then_lift", "lift_at_once", "random")
@@ -871,155 +823,3 @@ def headroom(results: Sequence[EvaluationResult]) -> Headroom | None:
         best["blind"].agent,
         reader.agent,
     )
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit code (usage errors exit 2)."""
-    parser = _parser()
-    args = parser.parse_args(argv)
-    entries: list[str] = []
-    if args.agent:
-        entries.append(args.agent)
-    if args.model:
-        entries.append(args.model)
-    if args.compare:
-        entries.extend(e.strip() for e in args.compare.split(",") if e.strip())
-    if not entries:
-        parser.error("give --agent NAME, --model PATH or --compare NAME,NAME,...")
-    if args.episodes < 1:
-        parser.error(f"--episodes must be >= 1, got {args.episodes}")
-    if args.n_envs < 1:
-        parser.error(f"--n-envs must be >= 1, got {args.n_envs}")
-    problem = seed_range_problem("--seed", args.seed, args.episodes)  # episode k uses seed + k
-    if problem:
-        parser.error(problem)
-    personas = _personas_arg(args.personas)
-    try:
-        resolve_personas(personas)
-    except ValueError as exc:
-        parser.error(f"--personas: {exc}")
-    if args.env is not None and args.env not in coop_gym.ENV_IDS:
-        parser.error(
-            f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
-        )
-    for flag, value in (("--csv", args.csv), ("--json-out", args.json_out), ("--plot", args.plot)):
-        problem = output_path_problem(value) if value else None
-        if problem:
-            parser.error(f"{flag}: {problem}")
-    if args.plot and Path(args.plot).suffix.lower() not in PLOT_SUFFIXES:
-        parser.error(
-            f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
-        )
-    for entry in entries:
-        if entry not in SCRIPTED_AGENTS and not Path(entry).exists():
-            parser.error(
-                f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
-            )
-
-    # Every model is loaded and matched to its env before any episode is played.
-    planned: list[tuple[Agent | str, str, str]] = []
-    for entry in entries:
-        if entry in SCRIPTED_AGENTS:
-            planned.append((entry, args.env or DEFAULT_ENV_ID, entry))
-            continue
-        folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
-        if _is_rllib_run(entry):
-            from agents.rllib import load_rllib_agent
-
-            try:
-                rllib_agent = load_rllib_agent(entry)
-            except (OSError, ValueError) as exc:
-                parser.error(f"--model {entry}: {exc}")
-            env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
-            planned.append((rllib_agent, env_id, f"rllib_ppo:{folder.name or Path(entry).stem}"))
-            continue
-        from agents.base import feature_mismatch
-        from agents.rl import load_agent, observation_features
-
-        try:
-            loaded = load_agent(entry)
-        except (OSError, ValueError) as exc:
-            parser.error(f"--model {entry}: {exc}")
-        env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
-        problem = feature_mismatch(loaded.features, observation_features(env_id), env_id)
-        if problem:
-            parser.error(f"--model {entry}: {problem}")
-        planned.append((loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"))
-
-    results: list[EvaluationResult] = []
-    for agent, env_id, label in planned:
-        try:
-            result = evaluate(
-                agent,
-                env_id,
-                personas,
-                args.episodes,
-                args.seed,
-                n_envs=args.n_envs,
-                deterministic=not args.stochastic,
-                name=label,
-                backend=args.backend,
-            )
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        results.append(result)
-
-    if args.json:
-        print(json.dumps(results_json(results)))
-    else:
-        print_table(results)
-        room = headroom(results)
-        if room is not None:
-            print("\n".join(room.lines()))
-        if args.by_persona:
-            split = [sub for r in results for sub in _split_named(r)]
-            print_table(split, title="by persona")
-    try:
-        if args.csv:
-            write_csv(results, args.csv)
-        if args.json_out:
-            write_json(results, args.json_out, episodes=True)
-        if args.plot:
-            from agents.plots import plot_outcome_rates
-
-            plot_outcome_rates(results, args.plot)
-    except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
-        print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _is_rllib_run(entry: str) -> bool:
-    """A run folder of ``train.py --framework rllib`` (its ``agent.json`` says so); no Ray import."""
-    path = Path(entry)
-    folder = path.parent if path.name == "checkpoint" else path
-    info = folder / "agent.json"
-    if not (path.is_dir() and info.exists()):
-        return False
-    try:
-        return bool(json.loads(info.read_text()).get("framework") == "rllib")
-    except (OSError, ValueError, AttributeError):
-        return False  # not an RLlib run; the SB3 loader names what is wrong with the file
-
-
-def _split_named(result: EvaluationResult) -> list[EvaluationResult]:
-    out = []
-    for persona, sub in result.by_persona().items():
-        out.append(
-            EvaluationResult(
-                f"{result.agent} / {persona}",
-                sub.env_id,
-                sub.personas,
-                sub.seed,
-                sub.records,
-                sub.wall_time_s,
-                sub.backend,
-                sub.env_kwargs,
-            )
-        )
-    return out
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

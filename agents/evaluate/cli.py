@@ -1,0 +1,233 @@
+r"""The command line of :mod:`agents.evaluate`: ``python -m agents.evaluate ...``.
+
+A module of its own because it loads saved models: SB3 bundles (:mod:`agents.rl`) and
+RLlib runs (:mod:`agents.rllib`), which themselves evaluate through :mod:`agents.evaluate`.
+Kept here, the imports run one way (``cli -> rl -> evaluate``). Examples::
+
+    python -m agents.evaluate --agent handbook --personas test --episodes 1000
+    python -m agents.evaluate --model runs/.../model.zip --json
+    python -m agents.evaluate --model runs/...__rllib_ppo__.../    # an RLlib run folder
+    python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
+        --csv out.csv --plot out.png
+
+Importing this module does not import torch; ``--model`` loads SB3 lazily.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import coop_gym  # registers the env ids
+from agents.base import Agent, feature_mismatch
+from agents.evaluate import (
+    DEFAULT_ENV_ID,
+    PLOT_SUFFIXES,
+    EvaluationResult,
+    evaluate,
+    headroom,
+    print_table,
+    results_json,
+    write_csv,
+    write_json,
+)
+from agents.scripted import SCRIPTED_AGENTS
+from coop_gym.cli import output_path_problem, seed_range_problem
+from coop_gym.model.personas import resolve_personas
+
+__all__ = ["main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.evaluate",
+        description="Score agents on the same seeded sit-to-stand episodes (episode k uses seed + k).",
+    )
+    who = parser.add_argument_group("agent (one of --agent, --model, --compare)")
+    who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
+    who.add_argument(
+        "--model",
+        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent) or an RLlib run folder (agents.rllib)",
+    )
+    who.add_argument(
+        "--compare",
+        help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
+        "(--agent/--model, if given, are added first)",
+    )
+    parser.add_argument("--env", default=None, help=f"env id (default: the model's, else {DEFAULT_ENV_ID})")
+    parser.add_argument("--personas", default="test", help="train, test, all, a persona name or names joined by ','")
+    parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (default 1000)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of episode 0 (default 0)")
+    parser.add_argument("--n-envs", type=int, default=64, help="episodes played side by side (default 64)")
+    parser.add_argument(
+        "--backend", choices=("auto", "vector", "single"), default="auto", help="batched vector env or single envs"
+    )
+    parser.add_argument("--stochastic", action="store_true", help="sample actions instead of deterministic ones")
+    parser.add_argument("--by-persona", action="store_true", help="also show one row per agent and persona")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+    parser.add_argument("--csv", help="write the summary rows to this CSV file")
+    parser.add_argument("--json-out", help="write the summaries and episode records to this JSON file")
+    parser.add_argument("--plot", help="write a bar chart of outcome rates per agent to this PNG file")
+    return parser
+
+
+def _personas_arg(text: str) -> str | list[str]:
+    return text if "," not in text else [p.strip() for p in text.split(",") if p.strip()]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (usage errors exit 2)."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    entries = _checked_entries(parser, args)
+    # Every model is loaded and matched to its env before any episode is played.
+    planned = [_planned(parser, args, entry) for entry in entries]
+    results: list[EvaluationResult] = []
+    for agent, env_id, label in planned:
+        try:
+            result = evaluate(
+                agent,
+                env_id,
+                _personas_arg(args.personas),
+                args.episodes,
+                args.seed,
+                n_envs=args.n_envs,
+                deterministic=not args.stochastic,
+                name=label,
+                backend=args.backend,
+            )
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        results.append(result)
+    return _report(args, results)
+
+
+def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The agents to evaluate (scripted names, model paths); a usage error for any bad argument."""
+    entries: list[str] = []
+    if args.agent:
+        entries.append(args.agent)
+    if args.model:
+        entries.append(args.model)
+    if args.compare:
+        entries.extend(e.strip() for e in args.compare.split(",") if e.strip())
+    if not entries:
+        parser.error("give --agent NAME, --model PATH or --compare NAME,NAME,...")
+    if args.episodes < 1:
+        parser.error(f"--episodes must be >= 1, got {args.episodes}")
+    if args.n_envs < 1:
+        parser.error(f"--n-envs must be >= 1, got {args.n_envs}")
+    problem = seed_range_problem("--seed", args.seed, args.episodes)  # episode k uses seed + k
+    if problem:
+        parser.error(problem)
+    try:
+        resolve_personas(_personas_arg(args.personas))
+    except ValueError as exc:
+        parser.error(f"--personas: {exc}")
+    if args.env is not None and args.env not in coop_gym.ENV_IDS:
+        parser.error(
+            f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+        )
+    for flag, value in (("--csv", args.csv), ("--json-out", args.json_out), ("--plot", args.plot)):
+        problem = output_path_problem(value) if value else None
+        if problem:
+            parser.error(f"{flag}: {problem}")
+    if args.plot and Path(args.plot).suffix.lower() not in PLOT_SUFFIXES:
+        parser.error(
+            f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
+        )
+    for entry in entries:
+        if entry not in SCRIPTED_AGENTS and not Path(entry).exists():
+            parser.error(
+                f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
+            )
+    return entries
+
+
+def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: str) -> tuple[Agent | str, str, str]:
+    """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env."""
+    if entry in SCRIPTED_AGENTS:
+        return entry, args.env or DEFAULT_ENV_ID, entry
+    folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
+    if _is_rllib_run(entry):
+        from agents.rllib import load_rllib_agent
+
+        try:
+            rllib_agent = load_rllib_agent(entry)
+        except (OSError, ValueError) as exc:
+            parser.error(f"--model {entry}: {exc}")
+        env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
+        return rllib_agent, env_id, f"rllib_ppo:{folder.name or Path(entry).stem}"
+    from agents.rl import load_agent, observation_features
+
+    try:
+        loaded = load_agent(entry)
+    except (OSError, ValueError) as exc:
+        parser.error(f"--model {entry}: {exc}")
+    env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
+    problem = feature_mismatch(loaded.features, observation_features(env_id), env_id)
+    if problem:
+        parser.error(f"--model {entry}: {problem}")
+    return loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"
+
+
+def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
+    """Print the results (table or JSON) and write the files asked for; the exit code."""
+    if args.json:
+        print(json.dumps(results_json(results)))
+    else:
+        print_table(results)
+        room = headroom(results)
+        if room is not None:
+            print("\n".join(room.lines()))
+        if args.by_persona:
+            split = [sub for r in results for sub in _split_named(r)]
+            print_table(split, title="by persona")
+    try:
+        if args.csv:
+            write_csv(results, args.csv)
+        if args.json_out:
+            write_json(results, args.json_out, episodes=True)
+        if args.plot:
+            from agents.plots import plot_outcome_rates
+
+            plot_outcome_rates(results, args.plot)
+    except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
+        print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _is_rllib_run(entry: str) -> bool:
+    """A run folder of ``train.py --framework rllib`` (its ``agent.json`` says so); no Ray import."""
+    path = Path(entry)
+    folder = path.parent if path.name == "checkpoint" else path
+    info = folder / "agent.json"
+    if not (path.is_dir() and info.exists()):
+        return False
+    try:
+        return bool(json.loads(info.read_text()).get("framework") == "rllib")
+    except (OSError, ValueError, AttributeError):
+        return False  # not an RLlib run; the SB3 loader names what is wrong with the file
+
+
+def _split_named(result: EvaluationResult) -> list[EvaluationResult]:
+    out = []
+    for persona, sub in result.by_persona().items():
+        out.append(
+            EvaluationResult(
+                f"{result.agent} / {persona}",
+                sub.env_id,
+                sub.personas,
+                sub.seed,
+                sub.records,
+                sub.wall_time_s,
+                sub.backend,
+                sub.env_kwargs,
+            )
+        )
+    return out

@@ -1,0 +1,100 @@
+"""The env contract (coop_gym.envs.contract) is the one place both envs and the agents read."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import coop_gym
+from coop_gym.envs.config import ACTION_TYPES, Outcome
+from coop_gym.envs.contract import (
+    ACTION_SHAPE,
+    CMD,
+    EPISODE_END,
+    FEATURE_BOUNDS,
+    FEATURES,
+    ActionDecoder,
+    EnvArguments,
+    batched_infos,
+    decode_actions,
+    encode_actions,
+    episode_ends,
+    report_info,
+)
+from coop_gym.envs.vector import SitToStandVectorEnv
+from coop_gym.model.params import Cues
+
+CHOICES = np.array(list(itertools.product(*(range(n) for n in ACTION_SHAPE))))  # every (push, verbal, lift)
+
+
+def test_every_feature_has_bounds() -> None:
+    assert tuple(FEATURE_BOUNDS) == FEATURES
+
+
+@pytest.mark.parametrize("action_type", ACTION_TYPES)
+def test_encode_then_decode_gives_back_every_choice(action_type: str) -> None:
+    cues = Cues(soft_push_n=8.0, firm_push_n=25.0)
+    actions = encode_actions(CHOICES[:, 0], CHOICES[:, 1], CHOICES[:, 2], action_type, cues)
+    push, verbal, lift = decode_actions(actions, action_type, cues, len(CHOICES))
+    assert push.tolist() == pytest.approx([(0.0, 8.0, 25.0)[p] for p in CHOICES[:, 0]], abs=1e-5)  # float32 actions
+    assert verbal.tolist() == [(0.0, -1.0, 1.0)[v] for v in CHOICES[:, 1]]
+    assert lift.tolist() == [bool(x) for x in CHOICES[:, 2]]
+
+
+@pytest.mark.parametrize("action_type", ACTION_TYPES)
+def test_the_fast_paths_decode_as_decode_actions(action_type: str) -> None:
+    cues = Cues()
+    decoder = ActionDecoder(action_type, cues)
+    actions = encode_actions(CHOICES[:, 0], CHOICES[:, 1], CHOICES[:, 2], action_type, cues)
+    push, verbal, lift = decode_actions(actions, action_type, cues, len(CHOICES))
+    want = np.stack([push, verbal, lift.astype(float)], axis=1)
+    batch = np.zeros((len(CHOICES), len(CMD)))
+    decoder.batch(actions, batch)
+    assert np.array_equal(batch[:, : CMD.active], want)
+    for k, action in enumerate(actions):
+        single = action.item() if action_type == "discrete" else action
+        got = decoder.single(single, np.zeros((1, len(CMD))))
+        assert np.array_equal(got[0, : CMD.active], want[k])
+
+
+def test_episode_end_comes_from_the_outcome() -> None:
+    assert EPISODE_END == tuple((o.terminates, o.truncates) for o in Outcome)
+    outcome = np.array([float(o) for o in Outcome] * 2)
+    stepped = np.array([True] * len(Outcome) + [False] * len(Outcome))
+    terminated, truncated = episode_ends(outcome, stepped, np.zeros(len(outcome), dtype=bool))
+    assert terminated.tolist() == [o.terminates for o in Outcome] + [False] * len(Outcome)
+    assert truncated.tolist() == [o.truncates for o in Outcome] + [False] * len(Outcome)
+    # A step limit truncates whatever did not terminate.
+    _, truncated = episode_ends(outcome, stepped, np.ones(len(outcome), dtype=bool))
+    assert truncated.tolist() == [not o.terminates for o in Outcome] + [False] * len(Outcome)
+
+
+def test_the_vector_infos_hold_the_single_env_info_of_each_env() -> None:
+    envs = gym.make_vec("CoopGym/SitToStandMM-v0", num_envs=3)
+    envs.reset(seed=2)
+    envs.step(np.array([[1, 2, 0], [0, 0, 1], [2, 1, 0]]))
+    core = envs.unwrapped.core
+    names = np.array([p.name for p in envs.unwrapped.personas], dtype=object)
+    batched = batched_infos(core.report, None, names, True)
+    for i, row in enumerate(core.report.tolist()):
+        single = report_info(row, list(names), True)
+        for key, value in single.items():
+            if key == "reward_terms":
+                assert value == {k: batched[key][k][i] for k in value}
+            else:
+                assert np.array_equal(batched[key][i], value), key
+
+
+def test_one_list_of_env_keywords() -> None:
+    names = {f.name for f in dataclasses.fields(EnvArguments)}
+    for kwargs in coop_gym.ENV_IDS.values():
+        assert set(kwargs) <= names
+    for make in (coop_gym.SitToStandEnv, lambda **kw: SitToStandVectorEnv(2, **kw)):
+        with pytest.raises(TypeError, match=r"unexpected keyword argument 'persona'.*'personas'"):
+            make(persona="typical")
+    env = coop_gym.SitToStandEnv(**{f.name: f.default for f in dataclasses.fields(EnvArguments)})
+    assert env.config == EnvArguments().resolve()
