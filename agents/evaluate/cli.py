@@ -57,8 +57,12 @@ def _parser() -> argparse.ArgumentParser:
         help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
         "(--agent/--model, if given, are added first)",
     )
-    parser.add_argument("--env", default=None, help=f"env id (default: the model's, else {DEFAULT_ENV_ID})")
-    parser.add_argument("--personas", default="test", help="train, test, all, a persona name or names joined by ','")
+    parser.add_argument(
+        "--env", default=None, help=f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
+    )
+    parser.add_argument(
+        "--personas", default="test", help="train, train_wide, test, all, a persona name or names joined by ','"
+    )
     parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (default 1000)")
     parser.add_argument("--seed", type=int, default=0, help="seed of episode 0 (default 0)")
     parser.add_argument("--n-envs", type=int, default=64, help="episodes played side by side (default 64)")
@@ -85,6 +89,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     entries = _checked_entries(parser, args)
     # Every model is loaded and matched to its env before any episode is played.
     planned = [_planned(parser, args, entry) for entry in entries]
+    if args.env is None:
+        planned = _scripted_on_the_models_env(parser, planned)
     results: list[EvaluationResult] = []
     for agent, env_id, label in planned:
         try:
@@ -173,6 +179,18 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
     if problem:
         parser.error(f"--model {entry}: {problem}")
     return loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"
+
+
+def _scripted_on_the_models_env(
+    parser: argparse.ArgumentParser, planned: list[tuple[Agent | str, str, str]]
+) -> list[tuple[Agent | str, str, str]]:
+    """Without ``--env``, scripted agents play on the models' env, so a comparison compares like with like."""
+    model_envs = sorted({env_id for agent, env_id, _ in planned if not isinstance(agent, str)})
+    if not model_envs or all(not isinstance(agent, str) for agent, _, _ in planned):
+        return planned
+    if len(model_envs) > 1:
+        parser.error(f"the models were trained on different envs ({', '.join(model_envs)}): give --env")
+    return [(agent, model_envs[0] if isinstance(agent, str) else env_id, label) for agent, env_id, label in planned]
 
 
 def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:

@@ -124,3 +124,38 @@ def test_damaged_files_raise_value_error_naming_the_file(saved, tmp_path, damage
         (folder / VECNORMALIZE_FILE).write_bytes(b"\x80\x04garbage")
     with pytest.raises(ValueError, match=match):
         load_agent(folder)
+
+
+HARD = "CoopGym/SitToStandHard-v1"
+
+
+def _tiny_model(folder, env_id):
+    env = make_train_env(env_id, 2, 0, normalize=True, backend="dummy")
+    small = {"n_steps": 32, "batch_size": 32, "n_epochs": 1}
+    model = make_model(hyperparams_for("ppo", env_id), env, 0, overrides=small)
+    model.learn(64)
+    save_agent(model, folder, algo="ppo", env_id=env_id)
+    env.close()
+    return folder
+
+
+def test_compare_without_env_plays_scripted_agents_on_the_models_env(tmp_path, capsys):
+    # A hard-level model compared with the handbook: the handbook must play the hard level
+    # too, not the default id (it once scored 100 % there beside a hard-level model).
+    from agents.evaluate.cli import main
+
+    folder = _tiny_model(tmp_path / "hard", HARD)
+    assert main(["--compare", f"{folder / MODEL_FILE},handbook", "--episodes", "4", "--n-envs", "4", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    rows = rows["results"] if isinstance(rows, dict) else rows
+    assert {r["env_id"] for r in rows} == {HARD}
+
+
+def test_compare_of_models_of_different_envs_needs_env(saved, tmp_path, capsys):
+    from agents.evaluate.cli import main
+
+    folder = _tiny_model(tmp_path / "hard", HARD)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--compare", f"{folder / MODEL_FILE},{saved / MODEL_FILE},handbook", "--episodes", "4"])
+    assert exit_info.value.code == 2
+    assert "trained on different envs" in capsys.readouterr().err
