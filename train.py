@@ -356,7 +356,7 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
 
     from agents.hyperparams import hyperparams_for
-    from agents.rl import load_agent, load_model, observation_features
+    from agents.rl import load_agent
     from coop_gym.io import make_unique_folder, write_json
 
     # The run's settings: the algorithm's defaults (agents/hyperparams.py), overridden by the flags.
@@ -375,26 +375,9 @@ def main(argv: list[str] | None = None) -> int:
     n_envs = args.n_envs or config.n_envs
     checkpoint_every = args.checkpoint_every if args.checkpoint_every is not None else max(1, timesteps // 10)
     # A model must meet the observation it was trained on: checked before any folder is made.
-    model_features = None
-    if saved_agent is not None:
-        model_features = saved_agent.features
-    elif args.resume is not None and not in_place:
-        try:
-            _, model_info = load_model(args.resume)
-        except (OSError, ValueError) as exc:
-            return _usage_error(f"--resume: {exc}")
-        model_features = model_info.get("features")
-    flag = "--model" if args.eval_only else "--resume"
-    if model_features is not None:
-        from agents.base import feature_mismatch
-
-        problem = feature_mismatch(model_features, observation_features(env_id), env_id)
-        if problem:
-            return _usage_error(f"{flag}: {problem}")
-    elif saved_agent is not None:  # an older model without feature names: compare the sizes at least
-        shape, width = saved_agent.observation_space.shape, len(observation_features(env_id))
-        if shape != (width,):
-            return _usage_error(f"{flag}: the model observes shape {shape} but {env_id} gives ({width},)")
+    problem = _observation_problem(args, env_id, saved_agent, in_place)
+    if problem:
+        return _usage_error(problem)
 
     if in_place:
         assert args.resume is not None
@@ -424,11 +407,38 @@ def main(argv: list[str] | None = None) -> int:
     stop = _StopSignals()
     try:
         with stop:
-            return _run(args, stop, run_dir, algo, env_id, config, timesteps, n_envs, checkpoint_every, source_model)
+            plan = _Plan(run_dir, algo, env_id, config, timesteps, n_envs, checkpoint_every, source_model)
+            return _run(args, stop, plan)
     except Stopped:
         return _interrupted(run_dir, stop)
     except OSError as exc:
         return _write_failed(exc, run_dir)
+
+
+def _observation_problem(args: Args, env_id: str, saved_agent: Any, in_place: bool) -> str | None:
+    """Why the model of ``--model``/``--resume`` cannot play ``env_id`` (None if it can)."""
+    from agents.rl import load_model, observation_features
+
+    flag = "--model" if args.eval_only else "--resume"
+    model_features = None
+    if saved_agent is not None:
+        model_features = saved_agent.features
+    elif args.resume is not None and not in_place:
+        try:
+            _, model_info = load_model(args.resume)
+        except (OSError, ValueError) as exc:
+            return f"--resume: {exc}"
+        model_features = model_info.get("features")
+    if model_features is not None:
+        from agents.base import feature_mismatch
+
+        problem = feature_mismatch(model_features, observation_features(env_id), env_id)
+        return f"{flag}: {problem}" if problem else None
+    if saved_agent is not None:  # an older model without feature names: compare the sizes at least
+        shape, width = saved_agent.observation_space.shape, len(observation_features(env_id))
+        if shape != (width,):
+            return f"{flag}: the model observes shape {shape} but {env_id} gives ({width},)"
+    return None
 
 
 def _write_failed(exc: OSError, run_dir: Path) -> int:
@@ -438,169 +448,199 @@ def _write_failed(exc: OSError, run_dir: Path) -> int:
     return 1
 
 
-def _run(
-    args: Args,
-    stop: _StopSignals,
-    run_dir: Path,
-    algo: str,
-    env_id: str,
-    config: Any,
-    timesteps: int,
-    n_envs: int,
-    checkpoint_every: int,
-    source_model: str | None,
-) -> int:
+@dataclass(frozen=True)
+class _Plan:
+    """What a run does, settled before any work: the folder, the algorithm, the env and the budget."""
+
+    run_dir: Path
+    algo: str
+    env_id: str
+    config: Any  # agents.hyperparams.TrainingConfig (imported lazily: no torch at parse time)
+    timesteps: int
+    n_envs: int
+    checkpoint_every: int
+    source_model: str | None
+
+
+def _run(args: Args, stop: _StopSignals, plan: _Plan) -> int:
     """Train (or finish training), evaluate, report; returns the exit status."""
-    import numpy as np
-    import torch
+    finished_file = plan.run_dir / TRAINING_FILE
+    if finished_file.exists():  # an interrupted run that had finished training
+        finished = json.loads(finished_file.read_text())
+    elif args.eval_only:
+        finished = {"training": {}, "learning_curve": [], "start_steps": 0}
+    else:
+        trained = _train(args, stop, plan)
+        if isinstance(trained, int):
+            return trained
+        finished = trained
+    return _evaluate_and_report(args, plan, finished)
+
+
+def _model_to_train(args: Args, plan: _Plan, env: Any, checkpoint: Path | None) -> tuple[Any, Any, dict[str, Any], int]:
+    """``(model, env, checkpoint state, start steps)``: restored, continued from a saved model, or new.
+
+    Raises:
+        ValueError: a damaged checkpoint (the message names it).
+    """
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from agents.rl import MODEL_FILE, VECNORMALIZE_FILE, load_model, make_model, read_bundle, restore_checkpoint
+
+    if checkpoint is not None:
+        try:
+            model, state = restore_checkpoint(checkpoint, env)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"--resume: checkpoint {checkpoint}: {exc}") from exc
+        print(f"continuing from {checkpoint} at {model.num_timesteps} steps")
+        return model, env, state, state["start_steps"]
+    if plan.source_model is not None:
+        # A new run from a saved model: its own statistics come along and keep updating.
+        model_path = Path(plan.source_model)
+        model_path = model_path / MODEL_FILE if model_path.is_dir() else model_path
+        _, stats = read_bundle(model_path)
+        beside = model_path.parent / VECNORMALIZE_FILE
+        if stats is None and beside.exists():
+            stats = VecNormalize.load(str(beside), env)
+        if stats is not None:
+            stats.set_venv(env)
+            stats.training = True
+            env = stats
+        model, _ = load_model(model_path, env=env)
+        print(f"continuing {plan.algo} from {plan.source_model} at {model.num_timesteps} steps")
+        return model, env, {}, int(model.num_timesteps)
+    if plan.config.normalize:
+        env = VecNormalize(env, norm_obs=True, norm_reward=False)
+    return make_model(plan.config, env, args.seed), env, {}, 0
+
+
+def _train(args: Args, stop: _StopSignals, plan: _Plan) -> dict[str, Any] | int:
+    """Train to the step budget, checkpointing on the way; the training summary, or an exit status."""
+    from agents.rl import TrainingInterrupted, cleanrl_logger, latest_checkpoint, make_train_env, save_agent
+    from coop_gym.io import write_json as write_json_file
+
+    run_dir, config = plan.run_dir, plan.config
+    checkpoint = latest_checkpoint(run_dir)
+    # Training env: training personas only; observations normalised if the config says so.
+    env = make_train_env(
+        plan.env_id,
+        plan.n_envs,
+        args.seed,
+        personas=config.personas,
+        monitor_file=run_dir / "monitor.csv",
+        monitor_append=checkpoint is not None,
+    )
+    try:
+        model, env, state, start_steps = _model_to_train(args, plan, env, checkpoint)
+    except ValueError as exc:
+        return _usage_error(str(exc))
+    target = start_steps + plan.timesteps
+    model.set_logger(cleanrl_logger(run_dir / "tb"))
+
+    callbacks, curve, elapsed = _callbacks(args, plan, stop, state, start_steps, int(model.num_timesteps))
+    stop.in_training = True
+    try:
+        model.learn(
+            total_timesteps=target - int(model.num_timesteps),
+            reset_num_timesteps=checkpoint is None and plan.source_model is None,
+            progress_bar=args.progress,
+            callback=callbacks,
+        )
+    except TrainingInterrupted:
+        return _interrupted(run_dir, stop)
+    finally:
+        stop.in_training = False
+    train_s = elapsed()
+    save_agent(model, run_dir, algo=plan.algo, env_id=plan.env_id)
+    env.close()
+    trained_steps = int(model.num_timesteps) - start_steps
+    training = {
+        "timesteps": trained_steps,
+        "total_timesteps": int(model.num_timesteps),
+        "resumed_from": plan.source_model,
+        "n_envs": plan.n_envs,
+        "wall_time_s": train_s,
+        "steps_per_s": trained_steps / train_s if train_s > 0 else None,
+        "hyperparams": {**config.model_kwargs(), "normalize": config.normalize, "policy": config.policy},
+        "personas": config.personas,
+    }
+    # Training is over: the summary marks it, and the checkpoints have served their purpose.
+    finished = {"training": training, "learning_curve": curve.history if curve else [], "start_steps": start_steps}
+    write_json_file(run_dir / TRAINING_FILE, finished)
+    _remove_checkpoints(run_dir)
+    print(f"trained {trained_steps} steps in {train_s:.0f} s ({training['steps_per_s']:.0f} steps/s)")
+    if stop.requested():  # the signal came after the last rollout boundary
+        raise Stopped(signal.Signals(stop.signum or signal.SIGINT).name)
+    return finished
+
+
+def _callbacks(
+    args: Args, plan: _Plan, stop: _StopSignals, state: dict[str, Any], start_steps: int, model_steps: int
+) -> tuple[list[Any], Any, Any]:
+    """``(callbacks, learning-curve callback or None, training-seconds clock)`` of a training run."""
+    from agents.rl import CheckpointCallback, OutcomeStatsCallback, PeriodicEvalCallback
+
+    # Periodic scores on the evaluation personas (for the learning curve only; the
+    # final model is the last one, never a selected one).
+    callbacks: list[Any] = [OutcomeStatsCallback()]
+    curve = None
+    if args.eval_points > 0:
+        every = max(1, plan.timesteps // args.eval_points)
+        curve_episodes = min(200, args.eval_episodes)
+        curve = PeriodicEvalCallback(
+            plan.algo, plan.env_id, _eval_personas(args), curve_episodes, args.eval_seed, every, start_steps
+        )
+        if state:
+            curve.history, curve._next = state["curve_history"], state["curve_next"]
+        callbacks.append(curve)
+    wall_s = float(state.get("wall_time_s", 0.0))  # training seconds before an interruption
+    started = time.perf_counter()
+
+    def elapsed() -> float:
+        return wall_s + time.perf_counter() - started
+
+    def checkpoint_state() -> dict[str, Any]:
+        return {
+            "start_steps": start_steps,
+            "curve_history": curve.history if curve else [],
+            "curve_next": curve._next if curve else None,
+            "wall_time_s": elapsed(),
+        }
+
+    callbacks.append(
+        CheckpointCallback(
+            plan.run_dir,
+            plan.checkpoint_every,
+            algo=plan.algo,
+            env_id=plan.env_id,
+            stop_requested=stop.requested,
+            extra=checkpoint_state,
+            start_steps=model_steps,
+        )
+    )
+    return callbacks, curve, elapsed
+
+
+def _eval_personas(args: Args) -> Any:
+    return args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas
+
+
+def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> int:
+    """Score the saved agent and the baselines on the same episodes; write the figures and results.json."""
     from agents.evaluate import evaluate, headroom, print_table, write_csv, write_json
     from agents.plots import plot_learning_curve, plot_outcome_rates
-    from agents.rl import (
-        MODEL_FILE,
-        VECNORMALIZE_FILE,
-        CheckpointCallback,
-        OutcomeStatsCallback,
-        PeriodicEvalCallback,
-        TrainingInterrupted,
-        cleanrl_logger,
-        latest_checkpoint,
-        load_agent,
-        load_model,
-        make_model,
-        make_train_env,
-        read_bundle,
-        restore_checkpoint,
-        save_agent,
-    )
+    from agents.rl import MODEL_FILE, load_agent
     from coop_gym.io import write_json as write_json_file
     from coop_gym.io import write_text
 
-    eval_personas: Any = args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas
-    training: dict[str, Any] = {}
-    curve_points: list[dict[str, Any]] = []
-    start_steps = 0
-    done_before = (run_dir / TRAINING_FILE).exists()  # an interrupted run that had finished training
-    if done_before:
-        finished = json.loads((run_dir / TRAINING_FILE).read_text())
-        training, curve_points, start_steps = finished["training"], finished["learning_curve"], finished["start_steps"]
-    if not args.eval_only and not done_before:
-        checkpoint = latest_checkpoint(run_dir)
-        # Training env: training personas only; observations normalised if the config says so.
-        env = make_train_env(
-            env_id,
-            n_envs,
-            args.seed,
-            personas=config.personas,
-            monitor_file=run_dir / "monitor.csv",
-            monitor_append=checkpoint is not None,
-        )
-        state: dict[str, Any] = {}
-        if checkpoint is not None:
-            try:
-                model, state = restore_checkpoint(checkpoint, env)
-            except (OSError, ValueError) as exc:
-                return _usage_error(f"--resume: checkpoint {checkpoint}: {exc}")
-            start_steps = state["start_steps"]
-            print(f"continuing from {checkpoint} at {model.num_timesteps} steps")
-        elif source_model is not None:
-            # A new run from a saved model: its own statistics come along and keep updating.
-            model_path = Path(source_model)
-            model_path = model_path / MODEL_FILE if model_path.is_dir() else model_path
-            _, stats = read_bundle(model_path)
-            beside = model_path.parent / VECNORMALIZE_FILE
-            if stats is None and beside.exists():
-                stats = VecNormalize.load(str(beside), env)
-            if stats is not None:
-                stats.set_venv(env)
-                stats.training = True
-                env = stats
-            model, _ = load_model(model_path, env=env)
-            start_steps = int(model.num_timesteps)
-            print(f"continuing {algo} from {source_model} at {start_steps} steps")
-        else:
-            if config.normalize:
-                env = VecNormalize(env, norm_obs=True, norm_reward=False)
-            model = make_model(config, env, args.seed)
-        target = start_steps + timesteps
-        model.set_logger(cleanrl_logger(run_dir / "tb"))
-
-        # Periodic scores on the evaluation personas (for the learning curve only; the
-        # final model is the last one, never a selected one).
-        callbacks: list[Any] = [OutcomeStatsCallback()]
-        curve = None
-        if args.eval_points > 0:
-            every = max(1, timesteps // args.eval_points)
-            curve_episodes = min(200, args.eval_episodes)
-            curve = PeriodicEvalCallback(
-                algo, env_id, eval_personas, curve_episodes, args.eval_seed, every, start_steps
-            )
-            if state:
-                curve.history, curve._next = state["curve_history"], state["curve_next"]
-            callbacks.append(curve)
-        wall_s = float(state.get("wall_time_s", 0.0))
-        started = time.perf_counter()
-
-        def checkpoint_state() -> dict[str, Any]:
-            return {
-                "start_steps": start_steps,
-                "curve_history": curve.history if curve else [],
-                "curve_next": curve._next if curve else None,
-                "wall_time_s": wall_s + time.perf_counter() - started,
-            }
-
-        checkpoints = CheckpointCallback(
-            run_dir,
-            checkpoint_every,
-            algo=algo,
-            env_id=env_id,
-            stop_requested=stop.requested,
-            extra=checkpoint_state,
-            start_steps=int(model.num_timesteps),
-        )
-        callbacks.append(checkpoints)
-        stop.in_training = True
-        try:
-            model.learn(
-                total_timesteps=target - int(model.num_timesteps),
-                reset_num_timesteps=checkpoint is None and source_model is None,
-                progress_bar=args.progress,
-                callback=callbacks,
-            )
-        except TrainingInterrupted:
-            return _interrupted(run_dir, stop)
-        finally:
-            stop.in_training = False
-        train_s = wall_s + time.perf_counter() - started
-        curve_points = curve.history if curve else []
-        save_agent(model, run_dir, algo=algo, env_id=env_id)
-        env.close()
-        trained_steps = int(model.num_timesteps) - start_steps
-        training = {
-            "timesteps": trained_steps,
-            "total_timesteps": int(model.num_timesteps),
-            "resumed_from": source_model,
-            "n_envs": n_envs,
-            "wall_time_s": train_s,
-            "steps_per_s": trained_steps / train_s if train_s > 0 else None,
-            "hyperparams": {**config.model_kwargs(), "normalize": config.normalize, "policy": config.policy},
-        }
-        # Training is over: the summary marks it, and the checkpoints have served their purpose.
-        finished = {"training": training, "learning_curve": curve_points, "start_steps": start_steps}
-        write_json_file(run_dir / TRAINING_FILE, finished)
-        _remove_checkpoints(run_dir)
-        print(f"trained {trained_steps} steps in {train_s:.0f} s ({training['steps_per_s']:.0f} steps/s)")
-        if stop.requested():  # the signal came after the last rollout boundary
-            raise Stopped(signal.Signals(stop.signum or signal.SIGINT).name)
+    run_dir, env_id = plan.run_dir, plan.env_id
     model_path = Path(args.model) if args.eval_only and args.model else run_dir / MODEL_FILE
-
+    eval_personas = _eval_personas(args)
     # Evaluate the saved agent (what a user loads) and the baselines on the same episodes.
     agent = load_agent(model_path)
-    results = []
     started = time.perf_counter()
-    label = f"{algo} (learned)"
-    results.append(evaluate(agent, env_id, eval_personas, args.eval_episodes, args.eval_seed, name=label))
+    label = f"{plan.algo} (learned)"
+    results = [evaluate(agent, env_id, eval_personas, args.eval_episodes, args.eval_seed, name=label)]
     for name in _baselines(args):
         results.append(evaluate(name, env_id, eval_personas, args.eval_episodes, args.eval_seed))
     eval_s = time.perf_counter() - started
@@ -612,42 +652,25 @@ def _run(
     write_json(results, run_dir / "eval.json", episodes=True)
     write_csv(results, run_dir / "eval.csv")
     plot_outcome_rates(results, run_dir / "outcome_rates.png")
-    reference = {r.agent: r.success_rate for r in results[1:] if r.agent in ("handbook", "oracle")}
+    curve_points = finished["learning_curve"]
     if not args.eval_only:
-        steps, returns = _monitor_curve(run_dir / "monitor.csv", start_steps)
+        steps, returns = _monitor_curve(run_dir / "monitor.csv", finished["start_steps"])
         plot_learning_curve(
             steps,
             returns,
             run_dir / "learning_curve.png",
             eval_timesteps=[p["timesteps"] for p in curve_points],
             eval_success=[p["success_rate"] for p in curve_points],
-            reference=reference,
-            title=f"{algo} on {env_id}: training return, success on {args.eval_personas} personas",
-        )
-
-    learned = results[0]
-    handbook = next((r for r in results if r.agent == "handbook"), None)
-    verdict = None
-    if handbook is not None:
-        verdict = {
-            "higher_success_than_handbook": learned.success_rate > handbook.success_rate,
-            "no_more_unsafe_than_handbook": learned.unsafe_rate <= handbook.unsafe_rate,
-            "learned_success": learned.success_rate,
-            "handbook_success": handbook.success_rate,
-            "learned_unsafe": learned.unsafe_rate,
-            "handbook_unsafe": handbook.unsafe_rate,
-        }
-        print(
-            f"{label}: success {learned.success_rate:.3f} vs handbook {handbook.success_rate:.3f}, "
-            f"unsafe {learned.unsafe_rate:.3f} vs {handbook.unsafe_rate:.3f}"
+            reference={r.agent: r.success_rate for r in results[1:] if r.agent in ("handbook", "oracle")},
+            title=f"{plan.algo} on {env_id}: training return, success on {args.eval_personas} personas",
         )
     summary = {
         "run": run_dir.name,
-        "algo": algo,
+        "algo": plan.algo,
         "env_id": env_id,
         "seed": args.seed,
         "model": str(model_path),
-        "training": training,
+        "training": finished["training"],
         "evaluation": {
             "personas": args.eval_personas,
             "episodes": args.eval_episodes,
@@ -656,7 +679,7 @@ def _run(
             "results": [r.summary() for r in results],
         },
         "learning_curve": curve_points,
-        "verdict": verdict,
+        "verdict": _verdict(label, results),
         "headroom": None
         if room is None
         else {
@@ -664,8 +687,7 @@ def _run(
             "value_of_reading_the_mind": room.value_of_reading_the_mind,
             "achieved_insight": room.achieved_insight,
         },
-        "numpy": np.__version__,
-        "torch": torch.__version__,
+        **_versions(),
     }
     # Written last: a run folder with results.json and COMPLETE finished; one without did not.
     write_json_file(run_dir / "results.json", summary)
@@ -673,6 +695,33 @@ def _run(
     write_text(run_dir / "COMPLETE", time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
     print(f"saved: {run_dir}")
     return 0
+
+
+def _verdict(label: str, results: list[Any]) -> dict[str, Any] | None:
+    """The learned agent (``results[0]``) against the handbook caregiver, printed and returned."""
+    learned = results[0]
+    handbook = next((r for r in results if r.agent == "handbook"), None)
+    if handbook is None:
+        return None
+    print(
+        f"{label}: success {learned.success_rate:.3f} vs handbook {handbook.success_rate:.3f}, "
+        f"unsafe {learned.unsafe_rate:.3f} vs {handbook.unsafe_rate:.3f}"
+    )
+    return {
+        "higher_success_than_handbook": learned.success_rate > handbook.success_rate,
+        "no_more_unsafe_than_handbook": learned.unsafe_rate <= handbook.unsafe_rate,
+        "learned_success": learned.success_rate,
+        "handbook_success": handbook.success_rate,
+        "learned_unsafe": learned.unsafe_rate,
+        "handbook_unsafe": handbook.unsafe_rate,
+    }
+
+
+def _versions() -> dict[str, str]:
+    import numpy as np
+    import torch
+
+    return {"numpy": np.__version__, "torch": torch.__version__}
 
 
 def _interrupted(run_dir: Path, stop: _StopSignals) -> int:
