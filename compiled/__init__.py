@@ -2,6 +2,8 @@
 
 - :mod:`compiled.cache`: Numba's on-disk cache keyed by every project source a kernel
   compiles in (:func:`~compiled.cache.guard_kernel_cache`).
+- :mod:`compiled.checks`: what counts as a number (NumPy scalars yes, bools and arrays no) for
+  every validator of the project.
 - :mod:`compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
 

@@ -15,6 +15,13 @@ from the one stamped beside the cache. Nothing is read or written at import time
 check runs lazily, once per module and process, when Numba first looks in the cache
 (i.e. at the first call of one of its kernels). Keying Numba's cache directory by the
 hash instead would need the sources read at import.
+
+Where no cache folder is writable (a read-only install: the package folder, ``HOME`` and
+``NUMBA_CACHE_DIR`` all read-only), Numba refuses ``cache=True`` at decoration time ("no locator
+available"). For the modules that use the guard, :class:`_UncachedLocator` is then the last
+resort: their kernels compile in memory (``NullCache``), with one :class:`KernelCacheWarning` per
+process. A cache that fails later (a folder that turns read-only, a full disk) likewise warns
+once and the kernels run uncached; a run never stops for its cache.
 """
 
 from __future__ import annotations
@@ -25,12 +32,14 @@ import importlib
 import os
 import sys
 import threading
+import warnings
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
-from numba.core.caching import FunctionCache
+from numba.core.caching import CacheImpl, FunctionCache, NullCache, _CacheLocator
 
-__all__ = ["guard_kernel_cache", "guarded_kernels", "project_sources", "source_digest"]
+__all__ = ["KernelCacheWarning", "guard_kernel_cache", "guarded_kernels", "project_sources", "source_digest"]
 
 _STAMP_SUFFIX = ".sources.sha256"
 
@@ -142,13 +151,93 @@ class _SourceGuard:
                 pass
 
 
+class KernelCacheWarning(RuntimeWarning):
+    """Numba's disk cache is unusable here: kernels compile in memory at every process start."""
+
+
+_warned = threading.Event()
+
+
+def _warn_uncached(reason: str, filename: str = __file__, lineno: int = 1) -> None:
+    """Warn once per process that kernels run without a disk cache (at ``filename:lineno``)."""
+    if _warned.is_set():
+        return
+    _warned.set()
+    warnings.warn_explicit(
+        f"{reason}: compiling Numba kernels without a disk cache (slower start, same results); "
+        "set NUMBA_CACHE_DIR to a writable folder to cache them",
+        KernelCacheWarning,
+        filename,
+        lineno,
+    )
+
+
+def _built_on_compiled(py_func: Any) -> bool:
+    """Whether the (still executing) module of ``py_func`` has imported anything from ``compiled``."""
+    for value in list(getattr(py_func, "__globals__", {}).values()):
+        name = value.__name__ if isinstance(value, ModuleType) else getattr(value, "__module__", None)
+        if isinstance(name, str) and name.partition(".")[0] == __name__.partition(".")[0]:
+            return True
+    return False
+
+
+class _UncachedLocator(_CacheLocator):
+    """Numba's last-resort cache locator, for the kernels of modules built on this package.
+
+    Chosen only when every locator of Numba's own found no writable folder, and only for a module
+    that imports from ``compiled`` (every project module with kernels does; the others are left
+    to Numba's error). It reads and writes nothing: :func:`guard_kernel_cache`, which every such
+    module's kernels pass through (tests/compiled/test_cache.py), replaces their cache by Numba's
+    ``NullCache``.
+    """
+
+    def __init__(self, py_file: str) -> None:
+        self._py_file = py_file
+
+    def ensure_cache_path(self) -> None:
+        raise OSError(f"no writable cache folder for {self._py_file}")
+
+    def get_cache_path(self) -> str:
+        return os.path.join(os.path.dirname(self._py_file), "__pycache__")
+
+    def get_source_stamp(self) -> None:
+        return None
+
+    def get_disambiguator(self) -> str:
+        return ""
+
+    @classmethod
+    def from_function(cls, py_func: Any, py_file: str) -> _UncachedLocator | None:
+        if not _built_on_compiled(py_func):
+            return None
+        _warn_uncached(
+            "no writable Numba cache folder (package, NUMBA_CACHE_DIR, user cache)",
+            py_file,
+            py_func.__code__.co_firstlineno,
+        )
+        return cls(py_file)
+
+
+_NUMBA_LOCATORS: list[Any] = CacheImpl._locator_classes
+if _UncachedLocator not in _NUMBA_LOCATORS:
+    _NUMBA_LOCATORS.append(_UncachedLocator)
+
+
+def _uncached(kernel: Any) -> bool:
+    """Replace the cache of a kernel that got :class:`_UncachedLocator` by ``NullCache``; True if so."""
+    if isinstance(kernel._cache._impl.locator, _UncachedLocator):
+        kernel._cache = NullCache()
+        return True
+    return False
+
+
 def guard_kernel_cache(module_name: str) -> None:
     """Flush the cached kernels of ``module_name`` whenever a project source they depend on changes.
 
     Call at the end of a module that defines ``@njit(cache=True)`` kernels:
     ``guard_kernel_cache(__name__)``. No file is touched until a kernel is first called.
     """
-    kernels = guarded_kernels(module_name)
+    kernels = [kernel for kernel in guarded_kernels(module_name) if not _uncached(kernel)]
     if not kernels:
         return
     guard = _SourceGuard(module_name, kernels)
@@ -156,11 +245,24 @@ def guard_kernel_cache(module_name: str) -> None:
         cache = kernel._cache
         if getattr(cache, "source_guard", None) is not None:
             continue
-        original = cache.load_overload
+        original_load, original_save = cache.load_overload, cache.save_overload
 
-        def load_overload(sig: Any, target_context: Any, _original: Any = original) -> Any:
+        def load_overload(sig: Any, target_context: Any, _cache: Any = cache, _original: Any = original_load) -> Any:
             guard.check()
-            return _original(sig, target_context)
+            try:
+                return _original(sig, target_context)
+            except OSError as exc:  # an unreadable cache: compile instead
+                _cache.disable()
+                _warn_uncached(f"cannot read Numba's cache at {_cache.cache_path} ({exc})")
+                return None
+
+        def save_overload(sig: Any, data: Any, _cache: Any = cache, _original: Any = original_save) -> None:
+            try:
+                _original(sig, data)
+            except OSError as exc:  # a cache folder that turned read-only, a full disk ...
+                _cache.disable()
+                _warn_uncached(f"cannot write Numba's cache at {_cache.cache_path} ({exc})")
 
         cache.load_overload = load_overload
+        cache.save_overload = save_overload
         cache.source_guard = guard

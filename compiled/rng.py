@@ -9,6 +9,10 @@ for integers, so :func:`standard_normal`, :func:`random` and :func:`integers` re
 exactly what ``Generator.standard_normal()``, ``.random()`` and ``.integers(high)`` would
 (tests/compiled/test_rng.py holds them equal).
 
+With ``NUMBA_DISABLE_JIT=1`` (debug mode) the same functions run as Python: the C functions are
+called through ctypes instead of intrinsics, and ``exp``/``log1p`` are libm's (the ``math``
+module, as NumPy's C code calls them), so the draws stay bit for bit the ``Generator``'s.
+
 A kernel receives a generator as its :func:`bit_generator_row`: the addresses of the
 three C functions and of the state, in the columns :data:`G_NEXT_UINT64` ... :data:`G_STATE`.
 
@@ -20,11 +24,12 @@ imports them, and tests/compiled/test_rng.py fails if an upgrade changes them.
 from __future__ import annotations
 
 import ctypes
+import math
 from typing import Any
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, types
+from numba import config, njit, types
 from numba.core.extending import intrinsic
 from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 from numpy.typing import NDArray
@@ -76,9 +81,38 @@ def _state_function_caller(name: str, numba_type: Any, llvm_type: ir.Type) -> An
     return intrinsic(typing)
 
 
-_call_uint64: Any = _state_function_caller("_call_uint64", types.uint64, ir.IntType(64))
-_call_uint32: Any = _state_function_caller("_call_uint32", types.uint32, ir.IntType(32))
-_call_double: Any = _state_function_caller("_call_double", types.float64, ir.DoubleType())
+def _python_caller(restype: Any) -> Any:
+    """``f(function_address, state_address)`` through ctypes: the intrinsics' pure-Python twin.
+
+    With ``NUMBA_DISABLE_JIT=1`` the kernels run as Python and an intrinsic cannot be called; ctypes
+    calls the same C function on the same state, so the draws stay the ``Generator``'s own.
+    """
+    prototype = ctypes.CFUNCTYPE(restype, ctypes.c_void_p)
+    functions: dict[int, Any] = {}
+
+    def call(function_address: Any, state_address: Any) -> Any:
+        address = int(function_address)
+        function = functions.get(address)
+        if function is None:
+            function = functions[address] = prototype(address)
+        return function(int(state_address))
+
+    return call
+
+
+if getattr(config, "DISABLE_JIT", False):
+    _call_uint64: Any = _python_caller(ctypes.c_uint64)
+    _call_uint32: Any = _python_caller(ctypes.c_uint32)
+    _call_double: Any = _python_caller(ctypes.c_double)
+    # NumPy's C code calls libm's exp and log1p; the math module is libm, a NumPy ufunc may not be.
+    _exp: Any = math.exp
+    _log1p: Any = math.log1p
+else:
+    _call_uint64 = _state_function_caller("_call_uint64", types.uint64, ir.IntType(64))
+    _call_uint32 = _state_function_caller("_call_uint32", types.uint32, ir.IntType(32))
+    _call_double = _state_function_caller("_call_double", types.float64, ir.DoubleType())
+    _exp = np.exp
+    _log1p = np.log1p
 
 _U1 = np.uint64(1)
 _U8 = np.uint64(8)
@@ -111,13 +145,13 @@ def standard_normal(g: NDArray[np.uint64]) -> float:
         if idx == 0:
             # The tail beyond the base layer.
             while True:
-                xx = -ziggurat_nor_inv_r * np.log1p(-random(g))
-                yy = -np.log1p(-random(g))
+                xx = -ziggurat_nor_inv_r * _log1p(-random(g))
+                yy = -_log1p(-random(g))
                 if yy + yy > xx * xx:
                     if (rabs >> _U8) & _U1:
                         return -(ziggurat_nor_r + xx)
                     return ziggurat_nor_r + xx
-        elif (fi_double[idx - 1] - fi_double[idx]) * random(g) + fi_double[idx] < np.exp(-0.5 * x * x):
+        elif (fi_double[idx - 1] - fi_double[idx]) * random(g) + fi_double[idx] < _exp(-0.5 * x * x):
             return x
 
 

@@ -40,6 +40,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from compiled.cache import guard_kernel_cache
+from compiled.checks import is_integer, is_number, python_scalar
 from estimator.kalman import NOMINAL, nominal_row
 from estimator.multiple_model import N_MODES, _mean_step, _riccati_step
 from estimator.nominal import NominalModel
@@ -125,10 +126,13 @@ class Trial:
             raise ValueError(f"Trial arrays must have equal lengths, got {sorted(lengths)}")
         for name, arr in arrays.items():
             object.__setattr__(self, name, arr)
-        if self.xi is not None and self.xi not in (-1, 0, 1):
+        if self.xi is not None and not (is_number(self.xi) and self.xi in (-1, 0, 1)):
             raise ValueError(f"Trial.xi must be -1, 0, +1 or None, got {self.xi!r}")
-        if not (isinstance(self.dt_s, (int, float)) and math.isfinite(self.dt_s) and self.dt_s > 0):
+        if not (is_number(self.dt_s) and math.isfinite(self.dt_s) and self.dt_s > 0):
             raise ValueError(f"Trial.dt_s must be a finite number > 0, got {self.dt_s!r}")
+        if self.xi is not None:
+            object.__setattr__(self, "xi", int(self.xi))
+        object.__setattr__(self, "dt_s", python_scalar(self.dt_s))
 
     @property
     def n_steps(self) -> int:
@@ -394,7 +398,7 @@ def identify(
 
 def _checked_fields(initial: NominalModel, restarts: int, fitted_fields: Sequence[str]) -> tuple[str, ...]:
     """The fitted fields, after checking them and ``restarts`` (``ValueError`` naming the problem)."""
-    if restarts < 1:
+    if not is_integer(restarts) or restarts < 1:
         raise ValueError(f"restarts must be >= 1, got {restarts!r}")
     fields = tuple(fitted_fields)
     unknown = [f for f in fields if f not in _FITTABLE]

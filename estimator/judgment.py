@@ -16,6 +16,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
+from compiled.checks import is_number, python_scalar
 from compiled.schema import index_table
 
 __all__ = ["JUDGE", "JUDGMENT_COLUMNS", "ThresholdJudgment", "judgment_substep", "threshold_judgment"]
@@ -35,10 +36,13 @@ class ThresholdJudgment:
 
     def __post_init__(self) -> None:
         """Validate ranges."""
-        if not (isinstance(self.delay_s, (int, float)) and math.isfinite(self.delay_s) and 0.0 <= self.delay_s <= 30.0):
+        if not (is_number(self.delay_s) and math.isfinite(self.delay_s) and 0.0 <= self.delay_s <= 30.0):
             raise ValueError(f"ThresholdJudgment.delay_s must be in [0, 30] s, got {self.delay_s!r}")
-        if not (isinstance(self.threshold, (int, float)) and math.isfinite(self.threshold) and self.threshold > 0.0):
+        if not (is_number(self.threshold) and math.isfinite(self.threshold) and self.threshold > 0.0):
             raise ValueError(f"ThresholdJudgment.threshold must be > 0, got {self.threshold!r}")
+        # A NumPy scalar is kept as the Python number of the same value (frozen: object.__setattr__).
+        object.__setattr__(self, "delay_s", python_scalar(self.delay_s))
+        object.__setattr__(self, "threshold", python_scalar(self.threshold))
 
     def judge(self, xi_estimate: NDArray[np.float64] | float) -> NDArray[np.int64]:
         """Threshold one or many ``xi`` estimates into {-1, 0, +1}."""

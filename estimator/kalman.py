@@ -76,6 +76,75 @@ def nominal_row(model: NominalModel) -> NDArray[np.float64]:
     return np.array([values[name] for name in NOMINAL_COLUMNS])
 
 
+@njit(cache=True, inline="always")
+def _needs_repair(P: NDArray[np.float64]) -> bool:
+    """Whether the symmetric ``P`` (4, 4) fails a Cholesky test of positive semi-definiteness.
+
+    Elimination without square roots (``P = L D L^T``): every pivot must be > 0, or exactly 0 with
+    an exactly zero remaining column (a state the filter knows exactly, e.g. a zero prior std and
+    no process noise). Passing it in floating point bounds the smallest eigenvalue below by a few
+    ``eps * max(P_ii)`` (Demmel 1989). A non-finite ``P`` is left alone (returns False).
+    """
+    a00, a01, a02, a03 = P[0, 0], P[0, 1], P[0, 2], P[0, 3]
+    a11, a12, a13 = P[1, 1], P[1, 2], P[1, 3]
+    a22, a23 = P[2, 2], P[2, 3]
+    a33 = P[3, 3]
+    if a00 > 0.0:
+        inverse = 1.0 / a00
+        l1, l2, l3 = a01 * inverse, a02 * inverse, a03 * inverse
+        a11 -= l1 * a01
+        a12 -= l1 * a02
+        a13 -= l1 * a03
+        a22 -= l2 * a02
+        a23 -= l2 * a03
+        a33 -= l3 * a03
+    elif a00 < 0.0 or a01 != 0.0 or a02 != 0.0 or a03 != 0.0:
+        return _all_finite(P)
+    if a11 > 0.0:
+        inverse = 1.0 / a11
+        l2, l3 = a12 * inverse, a13 * inverse
+        a22 -= l2 * a12
+        a23 -= l2 * a13
+        a33 -= l3 * a13
+    elif a11 < 0.0 or a12 != 0.0 or a13 != 0.0:
+        return _all_finite(P)
+    if a22 > 0.0:
+        a33 -= (a23 / a22) * a23
+    elif a22 < 0.0 or a23 != 0.0:
+        return _all_finite(P)
+    # NaN fails every comparison: only a finite P that has failed the test is repaired.
+    return a33 < 0.0
+
+
+@njit(cache=True, inline="always")
+def _all_finite(P: NDArray[np.float64]) -> bool:
+    for i in range(4):
+        for j in range(4):
+            if not math.isfinite(P[i, j]):
+                return False
+    return True
+
+
+@njit(cache=True)
+def _nearest_psd(P: NDArray[np.float64]) -> None:
+    """Replace the symmetric ``P`` (4, 4) by its nearest PSD matrix, in place: ``V max(w, 0) V^T``.
+
+    Only for a covariance that rounding has pushed out of the PSD cone (see :func:`kalman_step`);
+    the entries move by at most the largest negative eigenvalue. Each diagonal entry is a sum of
+    non-negative terms, so ``P_00 >= 0`` and ``S = P_00 + R >= R`` hold exactly afterwards.
+    """
+    w, V = np.linalg.eigh(P)
+    for k in range(4):
+        w[k] = max(w[k], 0.0)
+    for i in range(4):
+        for j in range(i, 4):
+            s = 0.0
+            for k in range(4):
+                s += V[i, k] * w[k] * V[j, k]
+            P[i, j] = s
+            P[j, i] = s
+
+
 @njit(cache=True, fastmath=False)
 def kalman_step(
     m: NDArray[np.float64],
@@ -125,6 +194,10 @@ def kalman_step(
     P[1, 1] += nominal[NOMINAL.q_velocity]
     P[2, 2] += nominal[NOMINAL.q_intention]
     P[3, 3] += nominal[NOMINAL.q_cooperativeness]
+    # Guard (never taken when P stays PSD, so ordinary models keep these exact operations): a
+    # prediction that rounding made indefinite would give S <= 0 and a NaN likelihood.
+    if P[0, 0] < 0.0 and _needs_repair(P):
+        _nearest_psd(P)
     # --- update with the scalar measurement y = H s + v, H = [1 0 0 0] ---
     innovation = measured_position_m - m[0]
     R = nominal[NOMINAL.r_position]
@@ -146,6 +219,10 @@ def kalman_step(
             s = 0.5 * (P[i, j] + P[j, i])
             P[i, j] = s
             P[j, i] = s
+    # Guard: with a tiny R against a huge prior, or no process noise on a growing model, the
+    # update's cancellation can leave P slightly indefinite; project it back (see _nearest_psd).
+    if _needs_repair(P):
+        _nearest_psd(P)
     return innovation, S
 
 

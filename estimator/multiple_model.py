@@ -40,6 +40,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from compiled.cache import guard_kernel_cache
+from compiled.checks import is_number
 from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, nominal_row
 from estimator.nominal import NominalModel
 
@@ -384,7 +385,7 @@ def _validate_mode_prior(mode_prior: ArrayLike | None) -> NDArray[np.float64]:
 
 
 def _validate_floor(probability_floor: float) -> float:
-    floor = float(probability_floor)
+    floor = float(probability_floor) if is_number(probability_floor) else math.nan
     if not (math.isfinite(floor) and 0.0 <= floor < 1.0 / N_MODES):
         raise ValueError(f"probability_floor must be in [0, 1/3), got {probability_floor!r}")
     return floor
@@ -404,10 +405,10 @@ def switching_transition_matrix(switching_rate_per_s: float, dt_s: float) -> NDA
     Returns:
         (3, 3) matrix, rows and columns ordered ``xi = -1, 0, +1``.
     """
-    rate = float(switching_rate_per_s)
+    rate = float(switching_rate_per_s) if is_number(switching_rate_per_s) else math.nan
     if not (math.isfinite(rate) and rate >= 0.0):
         raise ValueError(f"switching_rate_per_s must be finite and >= 0, got {switching_rate_per_s!r}")
-    if not (math.isfinite(dt_s) and dt_s > 0.0):
+    if not (is_number(dt_s) and math.isfinite(dt_s) and dt_s > 0.0):
         raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
     stay = math.exp(-rate * dt_s)
     trans = np.full((N_MODES, N_MODES), 0.5 * (1.0 - stay))
@@ -796,7 +797,7 @@ def confident_judgment(probs: ArrayLike, confidence: float = 0.9) -> tuple[NDArr
         ``(judgment (...,), decided (...,))``: judgment in {-1, 0, +1} (0 where
         undecided) and whether the confidence rule decided.
     """
-    if not (0.0 < confidence <= 1.0):
+    if not (is_number(confidence) and 0.0 < confidence <= 1.0):
         raise ValueError(f"confidence must be in (0, 1], got {confidence!r}")
     p = _as_probs(probs)
     judgment = map_judgment(p)
@@ -825,7 +826,7 @@ def sequential_judgment(
         ``(judgment (N,), decision_step (N,))``: the accepted ``xi`` (0 if never decided)
         and the step index of the decision (-1 if never decided).
     """
-    if not (0.0 < error_rate < 0.5):
+    if not (is_number(error_rate) and 0.0 < error_rate < 0.5):
         raise ValueError(f"error_rate must be in (0, 0.5), got {error_rate!r}")
     p = _as_probs(probs)
     if p.ndim != 3:

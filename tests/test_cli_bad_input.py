@@ -174,6 +174,13 @@ CASES: list[tuple[str, str, list[str], str]] = [
         r"below 2\*\*32",
     ),
     ("experiment.protocol", "seed 2**64", ["--seed", str(2**64)], r"--seed: seeds must be below 2\*\*32"),
+    # Issue #13: numbers that are not integers where counts and seeds are expected.
+    ("experiment.protocol", "subjects 2.5", ["--subjects", "2.5"], r"--subjects: expected a positive integer, got '2\.5'"),  # noqa: E501
+    ("experiment.protocol", "trials 1e3", ["--trials", "1e3"], r"--trials: expected a positive integer, got '1e3'"),
+    ("experiment.protocol", "seed nan", ["--seed", "nan"], r"--seed: expected a non-negative integer seed, got 'nan'"),
+    ("experiment.protocol", "seeds True", ["--seeds", "True"], r"--seeds: expected a positive integer, got 'True'"),
+    ("experiment.protocol", "seed 2**32", ["--seed", str(2**32)], r"--seed: seeds must be below 2\*\*32"),
+    ("bench/run.py", "repeats inf", ["--repeats", "inf"], r"--repeats: expected a positive integer, got 'inf'"),
     ("bench/run.py", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
     (

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from compiled.checks import check_choice
 from compiled.schema import field_names, field_values, index_table
 from coop_gym.model.params import MAX_REACTION_DELAY_S, PersonParams, Timing
 
@@ -440,8 +441,7 @@ def simulate(
     cv = np.ascontiguousarray(verbal_cue, dtype=np.float64)
     if cp.ndim != 1 or cv.shape != cp.shape:
         raise ValueError(f"push_force_n and verbal_cue must be 1-D of equal length, got {cp.shape} and {cv.shape}")
-    if initial_xi not in (-1, 0, 1):
-        raise ValueError(f"initial_xi must be -1, 0 or 1, got {initial_xi!r}")
+    initial_xi = check_choice("initial_xi", initial_xi, (-1, 0, 1))
     p = pack_person(person, timing, hold_xi=hold_xi)
     s = initial_state_row(initial_xi, x0_m)
     n = cp.shape[0]

@@ -11,9 +11,10 @@ Field names carry their units (``_m``, ``_n``, ``_s``, ``_per_s`` ...).
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import Any, TypeVar
+
+from compiled.checks import check_choice, check_flag, check_integer, check_number
 
 __all__ = [
     "Biomechanics",
@@ -33,18 +34,21 @@ MAX_REACTION_DELAY_S = 1.2
 """Longest supported reaction delay [s]; the delay line holds this many seconds of cues."""
 
 
-def _check_number(owner: str, name: str, value: Any, low: float, high: float = math.inf) -> None:
-    """Raise ``ValueError`` naming ``owner.name`` unless ``low <= value <= high`` and finite."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{owner}.{name} must be a number, got {value!r}")
-    if not math.isfinite(value) or not (low <= value <= high):
-        raise ValueError(f"{owner}.{name} must be in [{low}, {high}], got {value!r}")
-
-
 def _validate_ranges(obj: Any, ranges: dict[str, tuple[float, float]]) -> None:
+    """Check each field of ``obj`` named in ``ranges`` (:func:`compiled.checks.check_number`).
+
+    A NumPy scalar is stored as the Python number of the same value (the dataclass is frozen, so
+    through ``object.__setattr__``, as in its own ``__init__``).
+    """
     owner = type(obj).__name__
     for name, (low, high) in ranges.items():
-        _check_number(owner, name, getattr(obj, name), low, high)
+        _set_checked(obj, name, check_number(f"{owner}.{name}", getattr(obj, name), low, high))
+
+
+def _set_checked(obj: Any, name: str, checked: Any) -> None:
+    """Store a validated field's Python value if the given one was a NumPy scalar."""
+    if checked is not getattr(obj, name):
+        object.__setattr__(obj, name, checked)
 
 
 def from_mapping(cls: type[T], values: dict[str, Any]) -> T:
@@ -154,8 +158,7 @@ class Intention:
                 "relaxation_rate_per_s": (0.0, 100.0),
             },
         )
-        if not isinstance(self.saturate, bool):
-            raise ValueError(f"Intention.saturate must be a bool, got {self.saturate!r}")
+        _set_checked(self, "saturate", check_flag("Intention.saturate", self.saturate))
 
 
 @dataclass(frozen=True)
@@ -252,8 +255,7 @@ class Cooperativeness:
                 "initial_p_cooperative": (0.0, 1.0),
             },
         )
-        if self.baseline not in (-1, 0, 1) or isinstance(self.baseline, bool):
-            raise ValueError(f"Cooperativeness.baseline must be -1, 0 or 1, got {self.baseline!r}")
+        _set_checked(self, "baseline", check_choice("Cooperativeness.baseline", self.baseline, (-1, 0, 1)))
         if self.initial_p_uncooperative + self.initial_p_cooperative > 1.0 + 1e-12:
             raise ValueError(
                 "Cooperativeness.initial_p_uncooperative + initial_p_cooperative must be <= 1, got "
@@ -302,6 +304,11 @@ class Cues:
         _validate_ranges(
             self, {"soft_push_n": (0.0, 200.0), "firm_push_n": (0.0, 200.0), "verbal_duration_s": (0.02, 10.0)}
         )
+        if self.soft_push_n > self.firm_push_n:
+            raise ValueError(
+                f"Cues.soft_push_n ({self.soft_push_n} N) must be <= firm_push_n ({self.firm_push_n} N): "
+                "a soft push cannot be stronger than a firm one"
+            )
 
 
 @dataclass(frozen=True)
@@ -321,8 +328,7 @@ class Timing:
     def __post_init__(self) -> None:
         """Validate ranges."""
         _validate_ranges(self, {"dt_s": (1e-4, 0.1), "episode_s": (0.1, 3600.0)})
-        if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or not 1 <= self.substeps <= 100:
-            raise ValueError(f"Timing.substeps must be an int in [1, 100], got {self.substeps!r}")
+        _set_checked(self, "substeps", check_integer("Timing.substeps", self.substeps, 1, 100))
 
     @property
     def action_period_s(self) -> float:
@@ -362,8 +368,7 @@ class Realism:
     def __post_init__(self) -> None:
         """Every switch must be a bool."""
         for field in dataclasses.fields(self):
-            if not isinstance(getattr(self, field.name), bool):
-                raise ValueError(f"Realism.{field.name} must be a bool, got {getattr(self, field.name)!r}")
+            _set_checked(self, field.name, check_flag(f"Realism.{field.name}", getattr(self, field.name)))
 
     @classmethod
     def off(cls) -> Realism:

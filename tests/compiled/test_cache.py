@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import importlib
+import json
 import os
 import pkgutil
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -97,3 +99,112 @@ def test_editing_an_inlined_dependency_recompiles_the_kernel(tmp_path: Path) -> 
 @pytest.mark.parametrize("module", ["coop_gym.envs.core", "estimator.identify", "coop_gym.model.dynamics"])
 def test_project_sources_stay_inside_the_project(module: str) -> None:
     assert all(ROOT in p.parents for p in project_sources(module))
+
+
+def _read_only_copy(tmp_path: Path) -> tuple[Path, dict[str, str]]:
+    """A copy of the packages where no cache folder Numba knows of can be created, and its environment.
+
+    Permissions do not stop root, so each folder is blocked by a regular file where the folder
+    would go: ``__pycache__`` in every package, ``HOME`` (hence ``~/.cache``) and
+    ``NUMBA_CACHE_DIR`` under a file.
+    """
+    site = tmp_path / "site"
+    for package in ("compiled", "coop_gym", "estimator"):
+        shutil.copytree(ROOT / package, site / package, ignore=shutil.ignore_patterns("__pycache__"))
+    for folder in [site, *(p for p in site.rglob("*") if p.is_dir())]:
+        (folder / "__pycache__").write_text("")
+    home = tmp_path / "home"
+    home.write_text("")
+    env = {**os.environ, "PYTHONPATH": str(site), "HOME": str(home), "NUMBA_CACHE_DIR": str(home / "numba")}
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    for name in ("XDG_CACHE_HOME", "NUMBA_DISABLE_JIT", "NUMBA_CACHE_LOCATOR_CLASSES"):
+        env.pop(name, None)
+    return site, env
+
+
+def _first_steps(env_id: str) -> list[list[float]]:
+    import gymnasium as gym
+
+    import coop_gym  # noqa: F401
+
+    env = gym.make(env_id)
+    rows = [env.reset(seed=5)[0].tolist()]
+    rows += [env.step([1, 2, 0])[0].tolist() for _ in range(3)]
+    return rows
+
+
+READ_ONLY_RUN = """
+import json, warnings
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught:
+    import gymnasium as gym
+    import coop_gym
+    env = gym.make("CoopGym/SitToStand-v0")
+    rows = [env.reset(seed=5)[0].tolist()]
+    rows += [env.step([1, 2, 0])[0].tolist() for _ in range(3)]
+print(json.dumps({"file": coop_gym.__file__, "rows": rows,
+                  "warnings": [f"{w.category.__name__}: {w.message}" for w in caught]}))
+"""
+
+
+def test_a_read_only_install_runs_uncached_with_one_warning(tmp_path: Path) -> None:
+    site, env = _read_only_copy(tmp_path)
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    out = subprocess.run(
+        [sys.executable, "-c", READ_ONLY_RUN], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert Path(result["file"]).is_relative_to(site)
+    cache_warnings = [w for w in result["warnings"] if w.startswith("KernelCacheWarning")]
+    assert len(cache_warnings) == 1, result["warnings"]
+    assert "NUMBA_CACHE_DIR" in cache_warnings[0]
+    assert result["rows"] == _first_steps("CoopGym/SitToStand-v0")  # the cached kernels' numbers
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before  # nothing written
+
+
+def test_kernels_of_modules_outside_the_compiled_boundary_keep_numbas_error(tmp_path: Path) -> None:
+    """The last-resort locator serves only modules built on ``compiled``; others fail as before."""
+    _, env = _read_only_copy(tmp_path)
+    (tmp_path / "site" / "plain.py").write_text(
+        "from numba import njit\n\n@njit(cache=True)\ndef kernel():\n    return 1\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", "import compiled.cache, plain"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode != 0
+    assert "no locator available" in out.stderr
+
+
+def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path: Path) -> None:
+    """Writable when the kernels were decorated, gone when they compile: they run uncached."""
+    package = tmp_path / "toy"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "kern.py").write_text(
+        "from numba import njit\n\nfrom compiled.cache import guard_kernel_cache\n\n"
+        "@njit(cache=True)\ndef kernel(x):\n    return 2 * x\n\n"
+        "@njit(cache=True)\ndef other(x):\n    return kernel(x) + 1\n\nguard_kernel_cache(__name__)\n"
+    )
+    code = textwrap.dedent(
+        """
+        import os, shutil, warnings
+        warnings.simplefilter("always")
+        from toy.kern import kernel, other
+        shutil.rmtree(os.environ["NUMBA_CACHE_DIR"])
+        open(os.environ["NUMBA_CACHE_DIR"], "w").close()  # a file where the folder was
+        with warnings.catch_warnings(record=True) as caught:
+            print(kernel(3), other(3.0), [w.category.__name__ for w in caught])
+        """
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    env.pop("NUMBA_DISABLE_JIT", None)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().split(maxsplit=2) == ["6", "7.0", "['KernelCacheWarning']"]

@@ -134,6 +134,42 @@ BAD_KWARGS: list[tuple[str, Callable[[], dict[str, Any]], type[Exception], str]]
         r"probability_floor must be in \[0, 1/3\)",
     ),
     ("unknown kwarg", lambda: {"bogus": 1}, TypeError, r"unexpected keyword argument 'bogus'"),
+    # Issue #13: NumPy scalars count as numbers (tests/coop_gym/test_numpy_values.py), NumPy bools
+    # and arrays do not; a soft push stronger than the firm one.
+    ("timing dt np.bool_", lambda: {"timing": {"dt_s": np.True_}}, ValueError, r"Timing\.dt_s must be a number"),
+    ("timing dt array", lambda: {"timing": {"dt_s": np.array([0.02])}}, ValueError, r"Timing\.dt_s must be a number"),
+    ("timing substeps bool", lambda: {"timing": {"substeps": True}}, ValueError, r"Timing\.substeps must be an int"),
+    (
+        "timing substeps np.bool_",
+        lambda: {"timing": {"substeps": np.True_}},
+        ValueError,
+        r"Timing\.substeps must be an int in \[1, 100\], got np\.True_",
+    ),
+    (
+        "timing substeps np.float64",
+        lambda: {"timing": {"substeps": np.float64(5.0)}},
+        ValueError,
+        r"Timing\.substeps must be an int",
+    ),
+    (
+        "timing substeps np.int64 0",
+        lambda: {"timing": {"substeps": np.int64(0)}},
+        ValueError,
+        r"Timing\.substeps must be an int in \[1, 100\], got np\.int64\(0\)",
+    ),
+    (
+        "cues soft push > firm push",
+        lambda: {"cues": {"soft_push_n": 30.0, "firm_push_n": 10.0}},
+        ValueError,
+        r"Cues\.soft_push_n \(30\.0 N\) must be <= firm_push_n \(10\.0 N\)",
+    ),
+    (
+        "cues soft push > default firm push",
+        lambda: {"cues": {"soft_push_n": np.float32(40.0)}},
+        ValueError,
+        r"Cues\.soft_push_n \(40\.0 N\) must be <= firm_push_n \(30\.0 N\)",
+    ),
+    ("realism np.str_", lambda: {"realism": {"sensor_noise": np.str_("yes")}}, ValueError, r"Realism\.sensor_noise"),
 ]
 
 
@@ -282,6 +318,26 @@ BAD_RESETS: list[tuple[str, dict[str, Any], type[Exception], str]] = [
     ("str seed", {"seed": "abc"}, gym.error.Error, r"Seed must be a python integer"),
     ("float seed", {"seed": 1.5}, gym.error.Error, r"Seed must be a python integer"),
 ]
+
+
+# Issue #13: a NumPy array or bool as initial_xi. The reset options are checked in coop_gym.envs
+# (parse_reset_options), where `xi not in (-1, 0, 1)` lets np.True_ through and np.array([1]) fails
+# with NumPy's TypeError, naming nothing. The fix is one call there to
+# compiled.checks.check_choice("reset option initial_xi", xi, (-1, 0, 1)) (as simulate() and
+# Cooperativeness.baseline do), left to the envs' owner; these flip to passing with it.
+PENDING_RESETS: list[tuple[str, dict[str, Any], str]] = [
+    ("initial_xi array", {"options": {"initial_xi": np.array([1])}}, r"initial_xi must be -1, 0 or 1, got array"),
+    ("initial_xi np.bool_", {"options": {"initial_xi": np.True_}}, r"initial_xi must be -1, 0 or 1, got np\.True_"),
+]
+
+
+@pytest.mark.xfail(strict=True, reason="issue #13: parse_reset_options must call compiled.checks.check_choice")
+@pytest.mark.parametrize(("kwargs", "match"), [c[1:] for c in PENDING_RESETS], ids=[c[0] for c in PENDING_RESETS])
+def test_numpy_initial_xi_is_refused_by_name(kwargs: dict[str, Any], match: str) -> None:
+    env, twin = started_pair()
+    with pytest.raises(ValueError, match=match):
+        env.reset(**kwargs)
+    assert_same_future(env, twin, valid_actions("multidiscrete", 60))
 
 
 @pytest.mark.parametrize(("kwargs", "exc", "match"), [c[1:] for c in BAD_RESETS], ids=[c[0] for c in BAD_RESETS])

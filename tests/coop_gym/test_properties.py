@@ -110,6 +110,7 @@ PERMISSIVE = {
         "initial_p_cooperative": 0.0,
     },
     LiftCriteria: {"success_lean_m": 1.0, "upright_m": -1.0},
+    Cues: {"soft_push_n": 0.0, "firm_push_n": 200.0},
 }
 
 
@@ -210,10 +211,12 @@ def env_configs(draw: st.DrawFn) -> dict[str, Any]:
     timing = draw(timings())
     lift = draw(dataclass_values(LiftCriteria))
     lift["upright_m"] = min(lift["upright_m"], lift["success_lean_m"])
+    cues = draw(dataclass_values(Cues))
+    cues["soft_push_n"] = min(cues["soft_push_n"], cues["firm_push_n"])
     return {
         "personas": [draw(persons(timing))],
         "timing": timing,
-        "cues": Cues(**draw(dataclass_values(Cues))),
+        "cues": Cues(**cues),
         "realism": Realism(**{f.name: draw(st.booleans()) for f in dataclasses.fields(Realism)}),
         "lift": LiftCriteria(**lift),
         "reward": RewardWeights(**draw(dataclass_values(RewardWeights))),
