@@ -23,18 +23,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from compiled.checks import is_number, python_scalar
+
 __all__ = ["STATE_DIM", "NominalModel"]
 
 STATE_DIM = 4
 """Length of the paper filter's state ``[x, xdot, eta, xi]``."""
 
 
-def _require_positive(name: str, value: float, *, allow_zero: bool = False) -> None:
-    if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+def _require_positive(name: str, value: Any, *, allow_zero: bool = False) -> float:
+    """``value`` as a Python float if finite and positive (or zero where allowed); NumPy scalars welcome."""
+    if not is_number(value) or not math.isfinite(value):
         raise ValueError(f"NominalModel.{name} must be a finite number, got {value!r}")
     if value < 0 or (value == 0 and not allow_zero):
         bound = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"NominalModel.{name} must be {bound}, got {value!r}")
+    return float(python_scalar(value))
 
 
 @dataclass(frozen=True)
@@ -81,7 +85,7 @@ class NominalModel:
             value = getattr(self, field.name)
             # Gains may be zero (a person deaf to words has k4 = 0); the step may not.
             allow_zero = field.name not in ("dt_s", "position_noise_std_m")
-            _require_positive(field.name, value, allow_zero=allow_zero)
+            object.__setattr__(self, field.name, _require_positive(field.name, value, allow_zero=allow_zero))
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> NominalModel:

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
 
+from compiled.checks import is_number, python_scalar
+
 __all__ = [
     "ACTION_TYPES",
     "ESTIMATORS",
@@ -53,11 +55,14 @@ class Outcome(IntEnum):
         return self is Outcome.TIMEOUT
 
 
-def _finite(owner: str, name: str, value: Any, low: float = -math.inf, high: float = math.inf) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+def _finite(instance: Any, name: str, low: float = -math.inf, high: float = math.inf) -> None:
+    """Check field ``name`` of a frozen dataclass and store it as a Python number (NumPy scalars welcome)."""
+    owner, value = type(instance).__name__, getattr(instance, name)
+    if not is_number(value) or not math.isfinite(value):
         raise ValueError(f"{owner}.{name} must be a finite number, got {value!r}")
     if not low <= value <= high:
         raise ValueError(f"{owner}.{name} must be in [{low}, {high}], got {value!r}")
+    object.__setattr__(instance, name, python_scalar(value))
 
 
 @dataclass(frozen=True)
@@ -76,8 +81,8 @@ class LiftCriteria:
 
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _finite("LiftCriteria", "success_lean_m", self.success_lean_m, 0.0, 1.0)
-        _finite("LiftCriteria", "upright_m", self.upright_m, -1.0, self.success_lean_m)
+        _finite(self, "success_lean_m", 0.0, 1.0)
+        _finite(self, "upright_m", -1.0, self.success_lean_m)
 
 
 @dataclass(frozen=True)
@@ -101,7 +106,7 @@ class RewardWeights:
     def __post_init__(self) -> None:
         """Validate ranges: weights are finite and non-negative."""
         for field in dataclasses.fields(self):
-            _finite("RewardWeights", field.name, getattr(self, field.name), 0.0, 1e6)
+            _finite(self, field.name, 0.0, 1e6)
 
 
 def as_dataclass(cls: type[Any], value: Any, argument: str) -> Any:

@@ -128,7 +128,6 @@ def test_numpy_bools_and_arrays_are_not_numbers(cls: type, kwargs: dict[str, Any
         cls(**kwargs)
 
 
-@pytest.mark.xfail(strict=True, reason="issue #13: coop_gym/envs/config.py's _finite must use compiled.checks")
 def test_lift_criteria_and_reward_weights_take_numpy_scalars() -> None:
     from coop_gym.envs.config import LiftCriteria, RewardWeights
 

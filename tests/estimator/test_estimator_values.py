@@ -36,7 +36,6 @@ def test_numpy_scalars_are_numbers() -> None:
     sequential_judgment(probs, error_rate=np.float64(0.05))
 
 
-@pytest.mark.xfail(strict=True, reason="issue #13: estimator/nominal.py's _require_positive must use compiled.checks")
 def test_nominal_model_takes_numpy_scalars() -> None:
     assert NominalModel(dt_s=np.float32(0.02)).dt_s == float(np.float32(0.02))
 
