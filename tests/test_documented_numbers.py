@@ -31,6 +31,12 @@ def _variation_percent() -> tuple[float, ...]:
     return (100 * stds.pop(),)
 
 
+def _wide_variation() -> tuple[float, ...]:
+    from coop_gym.model.personas import WIDE_VARIATION_STD
+
+    return (WIDE_VARIATION_STD, _variation_percent()[0] / 100)
+
+
 def _reward_weights() -> tuple[float, ...]:
     w = RewardWeights()
     return (w.success, w.unsafe, w.premature, w.time_per_s, w.force_per_n_s)
@@ -53,6 +59,7 @@ CASES: list[tuple[str, str, str, Callable[[], tuple[float, ...]]]] = [
         lambda: (Timing().episode_s, *_max_episode_steps()),
     ),
     ("readme-variation", README, r"~(\d+) % per-episode variation", _variation_percent),
+    ("readme-wide-variation", README, r"has\nstd ([\d.]+) around its persona instead of ([\d.]+)", _wide_variation),
     ("readme-success", README, r"shoulder ≥ ([\d.]+) m forward", lambda: (LiftCriteria().success_lean_m,)),
     ("readme-upright", README, r"upright \(< ([\d.]+) m\)", lambda: (LiftCriteria().upright_m,)),
     (

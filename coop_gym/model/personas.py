@@ -153,8 +153,8 @@ TEST_PERSONAS: tuple[str, ...] = ("frail", "forgetful")
 """Held-out personas for measuring generalisation."""
 
 WIDE_VARIATION_STD = 0.5
-"""``variation_relative_std`` of the ``"train_wide"`` set: people vary about +/-65 % around
-each training persona instead of +/-20 % (domain randomisation). A policy trained on the
+"""``variation_relative_std`` of the ``"train_wide"`` set: one sd of a varied gain is x1.65 or
+x0.61 around each training persona instead of about +/-20 % (domain randomisation). A policy trained on the
 narrow spread learns the training personas' exact push compliance; on the hard level one
 of three PPO seeds then read a held-out frail person's pushed lean as cooperation
 (README, "Difficulty levels")."""
