@@ -30,8 +30,8 @@ from agents.scripted import (
     make_scripted,
 )
 
-# name -> module, imported on first use: agents.evaluate because it runs as
-# `python -m agents.evaluate` (an eager import would load it twice), the rest need torch / SB3.
+# name -> module, imported on first use, so `import agents` stays cheap: agents.evaluate
+# builds envs and tables, the rest need torch / SB3.
 _LAZY = {
     "EpisodeRecord": "agents.evaluate",
     "EvaluationResult": "agents.evaluate",

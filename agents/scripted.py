@@ -46,7 +46,7 @@ from agents.base import (
     require_features,
 )
 from coop_gym.envs.config import ACTION_TYPES, LiftCriteria
-from coop_gym.envs.sit_to_stand import observation_features
+from coop_gym.envs.contract import observation_features
 from estimator.judgment import ThresholdJudgment
 
 __all__ = [
@@ -139,7 +139,7 @@ class ScriptedAgent:
 
     Args:
         features: Names of the observation's features, in order (``env.unwrapped.features``
-            or :func:`coop_gym.envs.sit_to_stand.observation_features`). Default: the
+            or :func:`coop_gym.envs.contract.observation_features`). Default: the
             belief observation of the paper's Kalman filter.
         action_type: ``"multidiscrete"`` (default), ``"discrete"`` or ``"continuous"``.
         seed: Seed of the agent's own random generator (only :class:`RandomAgent` draws).

@@ -208,7 +208,7 @@ class TraceBuilder:
             kwargs["threshold"] = core.judgment.threshold
             kwargs["judgment_delay_s"] = core.judgment.delay_s
             kwargs["success_lean_m"] = core.lift.success_lean_m
-            from coop_gym.envs.core import FEATURES
+            from coop_gym.envs.contract import FEATURES
 
             # The core computes every feature whatever the observation mode selects.
             def fallback() -> dict[str, float]:
