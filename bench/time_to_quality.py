@@ -16,9 +16,11 @@ the handbook caregiver. In one run, one after the other, this trains
 Every ``--eval-every-s`` seconds of training (checked at rollout boundaries) the clock
 stops and the policy plays the same ``--episodes`` seeded episodes on the held-out
 personas through :func:`agents.evaluate.evaluate`; the evaluation's own time is not
-counted. The handbook caregiver plays the same episodes first: its success rate is the
-target. A contender *reaches handbook level* at the first evaluation whose success rate
-is at least the handbook's. The report gives each contender's time to that point (or
+counted. The handbook caregiver plays the same episodes first. A contender *reaches
+handbook level* at the first evaluation whose success rate is at least the lower end of
+the handbook's 95 % Wilson interval on those episodes -- statistically no worse than the
+handbook (on the paper's model the handbook succeeds ~100 % of the time, and demanding
+500/500 would time a lucky draw, not a caregiver). The report gives each contender's time to that point (or
 "not within the budget") and the ratio ``default / first_script`` (an upper bound when
 the first script never got there). Torch uses one thread; both contenders train on the
 same machine in the same process, so a change of load between them is the main source of
@@ -164,6 +166,7 @@ def _plot(report: dict[str, Any], path: Path) -> None:
         ys = [0.0] + [100 * p["success_rate"] for p in run["curve"]]
         ax.plot(xs, ys, marker="o", ms=3, label=f"{run['contender']} ({run['steps_per_s'] or 0:.0f} steps/s)")
     ax.axhline(100 * report["handbook_success"], color="#757575", ls="--", label="handbook caregiver")
+    ax.axhline(100 * report["target_success"], color="#757575", ls=":", label="target (handbook's 95 % CI low end)")
     ax.set_xlabel("training wall-clock time [s] (evaluations not counted)")
     ax.set_ylabel("held-out success [%]")
     ax.set_ylim(0, 100)
@@ -191,8 +194,12 @@ def run(
     torch.set_num_threads(1)
     eval_seed = 1_000_000
     handbook = evaluate("handbook", env_id, "test", episodes, eval_seed)
-    target = handbook.success_rate
-    print(f"{env_id}: handbook {target:.3f} success on {episodes} held-out episodes", flush=True)
+    target = handbook.interval("success")[0]
+    print(
+        f"{env_id}: handbook {handbook.success_rate:.3f} success on {episodes} held-out episodes; "
+        f"target {target:.3f} (its 95 % interval's lower end)",
+        flush=True,
+    )
     runs = [
         _train_with_clock(c, env_id, seed, budget_s, every_s, episodes, eval_seed, target, stop_at_target)
         for c in contenders
@@ -211,8 +218,9 @@ def run(
         "eval_seed": eval_seed,
         "seed": seed,
         "budget_s": budget_s,
-        "handbook_success": target,
+        "handbook_success": handbook.success_rate,
         "handbook_unsafe": handbook.unsafe_rate,
+        "target_success": target,
         "runs": runs,
         "time_ratio_default_vs_first_script": ratio,
         "cpu_count": os.cpu_count(),
