@@ -42,7 +42,7 @@ HERE = Path(__file__).resolve().parent
 if str(HERE.parent) not in sys.path:  # run as a script from a checkout
     sys.path.insert(0, str(HERE.parent))
 
-from coop_gym.cli import positive_int  # noqa: E402
+from coop_gym.cli import output_path_problem, positive_int  # noqa: E402
 
 CONTENDERS: tuple[str, ...] = ("default", "first_script")
 
@@ -245,12 +245,14 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [c for c in contenders if c not in CONTENDERS]
     if unknown or not contenders:
         parser.error(f"--contenders: unknown {unknown or 'empty'}; known: {', '.join(CONTENDERS)}")
-    import gymnasium as gym
 
-    import coop_gym  # noqa: F401  (registers the ids)
+    import coop_gym
 
-    if args.env not in gym.registry:
-        parser.error(f"--env: unknown env id {args.env!r}")
+    if args.env not in coop_gym.ENV_IDS:
+        parser.error(f"--env: unknown env id {args.env!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
+    problem = output_path_problem(args.out, folder=True)
+    if problem:
+        parser.error(f"--out: {problem}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     report = run(args.env, args.budget_s, args.eval_every_s, args.episodes, args.seed, contenders, args.stop_at_target)

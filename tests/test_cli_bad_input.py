@@ -183,6 +183,11 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/run.py", "repeats inf", ["--repeats", "inf"], r"--repeats: expected a positive integer, got 'inf'"),
     ("bench/run.py", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
+    ("bench/time_to_quality.py", "budget 0", ["--budget-s", "0"], r"--budget-s: must be a positive number, got '0'"),
+    ("bench/time_to_quality.py", "budget nan", ["--budget-s", "nan"], r"--budget-s: must be a positive number"),
+    ("bench/time_to_quality.py", "episodes 0", ["--episodes", "0"], r"--episodes: expected a positive integer, got 0"),
+    ("bench/time_to_quality.py", "unknown contender", ["--contenders", "x"], r"--contenders: unknown \['x'\]"),
+    ("bench/time_to_quality.py", "unknown env", ["--env", "CartPole-v1"], r"--env: unknown env id 'CartPole-v1'"),
     (
         "bench/run.py",
         "repeats not a number",
