@@ -32,11 +32,13 @@ Numba caches the kernels on disk, keyed by every project source they compile in
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
@@ -155,6 +157,56 @@ INITIAL_LEAN_STD_M = 0.005
 """People sit a little differently: std of the initial forward lean [m]."""
 
 _NO_OVERRIDE = -99  # "draw it" for the persona / initial-xi overrides of a reset
+
+MIN_ENVS_PER_THREAD = 64
+"""Fewer envs per thread than this step on one thread: waking Numba's threads costs more than it saves
+(measured in bench/threads.py: crossover near 32 envs on 2 threads)."""
+
+
+def numba_pool_size() -> int:
+    """The size of Numba's thread pool (``NUMBA_NUM_THREADS``, fixed at the first parallel launch)."""
+    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set from the environment
+
+
+def available_threads() -> int:
+    """The threads a batched core may use by default: the cores this process may run on, at most Numba's pool."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, numba_pool_size()))
+
+
+def check_threads(threads: Any) -> int:
+    """``threads`` validated: ``None`` (:func:`available_threads`) or an int from 1 to Numba's pool size."""
+    if threads is None:
+        return available_threads()
+    limit = numba_pool_size()
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= limit:
+        raise ValueError(
+            f"threads must be None or an int from 1 to {limit} (Numba's thread pool, NUMBA_NUM_THREADS), "
+            f"got {threads!r}"
+        )
+    return int(threads)
+
+
+# GNU OpenMP cannot run a parallel region in a child forked after the parent ran one (Numba
+# aborts the child). A forked child then steps on one thread: the same numbers, only slower.
+_parallel_launched = False
+_parallel_forbidden = False
+
+
+def _after_fork_in_child() -> None:
+    global _parallel_forbidden
+    if _parallel_launched and not _parallel_forbidden:
+        try:
+            _parallel_forbidden = numba.threading_layer() == "omp"
+        except ValueError:  # no parallel region ran after all
+            pass
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel | None = None) -> NominalModel:
@@ -419,21 +471,30 @@ def _write_reward_and_truth(
 
 
 @njit(cache=True)
-def _advance(
+def _unready(cmd: NDArray[np.float64], generators: NDArray[np.uint64]) -> int:
+    # The first active env that was never reset (has no generator), or -1. Checked before any
+    # env is stepped, in order, so a failed call changes nothing and names the lowest such env.
+    for i in range(cmd.shape[0]):
+        if cmd[i, CMD.active] > 0.5 and generators[i, G_STATE] == 0:
+            return i
+    return -1
+
+
+@njit(cache=True)
+def _advance_rows(
+    start: int,
+    stop: int,
     cmd: NDArray[np.float64],
     state: NDArray[np.float64],
     generators: NDArray[np.uint64],
     obs: NDArray[np.float32],
     consts: NDArray[np.float64],
-) -> int:
-    # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
-    n_envs = cmd.shape[0]
-    for i in range(n_envs):
-        if cmd[i, CMD.active] > 0.5 and generators[i, G_STATE] == 0:
-            return i
+) -> None:
+    # Step the active envs start..stop-1. Each env touches only its own rows and its own
+    # generator, so disjoint ranges can run on different threads; ``z`` is this call's scratch.
     substeps = int(consts[CONSTS.substeps])
     z = np.empty(NORMALS_PER_SUBSTEP)
-    for i in range(n_envs):
+    for i in range(start, stop):
         if cmd[i, CMD.active] < 0.5:
             continue
         row = state[i]
@@ -453,7 +514,41 @@ def _advance(
         _write_reward_and_truth(row, result, lift, cp, consts)
         if consts[CONSTS.build_obs] > 0.5:
             _observe_row(row, obs[i], consts)
-    return -1
+
+
+@njit(cache=True)
+def _advance(
+    cmd: NDArray[np.float64],
+    state: NDArray[np.float64],
+    generators: NDArray[np.uint64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> int:
+    # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
+    failed = _unready(cmd, generators)
+    if failed < 0:
+        _advance_rows(0, cmd.shape[0], cmd, state, generators, obs, consts)
+    return failed
+
+
+@njit(cache=True, parallel=True)
+def _advance_parallel(
+    cmd: NDArray[np.float64],
+    state: NDArray[np.float64],
+    generators: NDArray[np.uint64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+    chunks: int,
+) -> int:
+    # _advance with the envs split into ``chunks`` contiguous ranges run on Numba's threads.
+    # Env i's numbers depend only on its own row and generator, never on the range it falls
+    # in or the thread running it: the results are bit-identical to _advance's.
+    failed = _unready(cmd, generators)
+    if failed < 0:
+        n_envs = cmd.shape[0]
+        for c in prange(chunks):
+            _advance_rows(c * n_envs // chunks, (c + 1) * n_envs // chunks, cmd, state, generators, obs, consts)
+    return failed
 
 
 class SitToStandCore:
@@ -516,6 +611,8 @@ class SitToStandCore:
         self.consts = _pack_consts(self, index, observation_low, observation_high, varied)
         self._allocate(n, len(index), len(varied))
         self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
+        self.threads = available_threads()
+        self._chunks = 0  # threads a step uses; 0: plan again (see _plan_chunks)
         # With a multiple-model estimator the observation waits for its probabilities.
         self.consts[CONSTS.build_obs] = 1.0 if self.mm is None else 0.0
 
@@ -602,11 +699,29 @@ class SitToStandCore:
 
     # --- episodes -------------------------------------------------------------
 
+    def set_threads(self, threads: int | None) -> None:
+        """Step on up to ``threads`` threads (``None``: :func:`available_threads`); results do not depend on it."""
+        self.threads = check_threads(threads)
+        self._chunks = 0
+
+    def _plan_chunks(self) -> int:
+        """How many threads (contiguous ranges of envs) a step uses: 1 unless it pays and is safe."""
+        chunks = min(self.threads, numba_pool_size(), self.n_envs // MIN_ENVS_PER_THREAD)
+        if chunks > 1:
+            # Two envs drawing from one generator must draw in env order: one thread.
+            drawing = self.generators[:, G_STATE]
+            drawing = drawing[drawing != 0]
+            if np.unique(drawing).shape[0] != drawing.shape[0]:
+                chunks = 1
+        self._chunks = max(chunks, 1)
+        return self._chunks
+
     def set_rng(self, i: int, rng: np.random.Generator) -> None:
         """Make ``rng`` env ``i``'s source of randomness (kept for its following episodes)."""
         if self.rngs[i] is not rng:
             self.generators[i] = bit_generator_row(rng)
             self.rngs[i] = rng
+            self._chunks = 0
 
     def reset_env(
         self, i: int, rng: np.random.Generator, persona_index: int | None = None, initial_xi: int | None = None
@@ -683,7 +798,19 @@ class SitToStandCore:
             cmd: (N, 4) float64 C-contiguous rows ``[push_force_n, verbal_cue, lift, active]``
                 (decoded and validated); envs with ``active == 0`` are left untouched.
         """
-        failed = _advance(cmd, self.state, self.generators, self.obs, self.consts)
+        global _parallel_launched
+        chunks = self._chunks or self._plan_chunks()
+        if chunks > 1 and not _parallel_forbidden:
+            # Numba's thread count is per calling thread: set for this call, then given back.
+            previous = numba.get_num_threads()
+            numba.set_num_threads(chunks)
+            _parallel_launched = True
+            try:
+                failed = _advance_parallel(cmd, self.state, self.generators, self.obs, self.consts, chunks)
+            finally:
+                numba.set_num_threads(previous)
+        else:
+            failed = _advance(cmd, self.state, self.generators, self.obs, self.consts)
         if failed >= 0:
             raise RuntimeError(f"env {failed} was stepped before it was reset")
         if self.mm is not None:
@@ -714,6 +841,7 @@ class SitToStandCore:
         for i, rng in enumerate(self.rngs):
             if rng is not None:
                 self.generators[i] = bit_generator_row(rng)
+        self._chunks = 0
 
 
 def _pack_consts(
