@@ -158,9 +158,12 @@ INITIAL_LEAN_STD_M = 0.005
 
 _NO_OVERRIDE = -99  # "draw it" for the persona / initial-xi overrides of a reset
 
-MIN_ENVS_PER_THREAD = 64
-"""Fewer envs per thread than this step on one thread: waking Numba's threads costs more than it saves
-(measured in bench/threads.py: crossover near 32 envs on 2 threads)."""
+MIN_ENVS_PER_THREAD = 128
+"""Fewer envs per thread than this step on one thread. Measured on the 2-core dev machine at
+load ~11 (core.step_commands, 2 threads vs 1): a parallel step costs ~50-70 us more to start,
+so 16 envs ran at 0.4x, 64 at 0.67x, 128 at 0.8x, 256-1024 at 0.9-1.0x (an overloaded machine
+has no idle core to gain); the env-step itself is ~0.7 us of CPU, so with a free core the
+second thread pays from ~100 envs. 128 per thread keeps the single env and small batches serial."""
 
 
 def numba_pool_size() -> int:
@@ -207,6 +210,28 @@ def _after_fork_in_child() -> None:
 
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def _start_numba_threads() -> None:
+    """Start Numba's thread pool, its GNU OpenMP threads sleeping rather than spinning between steps.
+
+    With OpenMP's default (spinning) wait, an env step of 1024 envs on 2 threads took 20-30 ms
+    instead of 3 ms on this project's loaded 2-core machine: the spinning thread ate the core
+    the other needed. ``OMP_WAIT_POLICY`` is read once, when the OpenMP runtime loads (here, at
+    the pool's start); it is set only if the user has not, and only for that moment.
+    """
+    global _parallel_launched
+    if _parallel_launched:
+        return
+    unset = "OMP_WAIT_POLICY" not in os.environ
+    if unset:
+        os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+    try:
+        numba.get_num_threads()  # starts the pool
+    finally:
+        if unset:
+            os.environ.pop("OMP_WAIT_POLICY", None)
+    _parallel_launched = True
 
 
 def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel | None = None) -> NominalModel:
@@ -798,13 +823,12 @@ class SitToStandCore:
             cmd: (N, 4) float64 C-contiguous rows ``[push_force_n, verbal_cue, lift, active]``
                 (decoded and validated); envs with ``active == 0`` are left untouched.
         """
-        global _parallel_launched
         chunks = self._chunks or self._plan_chunks()
         if chunks > 1 and not _parallel_forbidden:
+            _start_numba_threads()
             # Numba's thread count is per calling thread: set for this call, then given back.
             previous = numba.get_num_threads()
             numba.set_num_threads(chunks)
-            _parallel_launched = True
             try:
                 failed = _advance_parallel(cmd, self.state, self.generators, self.obs, self.consts, chunks)
             finally:
