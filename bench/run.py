@@ -52,7 +52,7 @@ import numpy as np
 
 import coop_gym
 from coop_gym.cli import positive_int as _positive_int
-from coop_gym.envs.core import available_threads, numba_pool_size
+from coop_gym.envs.core import available_threads
 
 ENV_ID = "CoopGym/SitToStand-v0"
 CARTPOLE_ID = "CartPole-v1"
@@ -252,7 +252,7 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
     measurements["cartpole_single_steps_per_s"] = summary(cartpole)
     ratios["single_ratio_vs_cartpole"] = summary([a / b for a, b in zip(ours, cartpole, strict=True)])
 
-    threads = [t for t in VECTOR_THREADS if t <= numba_pool_size()]
+    threads = list(VECTOR_THREADS)
     *ours_by_threads, cartpole = measure(
         f"batched env-steps/s ({VECTOR_ENVS} envs; ours on {threads} threads, CartPole's single-threaded NumPy)",
         (*(f"{ENV_ID} threads={t}" for t in threads), "CartPoleVectorEnv"),
@@ -300,7 +300,7 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
             "single_steps_per_repeat": single_block * blocks,
             "vector_envs": VECTOR_ENVS,
             "vector_steps_per_repeat": vector_block * blocks,
-            "vector_threads": [t for t in VECTOR_THREADS if t <= numba_pool_size()],
+            "vector_threads": list(VECTOR_THREADS),
             "vector_default_threads": available_threads(),
             "ppo_envs": PPO_ENVS,
             "ppo_timesteps_per_repeat": ppo_block * blocks,

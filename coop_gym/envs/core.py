@@ -16,6 +16,12 @@ another resets any set of envs. Per-env state lives in one packed float row
 (:attr:`SitToStandCore.state`; ``m``, ``P``, ``params`` ... are views into it) so a call
 passes few arrays.
 
+Threads: a batch of at least 2 x :data:`MIN_ENVS_PER_THREAD` envs steps on up to
+:attr:`SitToStandCore.threads` threads (:meth:`SitToStandCore.set_threads`), each running the
+compiled step, without the GIL, on a contiguous range of envs. Env ``i``'s numbers depend
+only on its own row and generator, so the results are bit-identical whatever the thread
+count (tests/coop_gym/test_threads.py).
+
 Randomness: env ``i`` draws only from its own ``numpy.random.Generator``, in a fixed
 order -- at reset ``integers(n_personas)``, the person's variation normals, ``random()``
 for the initial ``xi`` and ``normal(0, 5 mm)`` for the initial lean; then
@@ -32,13 +38,15 @@ Numba caches the kernels on disk, keyed by every project source they compile in
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
@@ -160,78 +168,64 @@ _NO_OVERRIDE = -99  # "draw it" for the persona / initial-xi overrides of a rese
 
 MIN_ENVS_PER_THREAD = 128
 """Fewer envs per thread than this step on one thread. Measured on the 2-core dev machine at
-load ~11 (core.step_commands, 2 threads vs 1): a parallel step costs ~50-70 us more to start,
+load ~11 (core.step_commands, 2 threads vs 1): a threaded step costs ~50-70 us more to start,
 so 16 envs ran at 0.4x, 64 at 0.67x, 128 at 0.8x, 256-1024 at 0.9-1.0x (an overloaded machine
 has no idle core to gain); the env-step itself is ~0.7 us of CPU, so with a free core the
 second thread pays from ~100 envs. 128 per thread keeps the single env and small batches serial."""
 
 
-def numba_pool_size() -> int:
-    """The size of Numba's thread pool (``NUMBA_NUM_THREADS``, fixed at the first parallel launch)."""
-    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set from the environment
+ENVS_PER_BLOCK = 64
+"""Envs per block a thread claims at a time in a threaded step (~50 us of work: small enough that
+the threads finish together, large enough that claiming costs little)."""
 
 
 def available_threads() -> int:
-    """The threads a batched core may use by default: the cores this process may run on, at most Numba's pool."""
+    """The threads a batched core uses by default: the cores this process may run on."""
     try:
-        cores = len(os.sched_getaffinity(0))
+        return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    return max(1, min(cores, numba_pool_size()))
+        return max(1, os.cpu_count() or 1)
 
 
 def check_threads(threads: Any) -> int:
-    """``threads`` validated: ``None`` (:func:`available_threads`) or an int from 1 to Numba's pool size."""
+    """``threads`` validated: ``None`` (:func:`available_threads`) or a positive int."""
     if threads is None:
         return available_threads()
-    limit = numba_pool_size()
-    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= limit:
-        raise ValueError(
-            f"threads must be None or an int from 1 to {limit} (Numba's thread pool, NUMBA_NUM_THREADS), "
-            f"got {threads!r}"
-        )
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"threads must be None or a positive int, got {threads!r}")
     return int(threads)
 
 
-# GNU OpenMP cannot run a parallel region in a child forked after the parent ran one (Numba
-# aborts the child). A forked child then steps on one thread: the same numbers, only slower.
-_parallel_launched = False
-_parallel_forbidden = False
+# The worker threads of threaded steps, shared by every core of the process and started at
+# the first threaded step. Python threads calling a ``nogil`` kernel, not Numba's OpenMP
+# ``parallel=True``: OpenMP's threads spin between steps, and once torch has loaded its own
+# OpenMP runtime (Numba then uses that one, whose wait policy is already fixed) a 2-thread
+# step of 1024 envs took 18 ms instead of 2 ms on the loaded dev machine. GNU OpenMP also
+# aborts children forked after a parallel region; these threads are simply gone in a child.
+_workers: ThreadPoolExecutor | None = None
+_workers_lock = threading.Lock()
 
 
-def _after_fork_in_child() -> None:
-    global _parallel_forbidden
-    if _parallel_launched and not _parallel_forbidden:
-        try:
-            _parallel_forbidden = numba.threading_layer() == "omp"
-        except ValueError:  # no parallel region ran after all
-            pass
+def _worker_pool(count: int) -> ThreadPoolExecutor:
+    """A pool of at least ``count`` worker threads."""
+    global _workers
+    with _workers_lock:
+        if _workers is None or _workers._max_workers < count:
+            if _workers is not None:
+                _workers.shutdown(wait=False)
+            _workers = ThreadPoolExecutor(count, thread_name_prefix="coop_gym-step")
+        return _workers
+
+
+def _forget_workers() -> None:
+    # In a forked child the parent's threads do not exist: start new ones when needed.
+    global _workers, _workers_lock
+    _workers = None
+    _workers_lock = threading.Lock()
 
 
 if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_after_fork_in_child)
-
-
-def _start_numba_threads() -> None:
-    """Start Numba's thread pool, its GNU OpenMP threads sleeping rather than spinning between steps.
-
-    With OpenMP's default (spinning) wait, an env step of 1024 envs on 2 threads took 20-30 ms
-    instead of 3 ms on this project's loaded 2-core machine: the spinning thread ate the core
-    the other needed. ``OMP_WAIT_POLICY`` is read once, when the OpenMP runtime loads (here, at
-    the pool's start); it is set only if the user has not, and only for that moment.
-    """
-    global _parallel_launched
-    if _parallel_launched:
-        return
-    unset = "OMP_WAIT_POLICY" not in os.environ
-    if unset:
-        os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
-    try:
-        numba.get_num_threads()  # starts the pool
-    finally:
-        if unset:
-            os.environ.pop("OMP_WAIT_POLICY", None)
-    _parallel_launched = True
+    os.register_at_fork(after_in_child=_forget_workers)
 
 
 def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel | None = None) -> NominalModel:
@@ -505,7 +499,7 @@ def _unready(cmd: NDArray[np.float64], generators: NDArray[np.uint64]) -> int:
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _advance_rows(
     start: int,
     stop: int,
@@ -553,26 +547,6 @@ def _advance(
     failed = _unready(cmd, generators)
     if failed < 0:
         _advance_rows(0, cmd.shape[0], cmd, state, generators, obs, consts)
-    return failed
-
-
-@njit(cache=True, parallel=True)
-def _advance_parallel(
-    cmd: NDArray[np.float64],
-    state: NDArray[np.float64],
-    generators: NDArray[np.uint64],
-    obs: NDArray[np.float32],
-    consts: NDArray[np.float64],
-    chunks: int,
-) -> int:
-    # _advance with the envs split into ``chunks`` contiguous ranges run on Numba's threads.
-    # Env i's numbers depend only on its own row and generator, never on the range it falls
-    # in or the thread running it: the results are bit-identical to _advance's.
-    failed = _unready(cmd, generators)
-    if failed < 0:
-        n_envs = cmd.shape[0]
-        for c in prange(chunks):
-            _advance_rows(c * n_envs // chunks, (c + 1) * n_envs // chunks, cmd, state, generators, obs, consts)
     return failed
 
 
@@ -731,7 +705,7 @@ class SitToStandCore:
 
     def _plan_chunks(self) -> int:
         """How many threads (contiguous ranges of envs) a step uses: 1 unless it pays and is safe."""
-        chunks = min(self.threads, numba_pool_size(), self.n_envs // MIN_ENVS_PER_THREAD)
+        chunks = min(self.threads, self.n_envs // MIN_ENVS_PER_THREAD)
         if chunks > 1:
             # Two envs drawing from one generator must draw in env order: one thread.
             drawing = self.generators[:, G_STATE]
@@ -816,6 +790,32 @@ class SitToStandCore:
         self.step_commands(cmd)
         return self.out
 
+    def _advance_threaded(self, cmd: NDArray[np.float64], chunks: int) -> None:
+        """Step the envs on up to ``chunks`` threads (this one and ``chunks - 1`` workers).
+
+        The envs are cut into blocks of about :data:`ENVS_PER_BLOCK`, and each thread takes the
+        next unclaimed block until none is left: on a busy machine a worker that is not
+        scheduled in time is cancelled and this thread steps every block (one thread's speed,
+        not a wait for the slowest); with a free core the blocks are shared.
+        """
+        n = self.n_envs
+        blocks = max(chunks, n // ENVS_PER_BLOCK)
+        args = (cmd, self.state, self.generators, self.obs, self.consts)
+        claims = itertools.count()  # next() on it is atomic under the GIL
+
+        def step_blocks() -> None:
+            while (b := next(claims)) < blocks:
+                _advance_rows(b * n // blocks, (b + 1) * n // blocks, *args)
+
+        pool = _worker_pool(chunks - 1)
+        helpers: list[Future[None]] = [pool.submit(step_blocks) for _ in range(chunks - 1)]
+        try:
+            step_blocks()
+        finally:
+            for helper in helpers:
+                if not helper.cancel():  # it started: wait for its last block
+                    helper.result()
+
     def step_commands(self, cmd: NDArray[np.float64]) -> None:
         """Advance the active envs by one agent action; results land in ``report`` and ``obs``.
 
@@ -824,15 +824,10 @@ class SitToStandCore:
                 (decoded and validated); envs with ``active == 0`` are left untouched.
         """
         chunks = self._chunks or self._plan_chunks()
-        if chunks > 1 and not _parallel_forbidden:
-            _start_numba_threads()
-            # Numba's thread count is per calling thread: set for this call, then given back.
-            previous = numba.get_num_threads()
-            numba.set_num_threads(chunks)
-            try:
-                failed = _advance_parallel(cmd, self.state, self.generators, self.obs, self.consts, chunks)
-            finally:
-                numba.set_num_threads(previous)
+        if chunks > 1:
+            failed = _unready(cmd, self.generators)
+            if failed < 0:
+                self._advance_threaded(cmd, chunks)
         else:
             failed = _advance(cmd, self.state, self.generators, self.obs, self.consts)
         if failed >= 0:

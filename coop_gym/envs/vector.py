@@ -52,9 +52,8 @@ class SitToStandVectorEnv(VectorEnv):
       ``reset(options={"reset_mask": mask})``; stepping them raises.
 
     ``threads``: the compiled step runs on up to this many threads (default ``None``: the cores
-    this process may use, at most ``NUMBA_NUM_THREADS``); batches under 128 envs per thread step
-    on one. Every env draws only from its own generator, so the results are bit-identical
-    whatever the count.
+    this process may use); batches under 128 envs per thread step on one. Every env draws only
+    from its own generator, so the results are bit-identical whatever the count.
 
     ## Reset
 
