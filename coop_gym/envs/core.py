@@ -167,11 +167,12 @@ INITIAL_LEAN_STD_M = 0.005
 _NO_OVERRIDE = -99  # "draw it" for the persona / initial-xi overrides of a reset
 
 MIN_ENVS_PER_THREAD = 128
-"""Fewer envs per thread than this step on one thread. Measured on the 2-core dev machine at
-load ~11 (core.step_commands, 2 threads vs 1): a threaded step costs ~50-70 us more to start,
-so 16 envs ran at 0.4x, 64 at 0.67x, 128 at 0.8x, 256-1024 at 0.9-1.0x (an overloaded machine
-has no idle core to gain); the env-step itself is ~0.7 us of CPU, so with a free core the
-second thread pays from ~100 envs. 128 per thread keeps the single env and small batches serial."""
+"""Fewer envs per thread than this step on one thread. Measured on the shared 2-core dev machine
+(core.step_commands, 2 threads vs 1, load 2.5-3.5): a threaded step costs ~40 us more (waking a
+worker), so 16 envs ran at 0.3-0.4x, 64 at 0.6x, 128 at 0.7-0.8x, 256 at 0.85-0.9x, 1024 at
+0.85-0.9x -- that machine never had an idle core to gain. The env-step itself is ~1 us of
+CPU, so with a free core a second thread pays from ~80 envs: 128 per thread keeps the single
+env and small batches serial, and large batches lose little when no core is free."""
 
 
 ENVS_PER_BLOCK = 64
