@@ -11,8 +11,10 @@ ratio. Every figure is the median over ``--repeats`` repeats with its min..max s
    ``gymnasium.make("CartPole-v1")`` (all wrappers ``make`` adds), random actions sampled
    up front, ``reset()`` whenever an episode ends;
 2. batched env: env-steps/s of ``gymnasium.make_vec(..., num_envs=1024)`` -- our
-   :class:`coop_gym.envs.vector.SitToStandVectorEnv` vs Gymnasium's ``CartPoleVectorEnv``
-   -- with random actions sampled up front (autoreset: next step);
+   :class:`coop_gym.envs.vector.SitToStandVectorEnv` on 1 and on 2 threads (its ``threads``
+   keyword; the results are the same numbers either way) vs Gymnasium's ``CartPoleVectorEnv``,
+   which is single-threaded NumPy -- with random actions sampled up front (autoreset: next
+   step). The three alternate block by block in one run;
 3. SB3 PPO: timesteps/s of ``PPO("MlpPolicy").learn(T)`` on our env with 8 envs, as a
    ``DummyVecEnv`` of 8 ``Monitor``-wrapped single envs vs the batched env through
    :class:`agents.sb3_vec.SB3VecEnvAdapter`. Two settings: ``rollout`` (``n_steps=64``,
@@ -25,7 +27,10 @@ ratio. Every figure is the median over ``--repeats`` repeats with its min..max s
 Random actions lift half the time, so the single- and batched-env figures include a reset
 about every second step (CartPole's random episodes last ~22 steps).
 Torch runs on one thread. ``--quick`` shrinks every run (for a smoke test, not for numbers).
-JSON keys: ``single_ratio_vs_cartpole``, ``vector_ratio_vs_cartpole_vector``,
+JSON keys: ``single_ratio_vs_cartpole``, ``vector_ratio_vs_cartpole_vector`` (our env with its
+default thread count, :func:`coop_gym.envs.core.available_threads`),
+``vector_ratio_vs_cartpole_vector_threads1`` / ``_threads2``, ``vector_thread_scaling`` (2 threads
+over 1; the load average says how busy the machine was),
 ``ppo_speedup_vector_adapter`` (the ``rollout`` setting), ``ppo_speedup_vector_adapter_default``,
 ``ppo_speedup_upper_bound[_default]``, and the absolute figures under ``measurements``.
 """
@@ -47,10 +52,12 @@ import numpy as np
 
 import coop_gym
 from coop_gym.cli import positive_int as _positive_int
+from coop_gym.envs.core import available_threads
 
 ENV_ID = "CoopGym/SitToStand-v0"
 CARTPOLE_ID = "CartPole-v1"
 VECTOR_ENVS = 1024
+VECTOR_THREADS = (1, 2)
 PPO_ENVS = 8
 PPO_SETTINGS: dict[str, dict[str, Any]] = {
     "rollout": {"n_steps": 64, "batch_size": 512, "n_epochs": 1},
@@ -90,9 +97,9 @@ class SingleEnvRunner:
 class VectorEnvRunner:
     """Steps an id's own batched env (``vector_entry_point``, 1024 envs), a block at a time."""
 
-    def __init__(self, env_id: str, block: int, blocks: int, seed: int) -> None:
-        """Make the env, sample every action batch and warm up."""
-        self.envs = gym.make_vec(env_id, num_envs=VECTOR_ENVS, vectorization_mode="vector_entry_point")
+    def __init__(self, env_id: str, block: int, blocks: int, seed: int, **kwargs: Any) -> None:
+        """Make the env (``kwargs``: its keywords), sample every action batch and warm up."""
+        self.envs = gym.make_vec(env_id, num_envs=VECTOR_ENVS, vectorization_mode="vector_entry_point", **kwargs)
         self.envs.action_space.seed(seed)
         self.actions = [self.envs.action_space.sample() for _ in range(block * blocks)]
         self.block = block
@@ -215,6 +222,7 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
     import torch
 
     torch.set_num_threads(1)
+    load_at_start = os.getloadavg()[0]
     blocks = 4
     single_block = 1_000 if quick else 8_000
     vector_block = 5 if quick else 50
@@ -244,14 +252,28 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
     measurements["cartpole_single_steps_per_s"] = summary(cartpole)
     ratios["single_ratio_vs_cartpole"] = summary([a / b for a, b in zip(ours, cartpole, strict=True)])
 
-    ours, cartpole = measure(
-        f"batched env-steps/s ({VECTOR_ENVS} envs)",
-        (ENV_ID, "CartPoleVectorEnv"),
-        lambda r: [VectorEnvRunner(i, vector_block, blocks, r) for i in (ENV_ID, CARTPOLE_ID)],
+    threads = list(VECTOR_THREADS)
+    *ours_by_threads, cartpole = measure(
+        f"batched env-steps/s ({VECTOR_ENVS} envs; ours on {threads} threads, CartPole's single-threaded NumPy)",
+        (*(f"{ENV_ID} threads={t}" for t in threads), "CartPoleVectorEnv"),
+        lambda r: [
+            *(VectorEnvRunner(ENV_ID, vector_block, blocks, r, threads=t) for t in threads),
+            VectorEnvRunner(CARTPOLE_ID, vector_block, blocks, r),
+        ],
     )
-    measurements["vector_env_steps_per_s"] = summary(ours)
     measurements["cartpole_vector_env_steps_per_s"] = summary(cartpole)
-    ratios["vector_ratio_vs_cartpole_vector"] = summary([a / b for a, b in zip(ours, cartpole, strict=True)])
+    for t, ours in zip(threads, ours_by_threads, strict=True):
+        measurements[f"vector_env_steps_per_s_threads{t}"] = summary(ours)
+        ratios[f"vector_ratio_vs_cartpole_vector_threads{t}"] = summary(
+            [a / b for a, b in zip(ours, cartpole, strict=True)]
+        )
+    # The headline figures: our env as users get it, with the default thread count.
+    default = min(available_threads(), max(threads))
+    measurements["vector_env_steps_per_s"] = measurements[f"vector_env_steps_per_s_threads{default}"]
+    ratios["vector_ratio_vs_cartpole_vector"] = ratios[f"vector_ratio_vs_cartpole_vector_threads{default}"]
+    if len(threads) > 1:
+        one, many = ours_by_threads[0], ours_by_threads[-1]
+        ratios["vector_thread_scaling"] = summary([b / a for a, b in zip(one, many, strict=True)])
 
     for setting in PPO_SETTINGS:
         adapter, dummy, null = measure(
@@ -278,6 +300,8 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
             "single_steps_per_repeat": single_block * blocks,
             "vector_envs": VECTOR_ENVS,
             "vector_steps_per_repeat": vector_block * blocks,
+            "vector_threads": list(VECTOR_THREADS),
+            "vector_default_threads": available_threads(),
             "ppo_envs": PPO_ENVS,
             "ppo_timesteps_per_repeat": ppo_block * blocks,
             "ppo_settings": PPO_SETTINGS,
@@ -287,12 +311,12 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
             "python": platform.python_version(),
             "cpu_count": os.cpu_count(),
             "load_average_1min_at_end": os.getloadavg()[0],
+            "load_average_1min_at_start": load_at_start,
             "coop_gym": coop_gym.__version__,
             "gymnasium": gym.__version__,
             "numpy": np.__version__,
         },
     }
-
 
 
 def _table(report: dict[str, Any]) -> str:
@@ -309,10 +333,22 @@ def _table(report: dict[str, Any]) -> str:
         f"single env steps/s, {ENV_ID:<28}{fmt(m['single_steps_per_s'])}",
         f"single env steps/s, {CARTPOLE_ID:<28}{fmt(m['cartpole_single_steps_per_s'])}",
         f"  ratio single_ratio_vs_cartpole{'':<17}{rfmt(r['single_ratio_vs_cartpole'])}",
-        f"vector env-steps/s, SitToStandVectorEnv x{VECTOR_ENVS:<7}{fmt(m['vector_env_steps_per_s'])}",
-        f"vector env-steps/s, CartPoleVectorEnv x{VECTOR_ENVS:<9}{fmt(m['cartpole_vector_env_steps_per_s'])}",
-        f"  ratio vector_ratio_vs_cartpole_vector{'':<10}{rfmt(r['vector_ratio_vs_cartpole_vector'])}",
     ]
+    for t in report["settings"]["vector_threads"]:
+        label = f"vector env-steps/s, SitToStandVectorEnv x{VECTOR_ENVS} threads={t}"
+        lines += [
+            f"{label:<48}{fmt(m[f'vector_env_steps_per_s_threads{t}'])}",
+            f"{f'  ratio vector_ratio_vs_cartpole_vector_threads{t}':<48}"
+            f"{rfmt(r[f'vector_ratio_vs_cartpole_vector_threads{t}'])}",
+        ]
+    default = report["settings"]["vector_default_threads"]
+    lines += [
+        f"{f'vector env-steps/s, CartPoleVectorEnv x{VECTOR_ENVS}':<48}{fmt(m['cartpole_vector_env_steps_per_s'])}",
+        f"{f'  ratio vector_ratio_vs_cartpole_vector (threads={default})':<48}"
+        f"{rfmt(r['vector_ratio_vs_cartpole_vector'])}",
+    ]
+    if "vector_thread_scaling" in r:
+        lines.append(f"{'  ratio vector_thread_scaling (2 threads / 1)':<48}{rfmt(r['vector_thread_scaling'])}")
     for setting in PPO_SETTINGS:
         suffix = "" if setting == "rollout" else f"_{setting}"
         lines += [
@@ -323,7 +359,11 @@ def _table(report: dict[str, Any]) -> str:
             f"{fmt(m[f'ppo_null_env_timesteps_per_s{suffix}'])}",
             f"  bound ppo_speedup_upper_bound{suffix:<18}{rfmt(r[f'ppo_speedup_upper_bound{suffix}'])}",
         ]
-    lines.append(f"load average (1 min) at the end: {report['machine']['load_average_1min_at_end']:.2f}")
+    machine = report["machine"]
+    lines.append(
+        f"load average (1 min) at the start: {machine['load_average_1min_at_start']:.2f}, "
+        f"at the end: {machine['load_average_1min_at_end']:.2f} (on {machine['cpu_count']} cores)"
+    )
     return "\n".join(lines)
 
 

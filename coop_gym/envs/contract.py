@@ -611,6 +611,7 @@ class EnvArguments:
     estimator_options: dict[str, Any] | None = None
     render_mode: str | None = None
     difficulty: str | Difficulty | None = None
+    threads: int | None = None  # the vector env's compiled step: at most this many threads (None: the cores)
 
     @classmethod
     def from_keywords(cls, owner: str, keywords: Mapping[str, Any]) -> EnvArguments:

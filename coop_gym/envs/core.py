@@ -16,6 +16,12 @@ another resets any set of envs. Per-env state lives in one packed float row
 (:attr:`SitToStandCore.state`; ``m``, ``P``, ``params`` ... are views into it) so a call
 passes few arrays.
 
+Threads: a batch of at least 2 x :data:`MIN_ENVS_PER_THREAD` envs steps on up to
+:attr:`SitToStandCore.threads` threads (:meth:`SitToStandCore.set_threads`), each running the
+compiled step, without the GIL, on a contiguous range of envs. Env ``i``'s numbers depend
+only on its own row and generator, so the results are bit-identical whatever the thread
+count (tests/coop_gym/test_threads.py).
+
 Randomness: env ``i`` draws only from its own ``numpy.random.Generator``, in a fixed
 order -- at reset ``integers(n_personas)``, the person's variation normals, ``random()``
 for the initial ``xi`` and ``normal(0, 5 mm)`` for the initial lean; then
@@ -32,6 +38,10 @@ Numba caches the kernels on disk, keyed by every project source they compile in
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import os
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -155,6 +165,68 @@ INITIAL_LEAN_STD_M = 0.005
 """People sit a little differently: std of the initial forward lean [m]."""
 
 _NO_OVERRIDE = -99  # "draw it" for the persona / initial-xi overrides of a reset
+
+MIN_ENVS_PER_THREAD = 128
+"""Fewer envs per thread than this step on one thread. Measured on the shared 2-core dev machine
+(core.step_commands, 2 threads vs 1, load 2.5-3.5): a threaded step costs ~40 us more (waking a
+worker), so 16 envs ran at 0.3-0.4x, 64 at 0.6x, 128 at 0.7-0.8x, 256 at 0.85-0.9x, 1024 at
+0.85-0.9x -- that machine never had an idle core to gain. The env-step itself is ~1 us of
+CPU, so with a free core a second thread pays from ~80 envs: 128 per thread keeps the single
+env and small batches serial, and large batches lose little when no core is free."""
+
+
+ENVS_PER_BLOCK = 64
+"""Envs per block a thread claims at a time in a threaded step (~50 us of work: small enough that
+the threads finish together, large enough that claiming costs little)."""
+
+
+def available_threads() -> int:
+    """The threads a batched core uses by default: the cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def check_threads(threads: Any) -> int:
+    """``threads`` validated: ``None`` (:func:`available_threads`) or a positive int."""
+    if threads is None:
+        return available_threads()
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"threads must be None or a positive int, got {threads!r}")
+    return int(threads)
+
+
+# The worker threads of threaded steps, shared by every core of the process and started at
+# the first threaded step. Python threads calling a ``nogil`` kernel, not Numba's OpenMP
+# ``parallel=True``: OpenMP's threads spin between steps, and once torch has loaded its own
+# OpenMP runtime (Numba then uses that one, whose wait policy is already fixed) a 2-thread
+# step of 1024 envs took 18 ms instead of 2 ms on the loaded dev machine. GNU OpenMP also
+# aborts children forked after a parallel region; these threads are simply gone in a child.
+_workers: ThreadPoolExecutor | None = None
+_workers_lock = threading.Lock()
+
+
+def _worker_pool(count: int) -> ThreadPoolExecutor:
+    """A pool of at least ``count`` worker threads."""
+    global _workers
+    with _workers_lock:
+        if _workers is None or _workers._max_workers < count:
+            if _workers is not None:
+                _workers.shutdown(wait=False)
+            _workers = ThreadPoolExecutor(count, thread_name_prefix="coop_gym-step")
+        return _workers
+
+
+def _forget_workers() -> None:
+    # In a forked child the parent's threads do not exist: start new ones when needed.
+    global _workers, _workers_lock
+    _workers = None
+    _workers_lock = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_workers)
 
 
 def nominal_model_for(person: PersonParams, timing: Timing, base: NominalModel | None = None) -> NominalModel:
@@ -419,21 +491,30 @@ def _write_reward_and_truth(
 
 
 @njit(cache=True)
-def _advance(
+def _unready(cmd: NDArray[np.float64], generators: NDArray[np.uint64]) -> int:
+    # The first active env that was never reset (has no generator), or -1. Checked before any
+    # env is stepped, in order, so a failed call changes nothing and names the lowest such env.
+    for i in range(cmd.shape[0]):
+        if cmd[i, CMD.active] > 0.5 and generators[i, G_STATE] == 0:
+            return i
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def _advance_rows(
+    start: int,
+    stop: int,
     cmd: NDArray[np.float64],
     state: NDArray[np.float64],
     generators: NDArray[np.uint64],
     obs: NDArray[np.float32],
     consts: NDArray[np.float64],
-) -> int:
-    # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
-    n_envs = cmd.shape[0]
-    for i in range(n_envs):
-        if cmd[i, CMD.active] > 0.5 and generators[i, G_STATE] == 0:
-            return i
+) -> None:
+    # Step the active envs start..stop-1. Each env touches only its own rows and its own
+    # generator, so disjoint ranges can run on different threads; ``z`` is this call's scratch.
     substeps = int(consts[CONSTS.substeps])
     z = np.empty(NORMALS_PER_SUBSTEP)
-    for i in range(n_envs):
+    for i in range(start, stop):
         if cmd[i, CMD.active] < 0.5:
             continue
         row = state[i]
@@ -453,7 +534,21 @@ def _advance(
         _write_reward_and_truth(row, result, lift, cp, consts)
         if consts[CONSTS.build_obs] > 0.5:
             _observe_row(row, obs[i], consts)
-    return -1
+
+
+@njit(cache=True)
+def _advance(
+    cmd: NDArray[np.float64],
+    state: NDArray[np.float64],
+    generators: NDArray[np.uint64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> int:
+    # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
+    failed = _unready(cmd, generators)
+    if failed < 0:
+        _advance_rows(0, cmd.shape[0], cmd, state, generators, obs, consts)
+    return failed
 
 
 class SitToStandCore:
@@ -516,6 +611,8 @@ class SitToStandCore:
         self.consts = _pack_consts(self, index, observation_low, observation_high, varied)
         self._allocate(n, len(index), len(varied))
         self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
+        self.threads = available_threads()
+        self._chunks = 0  # threads a step uses; 0: plan again (see _plan_chunks)
         # With a multiple-model estimator the observation waits for its probabilities.
         self.consts[CONSTS.build_obs] = 1.0 if self.mm is None else 0.0
 
@@ -602,11 +699,29 @@ class SitToStandCore:
 
     # --- episodes -------------------------------------------------------------
 
+    def set_threads(self, threads: int | None) -> None:
+        """Step on up to ``threads`` threads (``None``: :func:`available_threads`); results do not depend on it."""
+        self.threads = check_threads(threads)
+        self._chunks = 0
+
+    def _plan_chunks(self) -> int:
+        """How many threads (contiguous ranges of envs) a step uses: 1 unless it pays and is safe."""
+        chunks = min(self.threads, self.n_envs // MIN_ENVS_PER_THREAD)
+        if chunks > 1:
+            # Two envs drawing from one generator must draw in env order: one thread.
+            drawing = self.generators[:, G_STATE]
+            drawing = drawing[drawing != 0]
+            if np.unique(drawing).shape[0] != drawing.shape[0]:
+                chunks = 1
+        self._chunks = max(chunks, 1)
+        return self._chunks
+
     def set_rng(self, i: int, rng: np.random.Generator) -> None:
         """Make ``rng`` env ``i``'s source of randomness (kept for its following episodes)."""
         if self.rngs[i] is not rng:
             self.generators[i] = bit_generator_row(rng)
             self.rngs[i] = rng
+            self._chunks = 0
 
     def reset_env(
         self, i: int, rng: np.random.Generator, persona_index: int | None = None, initial_xi: int | None = None
@@ -676,6 +791,32 @@ class SitToStandCore:
         self.step_commands(cmd)
         return self.out
 
+    def _advance_threaded(self, cmd: NDArray[np.float64], chunks: int) -> None:
+        """Step the envs on up to ``chunks`` threads (this one and ``chunks - 1`` workers).
+
+        The envs are cut into blocks of about :data:`ENVS_PER_BLOCK`, and each thread takes the
+        next unclaimed block until none is left: on a busy machine a worker that is not
+        scheduled in time is cancelled and this thread steps every block (one thread's speed,
+        not a wait for the slowest); with a free core the blocks are shared.
+        """
+        n = self.n_envs
+        blocks = max(chunks, n // ENVS_PER_BLOCK)
+        args = (cmd, self.state, self.generators, self.obs, self.consts)
+        claims = itertools.count()  # next() on it is atomic under the GIL
+
+        def step_blocks() -> None:
+            while (b := next(claims)) < blocks:
+                _advance_rows(b * n // blocks, (b + 1) * n // blocks, *args)
+
+        pool = _worker_pool(chunks - 1)
+        helpers: list[Future[None]] = [pool.submit(step_blocks) for _ in range(chunks - 1)]
+        try:
+            step_blocks()
+        finally:
+            for helper in helpers:
+                if not helper.cancel():  # it started: wait for its last block
+                    helper.result()
+
     def step_commands(self, cmd: NDArray[np.float64]) -> None:
         """Advance the active envs by one agent action; results land in ``report`` and ``obs``.
 
@@ -683,7 +824,13 @@ class SitToStandCore:
             cmd: (N, 4) float64 C-contiguous rows ``[push_force_n, verbal_cue, lift, active]``
                 (decoded and validated); envs with ``active == 0`` are left untouched.
         """
-        failed = _advance(cmd, self.state, self.generators, self.obs, self.consts)
+        chunks = self._chunks or self._plan_chunks()
+        if chunks > 1:
+            failed = _unready(cmd, self.generators)
+            if failed < 0:
+                self._advance_threaded(cmd, chunks)
+        else:
+            failed = _advance(cmd, self.state, self.generators, self.obs, self.consts)
         if failed >= 0:
             raise RuntimeError(f"env {failed} was stepped before it was reset")
         if self.mm is not None:
@@ -714,6 +861,7 @@ class SitToStandCore:
         for i, rng in enumerate(self.rngs):
             if rng is not None:
                 self.generators[i] = bit_generator_row(rng)
+        self._chunks = 0
 
 
 def _pack_consts(

@@ -1,0 +1,173 @@
+"""The batched env on several threads: the same numbers as on one, and as the single envs."""
+
+from __future__ import annotations
+
+import multiprocessing
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import coop_gym
+from coop_gym.envs import core as core_module
+from coop_gym.envs.vector import SitToStandVectorEnv
+from coop_gym.model.params import Timing
+
+SHORT = {"timing": {"episode_s": 2.0}}  # 20-step episodes: truncations as well as lifts
+TWO_THREADS = 2
+
+
+@pytest.fixture
+def parallel_for_small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Split even a handful of envs across threads (by default small batches step on one)."""
+    monkeypatch.setattr(core_module, "MIN_ENVS_PER_THREAD", 1)
+
+
+def _rollout(threads: int, n: int, steps: int, mode: AutoresetMode, env_id: str = "CoopGym/SitToStand-v0") -> Any:
+    """Everything a vector env returns over ``steps`` random steps (lifting often, so autoresets happen)."""
+    envs = gym.make_vec(env_id, num_envs=n, autoreset_mode=mode, threads=threads, **SHORT)
+    rng = np.random.default_rng(7)
+    record: list[Any] = list(envs.reset(seed=100))
+    for _ in range(steps):
+        lift = (rng.random(n) < 0.08).astype(np.int64)
+        actions = np.column_stack([rng.integers(0, 3, n), rng.integers(0, 3, n), lift])
+        record.extend(envs.step(actions))
+    return record, envs.unwrapped.core
+
+
+def _assert_identical(a: Any, b: Any) -> None:
+    """Equal bit for bit: arrays (NaN in the same places), dicts key by key, object arrays item by item."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            _assert_identical(a[key], b[key])
+    elif isinstance(a, np.ndarray) and a.dtype == object:
+        assert a.shape == b.shape
+        for x, y in zip(a, b, strict=True):
+            _assert_identical(x, y)
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and a.shape == b.shape
+        assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
+    else:
+        assert a == b
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_two_threads_give_bit_identical_results_to_one(mode: AutoresetMode) -> None:
+    one, serial_core = _rollout(1, 37, 300, mode)  # 37: the threads' ranges have unequal lengths
+    two, parallel_core = _rollout(TWO_THREADS, 37, 300, mode)
+    assert serial_core._chunks == 1
+    assert parallel_core._chunks == TWO_THREADS
+    ended = sum(int(np.sum(x)) for x in one[4::5]) + sum(int(np.sum(x)) for x in one[5::5])  # terminated, truncated
+    assert ended > 300  # lifts and truncations: autoresets were exercised
+    assert len(one) == len(two)
+    for a, b in zip(one, two, strict=True):
+        _assert_identical(a, b)
+    np.testing.assert_array_equal(serial_core.state, parallel_core.state)
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+def test_two_threads_give_bit_identical_results_with_the_imm_estimator() -> None:
+    one, _ = _rollout(1, 8, 60, AutoresetMode.NEXT_STEP, "CoopGym/SitToStandIMM-v0")
+    two, core = _rollout(TWO_THREADS, 8, 60, AutoresetMode.NEXT_STEP, "CoopGym/SitToStandIMM-v0")
+    assert core._chunks == TWO_THREADS
+    for a, b in zip(one, two, strict=True):
+        _assert_identical(a, b)
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+def test_env_i_on_two_threads_plays_what_a_single_env_seeded_s_plus_i_plays() -> None:
+    n, steps, seed = 12, 120, 40
+    limit = Timing(episode_s=2.0).max_episode_steps
+    envs = gym.make_vec("CoopGym/SitToStand-v0", num_envs=n, threads=TWO_THREADS, max_episode_steps=limit, **SHORT)
+    singles = [gym.make("CoopGym/SitToStand-v0", max_episode_steps=limit, **SHORT) for _ in range(n)]
+    vobs, _ = envs.reset(seed=seed)
+    for i, env in enumerate(singles):
+        assert np.array_equal(env.reset(seed=seed + i)[0], vobs[i])
+    rng = np.random.default_rng(3)
+    pending = np.zeros(n, dtype=bool)
+    for _ in range(steps):
+        actions = np.column_stack([rng.integers(0, 3, n), rng.integers(0, 3, n), rng.random(n) < 0.06])
+        vobs, vrew, vterm, vtrunc, vinfos = envs.step(actions)
+        for i, env in enumerate(singles):
+            if pending[i]:
+                obs, info = env.reset()
+                reward, terminated, truncated = 0.0, False, False
+            else:
+                obs, reward, terminated, truncated, info = env.step(actions[i])
+            assert np.array_equal(vobs[i], obs)
+            assert (vrew[i], vterm[i]) == (reward, terminated)
+            # (A lift on the last step: TimeLimit also truncates the single env; the vector env does not.)
+            assert (vterm[i] or vtrunc[i]) == (terminated or truncated)
+            assert vinfos["true_x_m"][i] == info["true_x_m"] and vinfos["xi_estimate"][i] == info["xi_estimate"]
+        pending = vterm | vtrunc
+    assert envs.unwrapped.core._chunks == TWO_THREADS
+
+
+@pytest.mark.parametrize("threads", [0, -1, 2.5, True, "2"])
+def test_bad_threads_raise_naming_the_argument(threads: Any) -> None:
+    with pytest.raises(ValueError, match=r"threads must be None or a positive int, got"):
+        SitToStandVectorEnv(num_envs=2, threads=threads)
+
+
+def test_threads_default_to_the_available_cores_and_small_batches_step_on_one() -> None:
+    envs = SitToStandVectorEnv(num_envs=4)
+    assert envs.threads == core_module.available_threads() >= 1
+    envs.reset(seed=0)
+    envs.step(envs.action_space.sample())
+    assert envs.core._chunks == 1  # 4 envs: below MIN_ENVS_PER_THREAD on any thread count
+    single = coop_gym.SitToStandEnv()
+    single.reset(seed=0)
+    single.step(single.action_space.sample())
+    assert single.core._chunks == 1
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+def test_envs_sharing_a_generator_step_on_one_thread_in_env_order() -> None:
+    envs = SitToStandVectorEnv(num_envs=4, threads=TWO_THREADS)
+    envs.reset(seed=0)
+    core = envs.core
+    assert core._plan_chunks() == TWO_THREADS
+    shared = np.random.default_rng(0)
+    core.reset_env(1, shared)
+    core.reset_env(2, shared)
+    assert core._plan_chunks() == 1
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+def test_stepping_an_env_never_reset_raises_before_any_env_moves() -> None:
+    envs = SitToStandVectorEnv(num_envs=6, threads=TWO_THREADS)
+    core = envs.core
+    for i in (0, 1, 2, 4):
+        core.reset_env(i, np.random.default_rng(i))
+    before = core.state.copy()
+    with pytest.raises(RuntimeError, match="env 3 was stepped before it was reset"):
+        core.step(np.zeros(6), np.zeros(6), np.zeros(6, dtype=bool))
+    np.testing.assert_array_equal(core.state, before)
+
+
+def _step_in_child(queue: Any) -> None:
+    envs = SitToStandVectorEnv(num_envs=8, threads=TWO_THREADS, **SHORT)
+    envs.reset(seed=1)
+    obs = envs.step(np.ones((8, 3), dtype=np.int64))[0]
+    queue.put(obs)
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+@pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(), reason="no fork on this platform")
+def test_a_child_forked_after_a_parallel_step_still_steps_and_agrees() -> None:
+    # The parent's worker threads do not exist in a forked child: it must start its own.
+    envs = SitToStandVectorEnv(num_envs=8, threads=TWO_THREADS, **SHORT)
+    envs.reset(seed=1)
+    expected = envs.step(np.ones((8, 3), dtype=np.int64))[0]
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_step_in_child, args=(queue,))
+    child.start()
+    obs = queue.get(timeout=120)
+    child.join(timeout=60)
+    assert child.exitcode == 0
+    np.testing.assert_array_equal(obs, expected)
