@@ -27,8 +27,8 @@ ratio. Every figure is the median over ``--repeats`` repeats with its min..max s
 Random actions lift half the time, so the single- and batched-env figures include a reset
 about every second step (CartPole's random episodes last ~22 steps).
 Torch runs on one thread. ``--quick`` shrinks every run (for a smoke test, not for numbers).
-JSON keys: ``single_ratio_vs_cartpole``, ``vector_ratio_vs_cartpole_vector`` (our env with its
-default thread count, :func:`coop_gym.envs.core.available_threads`),
+JSON keys: ``single_ratio_vs_cartpole``, ``vector_ratio_vs_cartpole_vector`` (our env on as
+many threads as the machine has cores, :func:`coop_gym.envs.core.available_threads`),
 ``vector_ratio_vs_cartpole_vector_threads1`` / ``_threads2``, ``vector_thread_scaling`` (2 threads
 over 1; the load average says how busy the machine was),
 ``ppo_speedup_vector_adapter`` (the ``rollout`` setting), ``ppo_speedup_vector_adapter_default``,

@@ -611,7 +611,9 @@ class EnvArguments:
     estimator_options: dict[str, Any] | None = None
     render_mode: str | None = None
     difficulty: str | Difficulty | None = None
-    threads: int | None = None  # the vector env's compiled step: at most this many threads (None: the cores)
+    # The vector env's compiled step: at most this many threads (None: the cores). One by default:
+    # on the shared 2-core dev machine 2 threads ran at 0.79-0.86x of one (README, "Speed").
+    threads: int | None = 1
 
     @classmethod
     def from_keywords(cls, owner: str, keywords: Mapping[str, Any]) -> EnvArguments:

@@ -119,7 +119,7 @@ def test_hyperparams_are_consistent():
         hyperparams_for("a2c")
     with pytest.raises(ValueError, match="n_envs"):
         TrainingConfig("ppo", "CoopGym/SitToStand-v0", 0, 10, "MlpPolicy", False)
-    with pytest.raises(ValueError, match="must not include held-out personas.*frail"):
+    with pytest.raises(ValueError, match=r"must not include held-out personas.*frail"):
         TrainingConfig("ppo", "CoopGym/SitToStand-v0", 8, 10, "MlpPolicy", False, personas=["typical", "frail"])
 
 

@@ -113,9 +113,10 @@ def test_bad_threads_raise_naming_the_argument(threads: Any) -> None:
         SitToStandVectorEnv(num_envs=2, threads=threads)
 
 
-def test_threads_default_to_the_available_cores_and_small_batches_step_on_one() -> None:
+def test_threads_default_to_one_none_means_the_cores_and_small_batches_step_on_one() -> None:
+    assert SitToStandVectorEnv(num_envs=4, threads=None).threads == core_module.available_threads() >= 1
     envs = SitToStandVectorEnv(num_envs=4)
-    assert envs.threads == core_module.available_threads() >= 1
+    assert envs.threads == 1
     envs.reset(seed=0)
     envs.step(envs.action_space.sample())
     assert envs.core._chunks == 1  # 4 envs: below MIN_ENVS_PER_THREAD on any thread count
