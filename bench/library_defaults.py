@@ -7,6 +7,9 @@ scores it on the held-out personas with the common evaluation path::
 
     nice python bench/library_defaults.py --algo ppo --timesteps 300000 --out runs/defaults
     python -m agents.evaluate --model runs/defaults/ppo_300000.zip --personas test --episodes 1000
+
+``--env ID`` trains on another registered id, e.g. the unit-scaled ``CoopGym/SitToStandUnit-v0``
+(the model is saved as ``{algo}_{name}_{timesteps}.zip`` and scored with ``--env ID``).
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from pathlib import Path
 import torch
 from stable_baselines3 import DQN, PPO
 
-import coop_gym  # noqa: F401  (registers the ids)
+import coop_gym  # registers the ids
 
 ENV_IDS = {"ppo": "CoopGym/SitToStand-v0", "dqn": "CoopGym/SitToStandDiscrete-v0"}
 
@@ -28,24 +31,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--algo", choices=sorted(ENV_IDS), required=True)
     parser.add_argument("--timesteps", type=int, default=300_000)
+    parser.add_argument("--env", choices=sorted(coop_gym.ENV_IDS), help="default: the algorithm's id in ENV_IDS")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="runs/defaults")
     args = parser.parse_args()
     torch.set_num_threads(1)
 
     cls = PPO if args.algo == "ppo" else DQN
-    model = cls("MlpPolicy", ENV_IDS[args.algo], seed=args.seed, device="cpu")
+    env_id = args.env or ENV_IDS[args.algo]
+    model = cls("MlpPolicy", env_id, seed=args.seed, device="cpu")
     started = time.perf_counter()
     model.learn(total_timesteps=args.timesteps)
     wall = time.perf_counter() - started
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / f"{args.algo}_{args.timesteps}.zip"
+    name = "" if args.env is None else env_id.split("/")[-1] + "_"
+    path = out / f"{args.algo}_{name}{args.timesteps}.zip"
     model.save(path)
-    info = {"algo": args.algo, "env_id": ENV_IDS[args.algo], "timesteps": args.timesteps, "wall_time_s": wall}
+    info = {"algo": args.algo, "env_id": env_id, "timesteps": args.timesteps, "wall_time_s": wall}
     path.with_suffix(".json").write_text(json.dumps(info, indent=2) + "\n")
     print(json.dumps(info))
-    print(f"python -m agents.evaluate --model {path} --personas test --episodes 1000")
+    print(f"python -m agents.evaluate --model {path} --personas test --episodes 1000 --env {env_id}")
 
 
 if __name__ == "__main__":

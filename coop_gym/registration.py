@@ -33,6 +33,21 @@ ENV_IDS: dict[str, dict[str, Any]] = {
     "CoopGym/SitToStandHardDiscrete-v1": {"difficulty": "hard", "action_type": "discrete"},
     "CoopGym/SitToStandHardIMM-v1": {"difficulty": "hard", "estimator": "imm"},
     "CoopGym/SitToStandHardHeldOut-v1": {"difficulty": "hard", "personas": "test"},
+    # Unit: the same tasks with every observation feature scaled to about [-1, 1]
+    # (contract.FEATURE_SCALES), learnable with a library's default settings; the physical
+    # values are in info["unscaled_obs"]. New names, not a -v2 of the same ones: Gymnasium's
+    # make() warns that an id is "out of date" once a higher version of its name exists.
+    "CoopGym/SitToStandUnit-v0": {"observation_scale": "unit"},
+    "CoopGym/SitToStandDiscreteUnit-v0": {"observation_scale": "unit", "action_type": "discrete"},
+    "CoopGym/SitToStandEasyUnit-v1": {"difficulty": "easy", "observation_scale": "unit"},
+    "CoopGym/SitToStandMediumUnit-v1": {"difficulty": "medium", "observation_scale": "unit"},
+    "CoopGym/SitToStandHardUnit-v1": {"difficulty": "hard", "observation_scale": "unit"},
+    "CoopGym/SitToStandHardDiscreteUnit-v1": {
+        "difficulty": "hard",
+        "action_type": "discrete",
+        "observation_scale": "unit",
+    },
+    "CoopGym/SitToStandHardHeldOutUnit-v1": {"difficulty": "hard", "personas": "test", "observation_scale": "unit"},
 }
 
 

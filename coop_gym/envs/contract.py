@@ -10,10 +10,13 @@ and the agents (:mod:`agents.base`) all call this module:
   ``push_force_n, verbal_cue, lift``), :class:`ActionDecoder` (the envs' fast paths into
   command rows, :data:`CMD`) and :func:`encode_actions` (component choices -> action);
 * the observation: :data:`FEATURES`, :data:`FEATURE_BOUNDS`, :func:`observation_features`,
-  :func:`observation_space_for`;
+  :func:`observation_space_for`; the unit scaling (:data:`OBSERVATION_SCALES`,
+  :data:`FEATURE_SCALES`, :func:`observation_scales`, :func:`unit_observation_space`,
+  :func:`observation_scaler`);
 * the report row the kernel writes (:data:`REPORT_COLUMNS`), the episode end
   (:data:`EPISODE_END`, :func:`episode_ends`, from :class:`~coop_gym.envs.config.Outcome`)
-  and the info built from it (:func:`report_info`, :func:`batched_infos`);
+  and the info built from it (:func:`report_info`, :func:`batched_infos`; :class:`InfoBuilder`
+  for every :data:`INFO_MODES` and observation scale);
 * the reset options (:func:`parse_reset_options`).
 """
 
@@ -21,7 +24,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+import operator
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -52,8 +56,12 @@ __all__ = [
     "EPISODE_END",
     "FEATURES",
     "FEATURE_BOUNDS",
+    "FEATURE_SCALES",
+    "INFO_MODES",
     "LIFT",
+    "NUMERIC_INFO_KEYS",
     "N_FLAT_ACTIONS",
+    "OBSERVATION_SCALES",
     "PUSH_FIRM",
     "PUSH_NONE",
     "PUSH_SOFT",
@@ -68,6 +76,7 @@ __all__ = [
     "WAIT",
     "ActionDecoder",
     "EnvArguments",
+    "InfoBuilder",
     "SitToStandConfig",
     "action_space_for",
     "batched_infos",
@@ -77,9 +86,13 @@ __all__ = [
     "encode_actions",
     "episode_ends",
     "observation_features",
+    "observation_scaler",
+    "observation_scales",
     "observation_space_for",
     "parse_reset_options",
     "report_info",
+    "scaled_feature_names",
+    "unit_observation_space",
 ]
 
 # --- observation ----------------------------------------------------------------
@@ -145,6 +158,105 @@ def observation_space_for(features: Sequence[str], episode_s: float) -> spaces.B
     low = np.array([FEATURE_BOUNDS[f][0] for f in features], dtype=np.float32)
     high = np.array([FEATURE_BOUNDS[f][1] if f not in _CLOCKS else episode_s for f in features], dtype=np.float32)
     return spaces.Box(low, high, dtype=np.float32)
+
+
+# --- unit scaling: every feature about [-1, 1] for a policy network with default settings --
+
+OBSERVATION_SCALES: tuple[str, ...] = ("none", "unit")
+"""``none``: features in their units (clipped into :data:`FEATURE_BOUNDS`); ``unit``: each
+divided by its :data:`FEATURE_SCALES` entry and clipped into [-1, 1]."""
+
+FEATURE_SCALES: dict[str, float | None] = {
+    "measured_position_m": 0.5,
+    "measured_force_n": 40.0,
+    "verbal_cue": 1.0,
+    "time_since_cue_onset_s": None,
+    "x_hat_m": 0.5,
+    "xdot_hat_m_per_s": 0.5,
+    "eta_hat_m": 0.5,
+    "xi_hat": 2.0,
+    "xi_std": 1.25,
+    "judgment": 1.0,
+    "elapsed_s": None,
+    "p_uncooperative": 1.0,
+    "p_unresponsive": 1.0,
+    "p_cooperative": 1.0,
+    "true_xi": 1.0,
+}
+"""What each feature is divided by under ``observation_scale="unit"``, in its units (None: the
+episode length, ``timing.episode_s``).
+
+Not the bounds of :data:`FEATURE_BOUNDS`: those are loose clip limits (x_hat +-2 m, xi_hat +-10)
+and dividing by them would squeeze the values a policy must tell apart into +-0.05. A scale is
+the range the feature really spans, read from 96,000 steps of random cues on the paper model, the
+hard level and the IMM estimator: shoulder and intended position reach 0.5 m (0.48 m at the 99.9th
+percentile), speed 0.5 m/s (0.25 m/s), the push reading 32 N (firm push 30 N plus noise), xi_hat
++-3 (+-1.8), its standard deviation 1.05 (its prior). Values beyond a scale saturate at +-1: a
+lean past 0.5 m or an estimate past +-2 means the same to a policy as one at it.
+"""
+if tuple(FEATURE_SCALES) != FEATURES:  # not an assert: it must hold under python -O too
+    raise RuntimeError("FEATURE_SCALES must give the scale of every feature of FEATURES, in order")
+
+
+def observation_scales(features: Sequence[str], episode_s: float) -> NDArray[np.float32]:
+    """The divisor of each of ``features`` under ``observation_scale="unit"`` (:data:`FEATURE_SCALES`)."""
+    return np.array([FEATURE_SCALES[f] or episode_s for f in features], dtype=np.float32)
+
+
+def unit_observation_space(features: Sequence[str], episode_s: float) -> spaces.Box:
+    """The Box of the unit-scaled observation: the physical bounds over the scales, cut to [-1, 1].
+
+    Every feature's range is [-1, 1] or [0, 1], except ``measured_force_n``'s [-0.5, 1]
+    (its physical low is -20 N, the scale 40 N).
+    """
+    physical = observation_space_for(features, episode_s)
+    scales = observation_scales(features, episode_s)
+    low = np.maximum(physical.low / scales, np.float32(-1.0))
+    high = np.minimum(physical.high / scales, np.float32(1.0))
+    return spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+
+
+def scaled_feature_names(features: Sequence[str], episode_s: float) -> tuple[str, ...]:
+    """Names of the unit-scaled features: ``"x_hat_m/0.5"`` is ``x_hat_m`` over 0.5 m.
+
+    A feature with scale 1 keeps its name. The names differ from the physical ones on
+    purpose: an agent that reads features by name in their units (the scripted caregivers
+    read ``x_hat_m`` in metres) refuses a unit-scaled env instead of misreading it.
+    """
+    scales = observation_scales(features, episode_s)
+    return tuple(f if s == 1.0 else f"{f}/{float(s):g}" for f, s in zip(features, scales, strict=True))
+
+
+def observation_scaler(
+    features: Sequence[str], episode_s: float, observation_scale: str
+) -> Callable[[NDArray[np.float32]], NDArray[np.float32]]:
+    """The env's observation from the core's physical observation rows (one row or a batch).
+
+    Returns:
+        A function that gives a fresh array (Gymnasium 1.4's checker refuses returns that
+        share memory): a copy under ``"none"``; under ``"unit"``, ``physical / scale``
+        clipped into :func:`unit_observation_space` (float32 arithmetic).
+    """
+    if observation_scale == "none":
+        return operator.methodcaller("copy")
+    space = unit_observation_space(features, episode_s)
+    return _UnitScaler(
+        observation_scales(features, episode_s), space.low.astype(np.float32), space.high.astype(np.float32)
+    )
+
+
+@dataclass(frozen=True)
+class _UnitScaler:
+    """``clip(physical / scales, low, high)`` in float32 (a class, not a closure: envs pickle)."""
+
+    scales: NDArray[np.float32]
+    low: NDArray[np.float32]
+    high: NDArray[np.float32]
+
+    def __call__(self, physical: NDArray[np.float32]) -> NDArray[np.float32]:
+        """The unit observation of physical observation rows, a fresh array."""
+        observation = np.divide(physical, self.scales)
+        return np.clip(observation, self.low, self.high, out=observation)  # type: ignore[no-any-return]
 
 
 # --- the report row: everything an observation and an info need ------------------
@@ -558,6 +670,109 @@ def batched_infos(
     return infos
 
 
+INFO_MODES: tuple[str, ...] = ("default", "numeric")
+"""``default``: the info of :func:`report_info` (labels, nested ``reward_terms``); ``numeric``:
+numbers only, under flat keys (:data:`NUMERIC_INFO_KEYS`), for TensorDict-based clients (TorchRL)."""
+
+# (key, report column, as int): the numeric info, one entry per key, scalars in the single env.
+_NUMERIC_INFO: tuple[tuple[str, int, bool], ...] = (
+    ("true_x_m", REPORT.true_x_m, False),
+    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
+    ("true_eta_m", REPORT.true_eta_m, False),
+    ("true_xi", REPORT.info_true_xi, True),
+    ("persona_index", REPORT.persona_index, True),
+    ("outcome_code", REPORT.outcome, True),
+    ("judgment", REPORT.judgment, True),
+    ("xi_estimate", REPORT.xi_hat, False),
+    ("push_force_n", REPORT.push_force_n, False),
+    ("verbal_cue", REPORT.verbal_cue, True),
+    ("elapsed_s", REPORT.elapsed_s, False),
+    *((f"reward_{name}", REPORT.reward_success + k, False) for k, name in enumerate(REWARD_TERMS)),
+)
+_NUMERIC_PROBABILITIES: tuple[tuple[str, int, bool], ...] = tuple(
+    (name, REPORT.p_uncooperative + k, False) for k, name in enumerate(_PROBABILITIES)
+)
+if [column for _, column, _ in _NUMERIC_PROBABILITIES] != [REPORT.p_uncooperative, REPORT.p_unresponsive,
+                                                           REPORT.p_cooperative]:  # fmt: skip
+    raise RuntimeError("the multiple-model probabilities must be consecutive report columns")
+
+NUMERIC_INFO_KEYS: tuple[str, ...] = tuple(key for key, _, _ in _NUMERIC_INFO)
+"""Keys of every ``info_mode="numeric"`` info, in order: the default info's numbers with the
+persona as ``persona_index`` (into the env's ``personas``), the outcome as ``outcome_code`` (an
+:class:`~coop_gym.envs.config.Outcome` value) and the reward terms as ``reward_<term>``. A
+multiple-model estimator adds ``p_uncooperative``, ``p_unresponsive``, ``p_cooperative`` (the
+default info's ``xi_probabilities``); ``observation_scale="unit"`` adds ``unscaled_obs``."""
+
+
+class InfoBuilder:
+    """The info of an env of ``config``, single (:meth:`single`) or batched (:meth:`batched`), from report rows.
+
+    ``info_mode="default"`` gives :func:`report_info` / :func:`batched_infos`;
+    ``"numeric"`` gives :data:`NUMERIC_INFO_KEYS` (NumPy int64 and float64 scalars in the single
+    env, arrays of them with Gymnasium's ``_key`` masks in the vector env). Under
+    ``observation_scale="unit"`` either adds ``unscaled_obs``: the observation in its units,
+    float32, as the ``"none"`` scale gives it (the unit observation is it over the scales, clipped).
+
+    Args:
+        config: The env's settings.
+    """
+
+    def __init__(self, config: SitToStandConfig) -> None:
+        """Tables of the info's keys and of the physical observation's columns and bounds."""
+        self.persona_names = tuple(p.name for p in config.personas)
+        self._persona_array = np.array(self.persona_names, dtype=object)
+        self.probabilities = config.estimator != "kalman"
+        self.numeric = config.info_mode == "numeric"
+        self.unscaled = config.observation_scale == "unit"
+        self._entries = _NUMERIC_INFO + (_NUMERIC_PROBABILITIES if self.probabilities else ())
+        # The physical observation rebuilt from a report row exactly as the kernel builds it:
+        # the features clipped in float64, then rounded to float32.
+        features = config.physical_features
+        self._obs_columns = np.array([REPORT_COLUMNS.index(f) for f in features], dtype=np.int64)
+        physical = observation_space_for(features, config.timing.episode_s)
+        self._obs_low = physical.low.astype(np.float64)
+        self._obs_high = physical.high.astype(np.float64)
+
+    def unscaled_observation(self, rows: NDArray[np.float64]) -> NDArray[np.float32]:
+        """The physical observation of report rows (one row or a batch)."""
+        values = np.take(rows, self._obs_columns, axis=-1)
+        return np.clip(values, self._obs_low, self._obs_high).astype(np.float32)  # type: ignore[no-any-return]
+
+    def single(self, r: list[float]) -> dict[str, Any]:
+        """The single env's info from one report row (``core.report[i].tolist()``)."""
+        if self.numeric:
+            # NumPy scalars, not Python numbers: TorchRL's info reader asks each value for its dtype.
+            info: dict[str, Any] = {
+                key: np.int64(r[column]) if as_int else np.float64(r[column]) for key, column, as_int in self._entries
+            }
+        else:
+            info = report_info(r, self.persona_names, self.probabilities)
+        if self.unscaled:
+            info["unscaled_obs"] = self.unscaled_observation(np.array(r))
+        return info
+
+    def batched(self, report: NDArray[np.float64], mask: NDArray[np.bool_] | None) -> dict[str, Any]:
+        """The vector env's infos from its report rows; entries outside ``mask`` (default all) are zero."""
+        if mask is None:
+            mask = np.ones(report.shape[0], dtype=bool)
+        outside = ~mask
+        infos: dict[str, Any] = {}
+        if self.numeric:
+            for key, column, as_int in self._entries:
+                values = report[:, column].astype(np.int64) if as_int else report[:, column].copy()
+                values[outside] = 0
+                infos[key] = values
+                infos[f"_{key}"] = mask.copy()
+        else:
+            infos = batched_infos(report, mask, self._persona_array, self.probabilities)
+        if self.unscaled:
+            unscaled = self.unscaled_observation(report)
+            unscaled[outside] = 0
+            infos["unscaled_obs"] = unscaled
+            infos["_unscaled_obs"] = mask.copy()
+        return infos
+
+
 # --- reset options ------------------------------------------------------------------
 
 
@@ -614,6 +829,8 @@ class EnvArguments:
     # The vector env's compiled step: at most this many threads (None: the cores). One by default:
     # on the shared 2-core dev machine 2 threads ran at 0.79-0.86x of one (README, "Speed").
     threads: int | None = 1
+    observation_scale: str = "none"
+    info_mode: str = "default"
 
     @classmethod
     def from_keywords(cls, owner: str, keywords: Mapping[str, Any]) -> EnvArguments:
@@ -629,6 +846,8 @@ class EnvArguments:
         _check_choice("observation_mode", self.observation_mode, OBSERVATION_MODES)
         _check_choice("action_type", self.action_type, ACTION_TYPES)
         _check_choice("estimator", self.estimator, ESTIMATORS)
+        _check_choice("observation_scale", self.observation_scale, OBSERVATION_SCALES)
+        _check_choice("info_mode", self.info_mode, INFO_MODES)
         if self.render_mode is not None and self.render_mode not in render_modes:
             raise ValueError(f"render_mode must be None or one of {list(render_modes)}, got {self.render_mode!r}")
         options = self.estimator_options
@@ -660,6 +879,8 @@ class EnvArguments:
             cues=as_dataclass(Cues, self.cues, "cues"),
             estimator_options=options,
             render_mode=self.render_mode,
+            observation_scale=self.observation_scale,
+            info_mode=self.info_mode,
         )
 
 
@@ -674,6 +895,8 @@ class SitToStandConfig:
         realism, reward, lift, judgment, timing, cues: The settings dataclasses.
         estimator_options: Keyword arguments of the multiple-model estimator.
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
+        observation_scale: One of :data:`OBSERVATION_SCALES`.
+        info_mode: One of :data:`INFO_MODES`.
     """
 
     personas: tuple[Persona, ...]
@@ -688,15 +911,40 @@ class SitToStandConfig:
     cues: Cues
     estimator_options: dict[str, Any] | None
     render_mode: str | None
+    observation_scale: str = "none"
+    info_mode: str = "default"
+
+    @property
+    def physical_features(self) -> tuple[str, ...]:
+        """The observation's features as the core builds them (names of :data:`FEATURES`), in order."""
+        return observation_features(self.observation_mode, self.estimator)
 
     @property
     def features(self) -> tuple[str, ...]:
-        """The observation's feature names, in order."""
-        return observation_features(self.observation_mode, self.estimator)
+        """The observation's feature names, in order (under unit scale: :func:`scaled_feature_names`)."""
+        if self.observation_scale == "unit":
+            return scaled_feature_names(self.physical_features, self.timing.episode_s)
+        return self.physical_features
+
+    def physical_observation_space(self) -> spaces.Box:
+        """The Box of the physical observation (the core clips into it)."""
+        return observation_space_for(self.physical_features, self.timing.episode_s)
 
     def observation_space(self) -> spaces.Box:
         """The observation space of one env."""
-        return observation_space_for(self.features, self.timing.episode_s)
+        if self.observation_scale == "unit":
+            return unit_observation_space(self.physical_features, self.timing.episode_s)
+        return self.physical_observation_space()
+
+    def observation_scales(self) -> NDArray[np.float32]:
+        """What each feature is divided by: :data:`FEATURE_SCALES` under unit scale, else ones."""
+        if self.observation_scale == "unit":
+            return observation_scales(self.physical_features, self.timing.episode_s)
+        return np.ones(len(self.physical_features), dtype=np.float32)
+
+    def observer(self) -> Callable[[NDArray[np.float32]], NDArray[np.float32]]:
+        """The env's observation (a fresh array) from the core's physical observation rows."""
+        return observation_scaler(self.physical_features, self.timing.episode_s, self.observation_scale)
 
     def action_space(self) -> spaces.Space[Any]:
         """The action space of one env."""

@@ -15,10 +15,10 @@ from coop_gym.envs.contract import (
     REPORT,
     ActionDecoder,
     EnvArguments,
+    InfoBuilder,
     SitToStandConfig,
     observation_features,
     parse_reset_options,
-    report_info,
 )
 from coop_gym.envs.core import SitToStandCore
 
@@ -33,8 +33,11 @@ _OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)
 
 
 def make_core(config: SitToStandConfig, n_envs: int) -> SitToStandCore:
-    """The batched simulation of ``n_envs`` envs of ``config``, building its observation."""
-    space = config.observation_space()
+    """The batched simulation of ``n_envs`` envs of ``config``, building its physical observation.
+
+    The core's ``obs`` holds the features in their units; the envs scale them with ``config.observer()``.
+    """
+    space = config.physical_observation_space()
     return SitToStandCore(
         n_envs,
         config.personas,
@@ -46,7 +49,7 @@ def make_core(config: SitToStandConfig, n_envs: int) -> SitToStandCore:
         config.judgment,
         config.estimator,
         config.estimator_options,
-        observation_index=tuple(FEATURES.index(f) for f in config.features),
+        observation_index=tuple(FEATURES.index(f) for f in config.physical_features),
         observation_low=space.low.astype(np.float64),
         observation_high=space.high.astype(np.float64),
     )
@@ -145,6 +148,14 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
     (a policy needs memory); ``"oracle"`` appends the true ``xi`` (an upper bound).
     Values are clipped into the bounds. The judgment is 0 until the first one is made.
 
+    ``observation_scale="unit"`` (the ``...Unit-v0`` / ``...Unit-v1`` ids) divides each feature
+    by a scale (``coop_gym.envs.contract.FEATURE_SCALES``) and clips into [-1, 1]: positions
+    0.5 m, speed 0.5 m/s, force 40 N, ``xi`` estimate 2, its std 1.25, clocks the episode
+    length (30 s), the rest 1. Every feature then spans [-1, 1] or [0, 1] (the force
+    [-0.5, 1]), so a policy network learns with a library's default settings. The features
+    are renamed by their scale (``"x_hat_m/0.5"``) and ``info["unscaled_obs"]`` holds the
+    observation above, in its units.
+
     ## Rewards
 
     Terms (named in ``info["reward_terms"]``, weights in ``RewardWeights``): ``success``
@@ -173,7 +184,17 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
     ``reward``, ``lift``, ``judgment``, ``timing``, ``cues``: the dataclass or a dict of its
     fields. Unknown names and out-of-range values raise ``ValueError``; an unknown keyword
     raises ``TypeError``. The keywords are those of :class:`coop_gym.envs.contract.EnvArguments`
-    (shared by the vector env and the registered ids), plus ``difficulty`` (``-v1`` ids).
+    (shared by the vector env and the registered ids), plus ``difficulty`` (``-v1`` ids),
+    ``observation_scale`` (``"none"`` or ``"unit"``, see "Observation Space") and ``info_mode``:
+
+    * ``"default"``: ``info`` holds ``true_x_m``, ``true_xdot_m_per_s``, ``true_eta_m``,
+      ``true_xi``, ``persona`` (name), ``outcome`` (label), ``judgment``, ``xi_estimate``,
+      ``push_force_n``, ``verbal_cue``, ``elapsed_s``, ``reward_terms`` (a dict) and, with a
+      multiple-model estimator, ``xi_probabilities``;
+    * ``"numeric"``: NumPy numbers only, no labels, no nested dicts (for TensorDict-based
+      clients such as TorchRL): ``persona_index``, ``outcome_code`` (an ``Outcome`` value),
+      ``reward_success`` ... ``reward_force``, ``p_uncooperative`` ... ``p_cooperative``
+      instead (``coop_gym.envs.contract.NUMERIC_INFO_KEYS``).
 
     ## Vectorized environment
 
@@ -189,6 +210,11 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
     ## Version History
 
     * v0: initial release.
+    * v1: difficulty levels (``difficulty``) and the safety-priced reward.
+    * ``Unit`` ids (``SitToStandUnit-v0``, ``SitToStandHardUnit-v1``, ...): the ids they
+      scale, with ``observation_scale="unit"``; same task and dynamics, so same version
+      (a new name, not a ``-v2``: Gymnasium warns that an id is out of date once a higher
+      version of its name is registered).
 
     Example:
         >>> import gymnasium as gym
@@ -225,8 +251,8 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self._cmd = self.core.cmd
         self._obs_row = self.core.obs[0]
         self._report_row = self.core.report[0]
-        self._persona_names = tuple(p.name for p in self.personas)
-        self._has_mm = self.core.mm is not None
+        self._observe = config.observer()
+        self._info = InfoBuilder(config)
         self._needs_reset = True
         self._stepped = False
         self._outcome = int(Outcome.NONE)
@@ -246,8 +272,8 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self._stepped = False
         self._outcome = int(Outcome.NONE)
         self._last_lift = False
-        obs = self._obs_row.copy()
-        info = report_info(self._report_row.tolist(), self._persona_names, self._has_mm)
+        obs = self._observe(self._obs_row)
+        info = self._info.single(self._report_row.tolist())
         if self.render_mode == "human":
             self.render()
         return obs, info
@@ -266,8 +292,8 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self._last_lift = terminated
         self._needs_reset = terminated or truncated
         self._stepped = True
-        obs = self._obs_row.copy()
-        info = report_info(r, self._persona_names, self._has_mm)
+        obs = self._observe(self._obs_row)
+        info = self._info.single(r)
         if self.render_mode == "human":
             self.render()
         return obs, r[REPORT.reward], terminated, truncated, info

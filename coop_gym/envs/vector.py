@@ -17,7 +17,7 @@ from coop_gym.envs.contract import (
     REPORT,
     ActionDecoder,
     EnvArguments,
-    batched_infos,
+    InfoBuilder,
     episode_ends,
     parse_reset_options,
 )
@@ -133,7 +133,8 @@ class SitToStandVectorEnv(VectorEnv):
         self.single_action_space = config.action_space()
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
-        self._persona_names = np.array([p.name for p in self.personas], dtype=object)
+        self._observe = config.observer()
+        self._info = InfoBuilder(config)
         self._actions = ActionDecoder(config.action_type, config.cues)
         self._episode_steps = np.zeros(n, dtype=np.int64)
         self._done = np.zeros(n, dtype=bool)  # finished, waiting for an (auto)reset
@@ -171,7 +172,7 @@ class SitToStandVectorEnv(VectorEnv):
         if mask[0]:
             self._env0_stepped = False
             self._env0_lift = False
-        obs = core.obs.copy()
+        obs = self._observe(core.obs)
         infos = self._infos(core.report, mask)
         if self.render_mode == "human":
             self.render()
@@ -247,11 +248,11 @@ class SitToStandVectorEnv(VectorEnv):
             self._done = done
         elif mode == AutoresetMode.SAME_STEP:
             if done.any():
-                final = (done, core.obs.copy(), report.copy())
+                final = (done, self._observe(core.obs), report.copy())
                 self._reset_finished(done)
         else:
             self._done = done
-        return core.obs.copy(), rewards, terminated, truncated, final
+        return self._observe(core.obs), rewards, terminated, truncated, final
 
     def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]
         """Draw env 0 (``"rgb_array"``: return its frame)."""
@@ -320,8 +321,8 @@ class SitToStandVectorEnv(VectorEnv):
         return mask.copy()
 
     def _infos(self, report: NDArray[np.float64], mask: NDArray[np.bool_] | None) -> dict[str, Any]:
-        """Infos of the envs of ``mask`` (default all) from report rows (the contract's :func:`batched_infos`)."""
-        return batched_infos(report, mask, self._persona_names, self.core.mm is not None)
+        """Infos of the envs of ``mask`` (default all) from report rows (the contract's :class:`InfoBuilder`)."""
+        return self._info.batched(report, mask)
 
 
 def _autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
