@@ -34,6 +34,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from compiled.checks import check_choice
 from compiled.schema import index_table
 from coop_gym.envs.config import (
     ACTION_TYPES,
@@ -796,9 +797,7 @@ def parse_reset_options(options: dict[str, Any] | None, personas: Sequence[Perso
             raise ValueError(f"reset option persona={options['persona']!r} is not one of this env's {names}")
         persona_index = names.index(options["persona"])
     xi = options.get("initial_xi")
-    if xi is not None and (isinstance(xi, bool) or xi not in (-1, 0, 1)):
-        raise ValueError(f"reset option initial_xi must be -1, 0 or 1, got {xi!r}")
-    return persona_index, None if xi is None else int(xi)
+    return persona_index, None if xi is None else check_choice("reset option initial_xi", xi, (-1, 0, 1))
 
 
 # --- the env's keyword arguments ---------------------------------------------------

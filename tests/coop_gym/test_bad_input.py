@@ -331,7 +331,6 @@ PENDING_RESETS: list[tuple[str, dict[str, Any], str]] = [
 ]
 
 
-@pytest.mark.xfail(strict=True, reason="issue #13: parse_reset_options must call compiled.checks.check_choice")
 @pytest.mark.parametrize(("kwargs", "match"), [c[1:] for c in PENDING_RESETS], ids=[c[0] for c in PENDING_RESETS])
 def test_numpy_initial_xi_is_refused_by_name(kwargs: dict[str, Any], match: str) -> None:
     env, twin = started_pair()
