@@ -7,7 +7,9 @@ What a user waits for is wall-clock time from starting to train to a policy that
 the handbook caregiver. In one run, one after the other, this trains
 
 - ``default``: ``train.py``'s configuration for ``--env`` (``agents/hyperparams.py``: its
-  env count, batched env adapter, ``VecNormalize``, tuned PPO);
+  env count, persona set, batched env adapter, ``VecNormalize``, tuned PPO; training is
+  cut by the clock, not a step budget, so a linearly decaying learning rate stays at its
+  start value);
 - ``first_script``: what a user writes first --
   ``PPO("MlpPolicy", make_vec_env(env_id, n_envs=8))`` with SB3's default hyperparameters
   on a ``DummyVecEnv`` of 8 ``gymnasium.make`` envs (the env's default personas: the
