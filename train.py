@@ -481,7 +481,7 @@ def _model_to_train(args: Args, plan: _Plan, env: Any, checkpoint: Path | None) 
     """``(model, env, checkpoint state, start steps)``: restored, continued from a saved model, or new.
 
     Raises:
-        ValueError: a damaged checkpoint (the message names it).
+        ValueError: a damaged checkpoint or saved model (the message names it).
     """
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -506,7 +506,10 @@ def _model_to_train(args: Args, plan: _Plan, env: Any, checkpoint: Path | None) 
             stats.set_venv(env)
             stats.training = True
             env = stats
-        model, _ = load_model(model_path, env=env)
+        try:
+            model, _ = load_model(model_path, env=env)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"--resume: {exc}") from exc
         print(f"continuing {plan.algo} from {plan.source_model} at {model.num_timesteps} steps")
         return model, env, {}, int(model.num_timesteps)
     if plan.config.normalize:
