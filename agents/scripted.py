@@ -45,6 +45,7 @@ from agents.base import (
     features_of,
     require_features,
 )
+from compiled.checks import check_number
 from coop_gym.envs.config import ACTION_TYPES, LiftCriteria
 from coop_gym.envs.contract import observation_features
 from estimator.judgment import ThresholdJudgment
@@ -72,11 +73,6 @@ __all__ = [
 _EPS_S = 1e-6  # slack on clock comparisons: elapsed time is a float sum of 0.1 s steps
 _DEFAULT_LEAN_M = LiftCriteria().success_lean_m
 _JUDGMENT_DELAY_S = ThresholdJudgment().delay_s
-
-
-def _check_range(name: str, value: Any, low: float, high: float) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
-        raise ValueError(f"{name} must be a number in [{low}, {high}], got {value!r}")
 
 
 @dataclass
@@ -275,8 +271,8 @@ class PushThenLiftSettings:
 
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _check_range("PushThenLiftSettings.lean_m", self.lean_m, 0.0, 1.0)
-        _check_range("PushThenLiftSettings.escalate_after_s", self.escalate_after_s, 0.0, 3600.0)
+        check_number("PushThenLiftSettings.lean_m", self.lean_m, 0.0, 1.0)
+        check_number("PushThenLiftSettings.escalate_after_s", self.escalate_after_s, 0.0, 3600.0)
 
 
 class PushThenLiftAgent(ScriptedAgent):
@@ -341,10 +337,10 @@ class HandbookSettings:
 
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _check_range("HandbookSettings.lean_m", self.lean_m, 0.0, 1.0)
-        _check_range("HandbookSettings.pause_s", self.pause_s, 0.0, 60.0)
-        _check_range("HandbookSettings.judge_after_s", self.judge_after_s, 0.0, 60.0)
-        _check_range("HandbookSettings.lean_patience_s", self.lean_patience_s, 0.0, 3600.0)
+        check_number("HandbookSettings.lean_m", self.lean_m, 0.0, 1.0)
+        check_number("HandbookSettings.pause_s", self.pause_s, 0.0, 60.0)
+        check_number("HandbookSettings.judge_after_s", self.judge_after_s, 0.0, 60.0)
+        check_number("HandbookSettings.lean_patience_s", self.lean_patience_s, 0.0, 3600.0)
         if isinstance(self.pushes_per_explanation, bool) or not isinstance(self.pushes_per_explanation, int):
             raise ValueError(
                 f"HandbookSettings.pushes_per_explanation must be an int, got {self.pushes_per_explanation!r}"
@@ -440,7 +436,7 @@ class OracleSettings:
 
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _check_range("OracleSettings.lean_m", self.lean_m, 0.0, 1.0)
+        check_number("OracleSettings.lean_m", self.lean_m, 0.0, 1.0)
 
 
 class OracleAgent(ScriptedAgent):
@@ -508,9 +504,9 @@ class BlindSettings:
         """Validate ranges."""
         if self.push not in _PUSHES:
             raise ValueError(f"BlindSettings.push must be one of {list(_PUSHES)}, got {self.push!r}")
-        _check_range("BlindSettings.lean_m", self.lean_m, 0.0, 1.0)
-        _check_range("BlindSettings.min_time_s", self.min_time_s, 0.0, 3600.0)
-        _check_range("BlindSettings.hold_s", self.hold_s, 0.0, 3600.0)
+        check_number("BlindSettings.lean_m", self.lean_m, 0.0, 1.0)
+        check_number("BlindSettings.min_time_s", self.min_time_s, 0.0, 3600.0)
+        check_number("BlindSettings.hold_s", self.hold_s, 0.0, 3600.0)
 
 
 class BlindAgent(ScriptedAgent):
@@ -585,9 +581,9 @@ class ProbingSettings:
     def __post_init__(self) -> None:
         """Validate ranges."""
         for name in ("burst_s", "settle_s", "window_s"):
-            _check_range(f"ProbingSettings.{name}", getattr(self, name), 0.0, 60.0)
+            check_number(f"ProbingSettings.{name}", getattr(self, name), 0.0, 60.0)
         for name in ("push_below_m", "answer_m", "lean_m"):
-            _check_range(f"ProbingSettings.{name}", getattr(self, name), 0.0, 1.0)
+            check_number(f"ProbingSettings.{name}", getattr(self, name), 0.0, 1.0)
 
 
 class ProbingCaregiver(ScriptedAgent):

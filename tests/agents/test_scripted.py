@@ -252,3 +252,22 @@ def test_scripted_agents_and_evaluation_import_without_torch():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.parametrize(
+    ("settings", "kwargs", "match"),
+    [
+        (HandbookSettings, {"lean_m": True}, r"HandbookSettings\.lean_m must be a number, got True"),
+        (HandbookSettings, {"pause_s": 61.0}, r"HandbookSettings\.pause_s must be in \[0\.0, 60\.0\], got 61\.0"),
+        (PushThenLiftSettings, {"lean_m": np.array([0.2])}, r"PushThenLiftSettings\.lean_m must be a number"),
+        (PushThenLiftSettings, {"lean_m": float("nan")}, r"PushThenLiftSettings\.lean_m must be in"),
+    ],
+)
+def test_settings_refuse_bools_arrays_and_out_of_range_values_by_name(settings, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        settings(**kwargs)
+
+
+def test_settings_accept_numpy_scalars():
+    assert HandbookSettings(lean_m=np.float32(0.2)).lean_m == np.float32(0.2)
+    assert PushThenLiftSettings(escalate_after_s=np.int64(3)).escalate_after_s == 3
