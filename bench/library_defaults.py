@@ -10,6 +10,11 @@ scores it on the held-out personas with the common evaluation path::
 
 ``--env ID`` trains on another registered id, e.g. the unit-scaled ``CoopGym/SitToStandUnit-v0``
 (the model is saved as ``{algo}_{name}_{timesteps}.zip`` and scored with ``--env ID``).
+
+``--snapshot-at 300000`` also saves the model when training first passes 300k steps, as
+``{algo}_{name}_300000.zip``. With PPO's defaults (constant learning rate and clip range)
+that model is the one a 300k-step run gives; DQN's exploration schedule spans the whole
+run, so for DQN train a separate 300k run instead.
 """
 
 from __future__ import annotations
@@ -17,14 +22,30 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
 from stable_baselines3 import DQN, PPO
+from stable_baselines3.common.callbacks import BaseCallback
 
 import coop_gym  # registers the ids
 
 ENV_IDS = {"ppo": "CoopGym/SitToStand-v0", "dqn": "CoopGym/SitToStandDiscrete-v0"}
+
+
+class _Snapshots(BaseCallback):
+    """Save the model the first time ``num_timesteps`` reaches each of ``steps``."""
+
+    def __init__(self, steps: list[int], path_for: Callable[[int], Path]) -> None:
+        super().__init__()
+        self.pending = sorted(steps)
+        self.path_for = path_for
+
+    def _on_step(self) -> bool:
+        while self.pending and self.num_timesteps >= self.pending[0]:
+            self.model.save(self.path_for(self.pending.pop(0)))
+        return True
 
 
 def main() -> None:
@@ -34,19 +55,26 @@ def main() -> None:
     parser.add_argument("--env", choices=sorted(coop_gym.ENV_IDS), help="default: the algorithm's id in ENV_IDS")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="runs/defaults")
+    parser.add_argument("--snapshot-at", type=int, nargs="*", default=[], help="also save at these step counts")
     args = parser.parse_args()
+    if any(n < 1 or n >= args.timesteps for n in args.snapshot_at):
+        parser.error(f"--snapshot-at: each must be in [1, --timesteps), got {args.snapshot_at}")
     torch.set_num_threads(1)
 
     cls = PPO if args.algo == "ppo" else DQN
     env_id = args.env or ENV_IDS[args.algo]
     model = cls("MlpPolicy", env_id, seed=args.seed, device="cpu")
-    started = time.perf_counter()
-    model.learn(total_timesteps=args.timesteps)
-    wall = time.perf_counter() - started
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = "" if args.env is None else env_id.split("/")[-1] + "_"
-    path = out / f"{args.algo}_{name}{args.timesteps}.zip"
+
+    def path_for(steps: int) -> Path:
+        return out / f"{args.algo}_{name}{steps}.zip"
+
+    started = time.perf_counter()
+    model.learn(total_timesteps=args.timesteps, callback=_Snapshots(args.snapshot_at, path_for))
+    wall = time.perf_counter() - started
+    path = path_for(args.timesteps)
     model.save(path)
     info = {"algo": args.algo, "env_id": env_id, "timesteps": args.timesteps, "wall_time_s": wall}
     path.with_suffix(".json").write_text(json.dumps(info, indent=2) + "\n")

@@ -1,0 +1,110 @@
+"""CleanRL's ``ppo.py``, unmodified and on its defaults, scored on the held-out personas.
+
+CleanRL's scripts are single files that train and exit; they do not save the agent. This
+runs one as a user would (``python ppo.py --env-id ... --total-timesteps N``, through
+:func:`runpy.run_path` with that command line), then takes the trained ``agent`` from the
+script's globals and scores it with the common evaluation path
+(:func:`agents.evaluate.evaluate`) on the held-out personas: greedy (argmax of the policy's
+logits, what SB3's ``deterministic=True`` means) and sampled (how the script acts while it
+trains). The script is not part of coop_gym; fetch it from CleanRL (``cleanrl/ppo.py``,
+needs ``pip install tyro``)::
+
+    python bench/cleanrl_defaults.py --script ppo.py --env-id CoopGym/SitToStandDiscreteUnit-v0 \\
+        --total-timesteps 1000000 --out runs/cleanrl
+
+The id is handed to the script as ``coop_gym:<id>``, so ``gym.make`` imports coop_gym (and so
+registers the ids) before it makes the env. The JSON written to ``--out`` holds the command,
+the wall time and both evaluations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import runpy
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+import coop_gym
+from agents.evaluate import evaluate
+from coop_gym.io import save_with, write_json
+
+
+class ScriptAgent:
+    """A CleanRL ``Agent`` (``actor`` logits over a Discrete action) behind SB3's ``predict``."""
+
+    def __init__(self, module: torch.nn.Module, name: str) -> None:
+        self.module = module
+        self.name = name
+
+    def predict(
+        self,
+        observation: NDArray[np.floating[Any]],
+        state: Any = None,
+        episode_start: NDArray[np.bool_] | None = None,
+        deterministic: bool = True,
+    ) -> tuple[NDArray[np.int64], Any]:
+        with torch.no_grad():
+            logits = self.module.actor(torch.as_tensor(np.asarray(observation), dtype=torch.float32))
+            if deterministic:
+                actions = logits.argmax(dim=-1)
+            else:
+                actions = torch.distributions.Categorical(logits=logits).sample()
+        return actions.numpy().astype(np.int64), state
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--script", required=True, help="path of CleanRL's ppo.py (or another script defining `agent`)")
+    parser.add_argument("--env-id", default="CoopGym/SitToStandDiscreteUnit-v0", choices=sorted(coop_gym.ENV_IDS))
+    parser.add_argument("--total-timesteps", type=int, default=1_000_000)
+    parser.add_argument("--seed", type=int, default=1, help="the script's --seed (CleanRL's default is 1)")
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--out", default="runs/cleanrl")
+    args = parser.parse_args()
+    script = Path(args.script)
+    if not script.is_file():
+        parser.error(f"--script: no such file {str(script)!r}")
+    if args.total_timesteps < 1:
+        parser.error(f"--total-timesteps: must be a positive integer, got {args.total_timesteps}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    torch.set_num_threads(1)
+    command = [
+        str(script), "--env-id", f"coop_gym:{args.env_id}", "--total-timesteps", str(args.total_timesteps),
+        "--seed", str(args.seed),
+    ]  # fmt: skip
+    saved_argv = sys.argv
+    sys.argv = command
+    started = time.perf_counter()
+    try:
+        namespace = runpy.run_path(str(script), run_name="__main__")
+    finally:
+        sys.argv = saved_argv
+    wall = time.perf_counter() - started
+    if "agent" not in namespace:
+        raise SystemExit(f"{script} defined no `agent` to evaluate")
+    name = f"cleanrl_{script.stem}_{args.total_timesteps}"
+    agent = ScriptAgent(namespace["agent"].cpu().eval(), name)
+    results = {}
+    for mode, deterministic in (("greedy", True), ("sampled", False)):
+        result = evaluate(
+            agent, args.env_id, personas="test", episodes=args.episodes, seed=0, deterministic=deterministic
+        )
+        results[mode] = result.summary()
+        print(mode, json.dumps(result.summary()))
+    path = out / f"{name}_{args.env_id.split('/')[-1]}_seed{args.seed}.json"
+    write_json(path, {"command": ["python", *command], "wall_time_s": wall, "evaluation": results})
+    save_with(path.with_suffix(".pt"), lambda temp: torch.save(agent.module.state_dict(), temp))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
