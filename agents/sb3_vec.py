@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from coop_gym.envs.contract import report_info
+from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
 
 __all__ = ["SB3VecEnvAdapter", "make_sb3_vec_env"]
@@ -74,8 +74,8 @@ class SB3VecEnvAdapter(VecEnv):
         # what step returns) gives its raw report rows: no dict-of-arrays round trip.
         self._rows_env = venv if isinstance(venv, SitToStandVectorEnv) else None
         if self._rows_env is not None:
-            self._persona_names = [p.name for p in self._rows_env.personas]
-            self._probabilities = self._rows_env.core.mm is not None
+            # The env's own info contract: its info_mode, and unscaled_obs on a unit-scaled id.
+            self._info = InfoBuilder(self._rows_env.config)
         self._actions: Any = None
         self._episode_return = np.zeros(n)
         self._episode_length = np.zeros(n, dtype=np.int64)
@@ -102,12 +102,12 @@ class SB3VecEnvAdapter(VecEnv):
                     seed=group_seeds,  # type: ignore[arg-type]
                     options={**options[i], "reset_mask": mask},
                 )
-                for k, info in enumerate(_unbatch(group_infos, self.num_envs)):
+                for k, info in enumerate(self._reset_infos(group_infos)):
                     if mask[k]:
                         self.reset_infos[k] = info
                 done |= mask
         if infos:
-            self.reset_infos = _unbatch(infos, self.num_envs)
+            self.reset_infos = self._reset_infos(infos)
         self._reset_seeds()
         self._reset_options()
         self._episode_return[:] = 0.0
@@ -129,10 +129,7 @@ class SB3VecEnvAdapter(VecEnv):
             if final is not None:
                 final_obs = final[1]
                 rows = final[2]
-                finals = {
-                    i: report_info(rows[i].tolist(), self._persona_names, self._probabilities)
-                    for i in np.flatnonzero(final[0]).tolist()
-                }
+                finals = {i: self._info.single(rows[i].tolist()) for i in np.flatnonzero(final[0]).tolist()}
         else:
             obs, rewards, terminated, truncated, infos = self.venv.step(self._actions)
             per_env = _unbatch(infos, self.num_envs)
@@ -163,10 +160,19 @@ class SB3VecEnvAdapter(VecEnv):
             self._episode_length[dones] = 0
         return obs, rewards.astype(np.float32), dones, per_env
 
+    def _reset_infos(self, infos: dict[str, Any]) -> list[dict[str, Any]]:
+        """Per-env reset infos.
+
+        From the report rows on coop_gym's batched env (exactly the single env's, the NumPy
+        scalars of ``info_mode="numeric"`` included), else unbatched from the vector infos.
+        """
+        if self._rows_env is not None:
+            return self._row_infos(self._rows_env.core.report)
+        return _unbatch(infos, self.num_envs)
+
     def _row_infos(self, report: NDArray[np.float64]) -> list[dict[str, Any]]:
         """The single env's info dicts from the batched env's report rows (as the single env builds them)."""
-        names, probabilities = self._persona_names, self._probabilities
-        return [report_info(row, names, probabilities) for row in report.tolist()]
+        return [self._info.single(row) for row in report.tolist()]
 
     def close(self) -> None:
         """Close the vector env."""

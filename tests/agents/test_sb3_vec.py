@@ -38,11 +38,21 @@ def _assert_same_info(got: dict[str, Any], expected: dict[str, Any]) -> None:
             assert got[key] == value and type(got[key]) is type(value), key
 
 
-@pytest.mark.parametrize("env_id", ["CoopGym/SitToStand-v0", "CoopGym/SitToStandMM-v0"])
-def test_adapter_steps_exactly_like_dummy_vec_env_of_single_envs(env_id: str) -> None:
+@pytest.mark.parametrize(
+    ("env_id", "options"),
+    [
+        ("CoopGym/SitToStand-v0", {}),
+        ("CoopGym/SitToStandMM-v0", {}),
+        # The env's info contract holds through the adapter: unscaled_obs on a unit id, numeric infos.
+        ("CoopGym/SitToStandUnit-v0", {}),
+        ("CoopGym/SitToStandUnit-v0", {"info_mode": "numeric"}),
+        ("CoopGym/SitToStandMM-v0", {"info_mode": "numeric"}),
+    ],
+)
+def test_adapter_steps_exactly_like_dummy_vec_env_of_single_envs(env_id: str, options: dict[str, Any]) -> None:
     n, seed = 3, 40
-    adapter = make_sb3_vec_env(env_id, n, seed, env_kwargs=SHORT)
-    dummy = _dummy(env_id, n, seed, **SHORT)
+    adapter = make_sb3_vec_env(env_id, n, seed, env_kwargs={**SHORT, **options})
+    dummy = _dummy(env_id, n, seed, **SHORT, **options)
     assert np.array_equal(adapter.reset(), dummy.reset())
     for i in range(n):
         _assert_same_info(adapter.reset_infos[i], dummy.reset_infos[i])
@@ -66,6 +76,12 @@ def test_adapter_steps_exactly_like_dummy_vec_env_of_single_envs(env_id: str) ->
                 {k: v for k, v in infos_d[i].items() if k != "terminal_observation"},
             )
     assert finished >= 5 and truncated_seen >= 1
+    final = infos_a[int(np.flatnonzero(done_a)[0])] if done_a.any() else infos_a[0]
+    for info in (infos_a[0], final, adapter.reset_infos[0]):
+        if gym.spec(env_id).kwargs.get("observation_scale") == "unit":
+            assert info["unscaled_obs"].dtype == np.float32
+        if options.get("info_mode") == "numeric":
+            assert "outcome_code" in info and "outcome" not in info and "reward_terms" not in info
 
 
 def test_terminal_observation_is_the_real_final_observation() -> None:
