@@ -126,6 +126,56 @@ def _all_finite(P: NDArray[np.float64]) -> bool:
 
 
 @njit(cache=True)
+def _symmetric_eigen(A: NDArray[np.float64], V: NDArray[np.float64]) -> None:
+    """Cyclic Jacobi eigendecomposition of the symmetric ``A`` (4, 4), in place.
+
+    ``A`` becomes diagonal (its eigenvalues) and ``V`` the orthogonal matrix of eigenvectors
+    (columns), so that the input equals ``V diag(A) V^T``. Rotations stop at the relative
+    threshold ``|a_pq| <= 1e-18 sqrt(|a_pp a_qq|)`` (Demmel & Veselic), which gives the small
+    eigenvalues of a diagonally scaled matrix to high relative accuracy. Written out rather
+    than ``np.linalg.eigh``: LAPACK's binding and its error formatting cost seconds of
+    compilation at every cold start, for a repair ordinary models never reach.
+    """
+    for i in range(4):
+        for j in range(4):
+            V[i, j] = 1.0 if i == j else 0.0
+    for _ in range(60):
+        rotated = False
+        for p in range(3):
+            for q in range(p + 1, 4):
+                apq = A[p, q]
+                app, aqq = A[p, p], A[q, q]
+                if abs(apq) <= 1e-18 * math.sqrt(abs(app * aqq)):
+                    A[p, q] = 0.0
+                    A[q, p] = 0.0
+                    continue
+                rotated = True
+                theta = (aqq - app) / (2.0 * apq)
+                if abs(theta) > 1e150:
+                    t = 0.5 / theta
+                else:
+                    t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(4):  # A J
+                    akp, akq = A[k, p], A[k, q]
+                    A[k, p] = c * akp - s * akq
+                    A[k, q] = s * akp + c * akq
+                for k in range(4):  # J^T (A J)
+                    apk, aqk = A[p, k], A[q, k]
+                    A[p, k] = c * apk - s * aqk
+                    A[q, k] = s * apk + c * aqk
+                A[p, q] = 0.0
+                A[q, p] = 0.0
+                for k in range(4):  # V J
+                    vkp, vkq = V[k, p], V[k, q]
+                    V[k, p] = c * vkp - s * vkq
+                    V[k, q] = s * vkp + c * vkq
+        if not rotated:
+            return
+
+
+@njit(cache=True)
 def _nearest_psd(P: NDArray[np.float64]) -> None:
     """Project the symmetric ``P`` (4, 4) back onto the PSD cone, in place, in its own scale.
 
@@ -142,17 +192,16 @@ def _nearest_psd(P: NDArray[np.float64]) -> None:
     for i in range(4):
         scale[i] = math.sqrt(P[i, i]) if P[i, i] > 0.0 else 1.0
     C = np.empty((4, 4))
+    V = np.empty((4, 4))
     for i in range(4):
         for j in range(4):
             C[i, j] = P[i, j] / (scale[i] * scale[j])
-    w, V = np.linalg.eigh(C)
-    for k in range(4):
-        w[k] = max(w[k], 0.0)
+    _symmetric_eigen(C, V)
     for i in range(4):
         for j in range(i, 4):
             s = 0.0
             for k in range(4):
-                s += V[i, k] * w[k] * V[j, k]
+                s += V[i, k] * max(C[k, k], 0.0) * V[j, k]
             s *= scale[i] * scale[j]
             P[i, j] = s
             P[j, i] = s
