@@ -10,6 +10,8 @@ the handbook caregiver. In one run, one after the other, this trains
   env count, persona set, batched env adapter, ``VecNormalize``, tuned PPO; training is
   cut by the clock, not a step budget, so a linearly decaying learning rate stays at its
   start value);
+- ``default@N``: the same on ``N`` envs with ``n_steps`` scaled so each update still takes
+  ``n_envs * n_steps`` samples (learner sizing: fewer, wider policy calls per sample);
 - ``first_script``: what a user writes first --
   ``PPO("MlpPolicy", make_vec_env(env_id, n_envs=8))`` with SB3's default hyperparameters
   on a ``DummyVecEnv`` of 8 ``gymnasium.make`` envs (the env's default personas: the
@@ -59,6 +61,22 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _resized(config: Any, n_envs: int) -> Any:
+    """``config`` on ``n_envs`` envs with the same samples per update (``n_envs * n_steps``)."""
+    batch = config.n_envs * config.algo_kwargs["n_steps"]
+    if n_envs < 1 or batch % n_envs:
+        raise ValueError(f"default@N: N must divide the {batch}-step rollout of train.py's config, got {n_envs}")
+    return config.replace(n_envs=n_envs, algo_kwargs={**config.algo_kwargs, "n_steps": batch // n_envs})
+
+
+def _contender(text: str) -> str:
+    if text in CONTENDERS:
+        return text
+    if text.startswith("default@") and text.partition("@")[2].isdigit() and int(text.partition("@")[2]) > 0:
+        return text
+    raise argparse.ArgumentTypeError(f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N")
+
+
 def _build(contender: str, env_id: str, seed: int) -> Any:
     """The SB3 model of ``contender`` on fresh training envs."""
     from stable_baselines3 import PPO
@@ -68,8 +86,10 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     from agents.hyperparams import hyperparams_for
     from agents.rl import make_model, make_train_env
 
-    if contender == "default":
+    if contender == "default" or contender.startswith("default@"):
         config = hyperparams_for("ppo", env_id)
+        if contender != "default":
+            config = _resized(config, int(contender.partition("@")[2]))
         env = make_train_env(env_id, config.n_envs, seed, personas=config.personas)
         if config.normalize:
             env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -240,18 +260,35 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=positive_int, default=500, help="held-out episodes per score")
     parser.add_argument("--seed", type=int, default=0, help="training seed")
     parser.add_argument("--out", default="bench/out", help="folder for time_to_quality.{json,png}")
-    parser.add_argument("--contenders", default=",".join(CONTENDERS), help="comma-separated subset of contenders")
+    parser.add_argument(
+        "--contenders",
+        default=",".join(CONTENDERS),
+        help="comma-separated contenders: default, first_script, or default@N (train.py's config on N envs, "
+        "the same samples per update)",
+    )
     parser.add_argument("--stop-at-target", action="store_true", help="stop a contender once it reaches the target")
     args = parser.parse_args(argv)
     contenders = tuple(c for c in args.contenders.split(",") if c)
-    unknown = [c for c in contenders if c not in CONTENDERS]
-    if unknown or not contenders:
-        parser.error(f"--contenders: unknown {unknown or 'empty'}; known: {', '.join(CONTENDERS)}")
+    if not contenders:
+        parser.error(f"--contenders: empty; known: {', '.join(CONTENDERS)}, default@N")
+    for c in contenders:
+        try:
+            _contender(c)
+        except argparse.ArgumentTypeError as error:
+            parser.error(f"--contenders: {error}")
 
     import coop_gym
 
     if args.env not in coop_gym.ENV_IDS:
         parser.error(f"--env: unknown env id {args.env!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
+    from agents.hyperparams import hyperparams_for
+
+    for c in contenders:
+        if c.startswith("default@"):
+            try:
+                _resized(hyperparams_for("ppo", args.env), int(c.partition("@")[2]))
+            except ValueError as error:
+                parser.error(f"--contenders: {error}")
     problem = output_path_problem(args.out, folder=True)
     if problem:
         parser.error(f"--out: {problem}")

@@ -186,7 +186,8 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/time_to_quality.py", "budget 0", ["--budget-s", "0"], r"--budget-s: must be a positive number, got '0'"),
     ("bench/time_to_quality.py", "budget nan", ["--budget-s", "nan"], r"--budget-s: must be a positive number"),
     ("bench/time_to_quality.py", "episodes 0", ["--episodes", "0"], r"--episodes: expected a positive integer, got 0"),
-    ("bench/time_to_quality.py", "unknown contender", ["--contenders", "x"], r"--contenders: unknown \['x'\]"),
+    ("bench/time_to_quality.py", "unknown contender", ["--contenders", "x"], r"--contenders: unknown contender 'x'"),
+    ("bench/time_to_quality.py", "contender size 5", ["--contenders", "default@5"], r"N must divide the 4096-step"),
     ("bench/time_to_quality.py", "unknown env", ["--env", "CartPole-v1"], r"--env: unknown env id 'CartPole-v1'"),
     (
         "bench/run.py",

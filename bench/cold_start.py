@@ -1,0 +1,116 @@
+"""Time to the first step: cold (numba compiles the kernels) and warm (they load from its cache).
+
+Each measurement is a fresh Python process that imports coop_gym, makes the env, resets it
+and steps it once, timing each part. *Cold* runs get an empty ``NUMBA_CACHE_DIR`` (what a
+fresh install meets: nothing compiled yet); *warm* runs reuse the cache the cold run
+filled. ``--kernels`` also lists the compilations of the cold run (numba's compile events,
+nested: a kernel's time includes the functions compiled inside it)::
+
+    python bench/cold_start.py                      # gym.make + make_vec x1024, 3 repeats
+    python bench/cold_start.py --repeats 5 --kernels
+
+Reported: median and range of the time from the first ``gym.make``/``make_vec`` call to the
+end of the first step (the import of coop_gym is timed on its own), with the load average.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+_CHILD = r"""
+import json, sys, time
+t0 = time.perf_counter()
+import gymnasium as gym
+import coop_gym
+t1 = time.perf_counter()
+from numba.core import event
+env_id, n, kernels = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
+with event.install_recorder("numba:compile") as rec:
+    t2 = time.perf_counter()
+    if n == 0:
+        env = gym.make(env_id)
+    else:
+        env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+    t3 = time.perf_counter()
+    env.reset(seed=0)
+    t4 = time.perf_counter()
+    env.step(env.action_space.sample())
+    t5 = time.perf_counter()
+compiles, stack = [], []
+for ts, ev in rec.buffer if kernels else ():
+    if ev.is_start:
+        stack.append((ev.data["dispatcher"].py_func.__qualname__, ts, len(stack)))
+    else:
+        name, start, depth = stack.pop()
+        compiles.append((start, depth, name, ts - start))
+print(json.dumps({"import_s": t1 - t0, "make_s": t3 - t2, "reset_s": t4 - t3, "step_s": t5 - t4,
+                  "first_step_s": t5 - t2, "compiles": sorted(compiles)}))
+"""
+
+
+def _measure(env_id: str, n: int, cache: str, kernels: bool) -> dict[str, Any]:
+    env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+    out = subprocess.run(
+        [sys.executable, "-c", _CHILD, env_id, str(n), "1" if kernels else "0"],
+        env=env, capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def _summary(values: list[float]) -> str:
+    return f"{statistics.median(values):6.2f} s ({min(values):.2f}..{max(values):.2f})"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="CoopGym/SitToStand-v0", help="env id (default: %(default)s)")
+    parser.add_argument("--num-envs", type=int, nargs="*", default=[0, 1024], help="0 = gym.make; N = make_vec xN")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--kernels", action="store_true", help="list the cold run's compilations")
+    parser.add_argument("--json", type=Path, help="also write the measurements here")
+    args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats: must be a positive integer, got {args.repeats}")
+    if any(n < 0 for n in args.num_envs):
+        parser.error(f"--num-envs: must be >= 0, got {args.num_envs}")
+    import coop_gym
+
+    if args.env not in coop_gym.ENV_IDS:
+        parser.error(f"--env: unknown env id {args.env!r}")
+
+    results: dict[str, Any] = {"env_id": args.env, "load_start": os.getloadavg()[0], "runs": {}}
+    for n in args.num_envs:
+        label = "gym.make" if n == 0 else f"make_vec x{n}"
+        cold, warm, imports = [], [], []
+        for r in range(args.repeats):
+            with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
+                first = _measure(args.env, n, cache, args.kernels and r == 0)
+                second = _measure(args.env, n, cache, False)
+            cold.append(first["first_step_s"])
+            warm.append(second["first_step_s"])
+            imports.append(second["import_s"])
+            if first["compiles"]:
+                print(f"{label}: cold compilations (s, nested)")
+                for _, depth, name, seconds in first["compiles"]:
+                    if seconds >= 0.1:
+                        print(f"  {'  ' * depth}{seconds:6.2f} {name}")
+        results["runs"][label] = {"cold_s": cold, "warm_s": warm, "import_s": imports}
+        print(f"{label:>14}: cold {_summary(cold)}  warm {_summary(warm)}  import {_summary(imports)}")
+    results["load_end"] = os.getloadavg()[0]
+    print(f"load average {results['load_start']:.1f} -> {results['load_end']:.1f}")
+    if args.json:
+        from coop_gym.io import write_json
+
+        write_json(args.json, results)
+
+
+if __name__ == "__main__":
+    main()
