@@ -89,6 +89,50 @@ def test_the_vector_infos_hold_the_single_env_info_of_each_env() -> None:
                 assert np.array_equal(batched[key][i], value), key
 
 
+def _shares_memory(a: object, b: object) -> bool:
+    return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and np.shares_memory(a, b)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs"),
+    [
+        ("CoopGym/SitToStand-v0", {}),
+        ("CoopGym/SitToStandMM-v0", {}),
+        ("CoopGym/SitToStandUnit-v0", {}),
+        ("CoopGym/SitToStand-v0", {"info_mode": "numeric"}),
+        ("CoopGym/SitToStandIMM-v0", {"info_mode": "numeric"}),
+    ],
+)
+def test_the_infos_of_every_env_are_the_masked_infos_with_an_all_true_mask(env_id: str, kwargs: dict) -> None:
+    # The per-step infos (mask None: one compiled gather into fresh blocks) against the masked
+    # path with every env selected: the same keys in the same order, dtypes and values, and no
+    # two arrays sharing memory (a caller may keep or change any of them).
+    envs = gym.make_vec(env_id, num_envs=5, **kwargs)
+    envs.reset(seed=4)
+    builder, core = envs.unwrapped._info, envs.unwrapped.core
+    for _ in range(6):
+        envs.step(np.array([[1, 2, 0], [0, 0, 1], [2, 1, 0], [2, 2, 1], [0, 1, 0]]))
+        fast = builder.batched(core.report, None)
+        masked = builder.batched(core.report, np.ones(5, dtype=bool))
+        assert list(fast) == list(masked)
+        arrays = []
+        for key in fast:
+            pairs = (
+                [(k, fast[key][k], masked[key][k]) for k in fast[key]]
+                if key == "reward_terms"
+                else [(key, fast[key], masked[key])]
+            )
+            assert isinstance(fast[key], dict) == isinstance(masked[key], dict), key
+            if isinstance(fast[key], dict):
+                assert list(fast[key]) == list(masked[key])
+            for name, got, want in pairs:
+                assert got.dtype == want.dtype and got.shape == want.shape, name
+                assert got.tolist() == want.tolist(), name
+                arrays.append(got)
+        assert not any(_shares_memory(a, b) for a, b in itertools.combinations(arrays, 2))
+        assert not any(_shares_memory(a, core.state) for a in arrays)
+
+
 def test_one_list_of_env_keywords() -> None:
     names = {f.name for f in dataclasses.fields(EnvArguments)}
     for kwargs in coop_gym.ENV_IDS.values():
