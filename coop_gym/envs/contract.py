@@ -328,6 +328,34 @@ def episode_ends(
     return terminated, truncated
 
 
+@njit(cache=True)
+def count_steps_and_end_episodes(
+    report: NDArray[np.float64],
+    cmd: NDArray[np.float64],
+    episode_steps: NDArray[np.int64],
+    max_episode_steps: int,
+    rewards: NDArray[np.float64],
+    terminated: NDArray[np.bool_],
+    truncated: NDArray[np.bool_],
+) -> None:
+    """The vector env's bookkeeping after a step, in one pass: :func:`episode_ends` and the step count.
+
+    Each env stepped (``cmd`` active) counts a step in ``episode_steps`` and is out of steps at
+    ``max_episode_steps``; ``rewards`` gets the report's reward of stepped envs, 0 elsewhere.
+    """
+    for i in range(report.shape[0]):
+        if cmd[i, CMD.active] > 0.5:
+            episode_steps[i] += 1
+            code = int(report[i, REPORT.outcome])
+            rewards[i] = report[i, REPORT.reward]
+            terminated[i] = TERMINATES[code]
+            truncated[i] = not terminated[i] and (episode_steps[i] >= max_episode_steps or TRUNCATES[code])
+        else:
+            rewards[i] = 0.0
+            terminated[i] = False
+            truncated[i] = False
+
+
 # --- actions ----------------------------------------------------------------------
 
 ACTION_SHAPE = (3, 3, 2)
@@ -416,6 +444,21 @@ def command_table(cues: Cues) -> NDArray[np.float64]:
     return np.ascontiguousarray(table[:, None, :])
 
 
+@njit(cache=True)
+def _decode_multidiscrete(actions: NDArray[np.int64], flat: NDArray[np.float64], cmd: NDArray[np.float64]) -> bool:
+    # cmd[i, :3] = flat[ravel_multi_index(actions[i], ACTION_SHAPE)] for every row, or False (and
+    # nothing written) when any component is out of range.
+    for i in range(actions.shape[0]):
+        push, verbal, lift = actions[i, 0], actions[i, 1], actions[i, 2]
+        if not (0 <= push < ACTION_SHAPE[0] and 0 <= verbal < ACTION_SHAPE[1] and 0 <= lift < ACTION_SHAPE[2]):
+            return False
+    for i in range(actions.shape[0]):
+        k = (actions[i, 0] * ACTION_SHAPE[1] + actions[i, 1]) * ACTION_SHAPE[2] + actions[i, 2]
+        for j in range(CMD.active):
+            cmd[i, j] = flat[k, j]
+    return True
+
+
 class ActionDecoder:
     """Actions of one action type -> the core's command rows, for the envs' hot paths.
 
@@ -471,9 +514,10 @@ class ActionDecoder:
         if type(a) is np.ndarray and a.dtype.kind in "iu" and kind != "continuous":
             try:
                 if kind == "multidiscrete" and a.shape == (n, 3):
-                    # One C call checks every range and flattens (ValueError when out of range).
-                    cmd[:, : CMD.active] = self._flat[np.ravel_multi_index(a.T, ACTION_SHAPE)]
-                    return
+                    # One compiled call checks every range and looks the rows up (int64: one
+                    # compiled version; a uint64 too large wraps negative and is refused).
+                    if _decode_multidiscrete(a.astype(np.int64, copy=False), self._flat, cmd):
+                        return
                 if kind == "discrete" and a.shape == (n,):
                     cmd[:, : CMD.active] = self._flat[np.ravel_multi_index((a,), (N_FLAT_ACTIONS,))]
                     return
@@ -790,9 +834,10 @@ class InfoBuilder:
                     top.append((key, *slot(REPORT.persona_index, True)))
                 elif key == "outcome_code":
                     top.append((key, *slot(REPORT.outcome, True)))
-                else:
-                    assert column is not None
+                elif column is not None:
                     top.append((key, *slot(column, as_int)))
+                else:
+                    raise RuntimeError(f"the info's {key!r} has no report column: update _plan_all_envs")
             terms = [(name, *slot(REPORT.reward_success + k, False)) for k, name in enumerate(REWARD_TERMS)]
         for key, source, at in top:
             if source in ("persona", "outcome") and int_columns[at] != (

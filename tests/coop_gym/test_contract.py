@@ -17,9 +17,12 @@ from coop_gym.envs.contract import (
     EPISODE_END,
     FEATURE_BOUNDS,
     FEATURES,
+    REPORT,
+    REPORT_COLUMNS,
     ActionDecoder,
     EnvArguments,
     batched_infos,
+    count_steps_and_end_episodes,
     decode_actions,
     encode_actions,
     episode_ends,
@@ -71,6 +74,45 @@ def test_episode_end_comes_from_the_outcome() -> None:
     # A step limit truncates whatever did not terminate.
     _, truncated = episode_ends(outcome, stepped, np.ones(len(outcome), dtype=bool))
     assert truncated.tolist() == [not o.terminates for o in Outcome] + [False] * len(Outcome)
+
+
+@pytest.mark.parametrize("dtype", [np.int64, np.int32, np.uint8, np.uint64])
+def test_the_compiled_multidiscrete_decoding_takes_any_integer_dtype_and_refuses_out_of_range(dtype: type) -> None:
+    decoder = ActionDecoder("multidiscrete", Cues())
+    want = np.zeros((len(CHOICES), len(CMD)))
+    decoder.batch(CHOICES, want)
+    got = np.zeros((len(CHOICES), len(CMD)))
+    decoder.batch(CHOICES.astype(dtype), got)
+    assert np.array_equal(got, want)
+    for bad in ([0, 3, 0], [0, 0, 2], [3, 0, 0]):
+        actions = CHOICES.astype(dtype)
+        actions[-1] = bad
+        cmd = np.full((len(CHOICES), len(CMD)), 7.0)
+        with pytest.raises(ValueError, match="multidiscrete action must be"):
+            decoder.batch(actions, cmd)
+        assert (cmd == 7.0).all()  # nothing written
+    with pytest.raises(ValueError, match="multidiscrete action must be"):
+        decoder.batch(np.array([[0, 0, 0], [-1, 0, 0]]), np.zeros((2, len(CMD))))
+
+
+def test_the_compiled_episode_end_and_step_count_follow_episode_ends() -> None:
+    rng = np.random.default_rng(5)
+    n, limit = 400, 3
+    report = np.zeros((n, len(REPORT_COLUMNS)))
+    steps = rng.integers(0, limit + 1, n)
+    for _ in range(4):
+        report[:, REPORT.outcome] = rng.integers(0, len(Outcome), n)
+        report[:, REPORT.reward] = rng.normal(size=n)
+        cmd = np.zeros((n, len(CMD)))
+        cmd[:, CMD.active] = rng.random(n) < 0.7
+        stepped = cmd[:, CMD.active] > 0.5
+        want_steps = steps + stepped
+        want = episode_ends(report[:, REPORT.outcome], stepped, want_steps >= limit)
+        rewards, terminated, truncated = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        count_steps_and_end_episodes(report, cmd, steps, limit, rewards, terminated, truncated)
+        assert np.array_equal(steps, want_steps)
+        assert np.array_equal(terminated, want[0]) and np.array_equal(truncated, want[1])
+        assert np.array_equal(rewards, np.where(stepped, report[:, REPORT.reward], 0.0))
 
 
 def test_the_vector_infos_hold_the_single_env_info_of_each_env() -> None:
