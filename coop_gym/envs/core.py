@@ -325,81 +325,68 @@ def _reset_rows(
     consts: NDArray[np.float64],
 ) -> None:
     # Start episodes from the draws (their normals columns already turned into variation factors).
-    for r in range(indices.shape[0]):
-        _reset_row(indices[r], draws[r], xi_override, persona_table, state, obs, consts)
-
-
-@njit(cache=True, nogil=True)
-def _reset_row(
-    i: int,
-    drawn: NDArray[np.float64],
-    xi_override: int,
-    persona_table: NDArray[np.float64],
-    state: NDArray[np.float64],
-    obs: NDArray[np.float32],
-    consts: NDArray[np.float64],
-) -> None:
-    # Start env i's episode from its row of draws (the normals already turned into variation factors).
     episode_s = consts[CONSTS.episode_s]
     n_varied = int(consts[CONSTS.n_varied])
     varied_at = int(consts[CONSTS.varied_at])
     template_at = int(consts[CONSTS.template_at])
-    k = int(drawn[DRAWS.persona])
-    persona = persona_table[k]
-    row = state[i]
-    row[:] = 0.0
-    # The person: the persona's packed row with the varied gains scaled (= sample_person + pack_person).
-    p = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
-    p[:] = persona[PERSONA_BLOCKS.params : PERSONA_BLOCKS.params + len(PARAM_COLUMNS)]
-    if consts[CONSTS.vary] > 0.5:
-        for j in range(n_varied):
-            column = int(consts[varied_at + j])
-            p[column] = persona[PERSONA_BLOCKS.params + column] * drawn[DRAWS.normals + j]
-    a00, a01, a10, a11, b0, b1 = zoh_coefficients(
-        p[PERSON.damping_rate_per_s], p[PERSON.voluntary_gain_per_s2], p[PERSON.dt_s]
-    )
-    p[PERSON.zoh_a00] = a00
-    p[PERSON.zoh_a01] = a01
-    p[PERSON.zoh_a10] = a10
-    p[PERSON.zoh_a11] = a11
-    p[PERSON.zoh_b0] = b0
-    p[PERSON.zoh_b1] = b1
-    u = drawn[DRAWS.uniform]
-    xi = -1.0 if u < persona[PERSONA_BLOCKS.xi_cuts] else (1.0 if u > persona[PERSONA_BLOCKS.xi_cuts + 1] else 0.0)
-    if xi_override != _NO_OVERRIDE:
-        xi = float(xi_override)
-    x0 = drawn[DRAWS.lean]
-    # initial_state_row(xi, x0): at rest at x0, intending to stay.
-    s = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
-    s[:] = consts[template_at : template_at + len(STATE_COLUMNS)]
-    s[STATE.x_m] = x0
-    s[STATE.eta_m] = x0
-    s[STATE.xi] = xi
-    # The filter, centred on the first reading with the nominal model's prior.
-    nominal_width = len(NOMINAL_COLUMNS)
-    row[BLOCKS.nominal : BLOCKS.nominal + nominal_width] = persona[
-        PERSONA_BLOCKS.nominal : PERSONA_BLOCKS.nominal + nominal_width
-    ]
-    row[BLOCKS.mean] = x0
-    row[BLOCKS.mean + 2] = x0
-    row[BLOCKS.cov] = persona[PERSONA_BLOCKS.nominal + NOMINAL.r_position]  # P[0, 0] = R
-    row[BLOCKS.cov + STATE_DIM + 1] = consts[CONSTS.xdot_var]
-    row[BLOCKS.cov + 2 * (STATE_DIM + 1)] = consts[CONSTS.eta_var]
-    row[BLOCKS.cov + 3 * (STATE_DIM + 1)] = consts[CONSTS.xi_var]
-    row[BLOCKS.judge + JUDGE.since_onset_s] = episode_s
-    rep = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
-    rep[REPORT.measured_position_m] = x0
-    rep[REPORT.x_hat_m] = x0
-    rep[REPORT.eta_hat_m] = x0
-    rep[REPORT.xi_std] = consts[CONSTS.xi_std]
-    rep[REPORT.time_since_cue_onset_s] = episode_s
-    rep[REPORT.true_xi] = xi
-    rep[REPORT.true_x_m] = x0
-    rep[REPORT.true_eta_m] = x0
-    rep[REPORT.info_true_xi] = xi
-    rep[REPORT.persona_index] = k
-    if consts[CONSTS.build_obs] > 0.5:
-        _observe_row(row, obs[i], consts)
+    for r in range(indices.shape[0]):
+        i = indices[r]
+        k = int(draws[r, DRAWS.persona])
+        persona = persona_table[k]
+        row = state[i]
+        row[:] = 0.0
+        # The person: the persona's packed row with the varied gains scaled (= sample_person + pack_person).
+        p = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
+        p[:] = persona[PERSONA_BLOCKS.params : PERSONA_BLOCKS.params + len(PARAM_COLUMNS)]
+        if consts[CONSTS.vary] > 0.5:
+            for j in range(n_varied):
+                column = int(consts[varied_at + j])
+                p[column] = persona[PERSONA_BLOCKS.params + column] * draws[r, DRAWS.normals + j]
+        a00, a01, a10, a11, b0, b1 = zoh_coefficients(
+            p[PERSON.damping_rate_per_s], p[PERSON.voluntary_gain_per_s2], p[PERSON.dt_s]
+        )
+        p[PERSON.zoh_a00] = a00
+        p[PERSON.zoh_a01] = a01
+        p[PERSON.zoh_a10] = a10
+        p[PERSON.zoh_a11] = a11
+        p[PERSON.zoh_b0] = b0
+        p[PERSON.zoh_b1] = b1
+        u = draws[r, DRAWS.uniform]
+        xi = -1.0 if u < persona[PERSONA_BLOCKS.xi_cuts] else (1.0 if u > persona[PERSONA_BLOCKS.xi_cuts + 1] else 0.0)
+        if xi_override != _NO_OVERRIDE:
+            xi = float(xi_override)
+        x0 = draws[r, DRAWS.lean]
+        # initial_state_row(xi, x0): at rest at x0, intending to stay.
+        s = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
+        s[:] = consts[template_at : template_at + len(STATE_COLUMNS)]
+        s[STATE.x_m] = x0
+        s[STATE.eta_m] = x0
+        s[STATE.xi] = xi
+        # The filter, centred on the first reading with the nominal model's prior.
+        nominal_width = len(NOMINAL_COLUMNS)
+        row[BLOCKS.nominal : BLOCKS.nominal + nominal_width] = persona[
+            PERSONA_BLOCKS.nominal : PERSONA_BLOCKS.nominal + nominal_width
+        ]
+        row[BLOCKS.mean] = x0
+        row[BLOCKS.mean + 2] = x0
+        row[BLOCKS.cov] = persona[PERSONA_BLOCKS.nominal + NOMINAL.r_position]  # P[0, 0] = R
+        row[BLOCKS.cov + STATE_DIM + 1] = consts[CONSTS.xdot_var]
+        row[BLOCKS.cov + 2 * (STATE_DIM + 1)] = consts[CONSTS.eta_var]
+        row[BLOCKS.cov + 3 * (STATE_DIM + 1)] = consts[CONSTS.xi_var]
+        row[BLOCKS.judge + JUDGE.since_onset_s] = episode_s
+        rep = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+        rep[REPORT.measured_position_m] = x0
+        rep[REPORT.x_hat_m] = x0
+        rep[REPORT.eta_hat_m] = x0
+        rep[REPORT.xi_std] = consts[CONSTS.xi_std]
+        rep[REPORT.time_since_cue_onset_s] = episode_s
+        rep[REPORT.true_xi] = xi
+        rep[REPORT.true_x_m] = x0
+        rep[REPORT.true_eta_m] = x0
+        rep[REPORT.info_true_xi] = xi
+        rep[REPORT.persona_index] = k
+        if consts[CONSTS.build_obs] > 0.5:
+            _observe_row(row, obs[i], consts)
 
 
 @njit(cache=True)
@@ -522,19 +509,12 @@ def _advance_rows(
     generators: NDArray[np.uint64],
     obs: NDArray[np.float32],
     consts: NDArray[np.float64],
-    reset_slot: NDArray[np.int64],
-    draws: NDArray[np.float64],
-    persona_table: NDArray[np.float64],
 ) -> None:
-    # Step the active envs start..stop-1, or reset those with a row of draws (reset_slot[i] >= 0:
-    # drawn beforehand, see SitToStandCore.step_commands). Each env touches only its own rows and
-    # its own generator, so disjoint ranges can run on different threads; ``z`` is this call's scratch.
+    # Step the active envs start..stop-1. Each env touches only its own rows and its own
+    # generator, so disjoint ranges can run on different threads; ``z`` is this call's scratch.
     substeps = int(consts[CONSTS.substeps])
     z = np.empty(NORMALS_PER_SUBSTEP)
     for i in range(start, stop):
-        if reset_slot[i] >= 0:
-            _reset_row(i, draws[reset_slot[i]], _NO_OVERRIDE, persona_table, state, obs, consts)
-            continue
         if cmd[i, CMD.active] < 0.5:
             continue
         row = state[i]
@@ -563,14 +543,11 @@ def _advance(
     generators: NDArray[np.uint64],
     obs: NDArray[np.float32],
     consts: NDArray[np.float64],
-    reset_slot: NDArray[np.int64],
-    draws: NDArray[np.float64],
-    persona_table: NDArray[np.float64],
 ) -> int:
     # Returns -1, or the index of an active env that was never reset (nothing is stepped then).
     failed = _unready(cmd, generators)
     if failed < 0:
-        _advance_rows(0, cmd.shape[0], cmd, state, generators, obs, consts, reset_slot, draws, persona_table)
+        _advance_rows(0, cmd.shape[0], cmd, state, generators, obs, consts)
     return failed
 
 
@@ -698,10 +675,6 @@ class SitToStandCore:
         )
         self._all = np.arange(n, dtype=np.int64)
         self._draws = np.zeros((n, DRAWS.normals + n_varied))
-        # Per env, the row of _draws it is reset from within a step (-1: none); see step_commands.
-        self._reset_slot = np.full(n, -1, dtype=np.int64)
-        self._no_resets = np.full(n, -1, dtype=np.int64)
-        self._distinct_generators = True
 
     def _make_multiple_model(self, options: dict[str, Any]) -> Any:
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
@@ -732,16 +705,14 @@ class SitToStandCore:
         self._chunks = 0
 
     def _plan_chunks(self) -> int:
-        """How many threads (contiguous ranges of envs) a step uses: 1 unless it pays and is safe.
-
-        Also notes whether every env has a generator of its own (``_distinct_generators``).
-        """
-        drawing = self.generators[:, G_STATE]
-        drawing = drawing[drawing != 0]
-        self._distinct_generators = bool(np.unique(drawing).shape[0] == drawing.shape[0])
+        """How many threads (contiguous ranges of envs) a step uses: 1 unless it pays and is safe."""
         chunks = min(self.threads, self.n_envs // MIN_ENVS_PER_THREAD)
-        if not self._distinct_generators:
-            chunks = 1  # two envs drawing from one generator must draw in env order: one thread
+        if chunks > 1:
+            # Two envs drawing from one generator must draw in env order: one thread.
+            drawing = self.generators[:, G_STATE]
+            drawing = drawing[drawing != 0]
+            if np.unique(drawing).shape[0] != drawing.shape[0]:
+                chunks = 1
         self._chunks = max(chunks, 1)
         return self._chunks
 
@@ -774,9 +745,22 @@ class SitToStandCore:
         The same draws happen whatever is fixed, so fixing the persona or ``initial_xi``
         shifts nothing else in the random stream.
         """
-        if indices.shape[0] == 0:
+        count = indices.shape[0]
+        if count == 0:
             return
-        draws = self._draw_resets(indices, persona_index)
+        draws = self._draws[:count]
+        override = _NO_OVERRIDE if persona_index is None else persona_index
+        failed = _draw_reset(indices, self.generators, len(self.personas), override, draws)
+        if failed >= 0:
+            raise RuntimeError(f"env {failed} has no random generator; call reset_env(i, rng) or set_rng first")
+        # The variation factors exp(std * z) with NumPy's exp, not a compiled one: NumPy's SIMD
+        # exp can differ in the last bit, and the person must equal sample_person's exactly.
+        factors = draws[:, DRAWS.normals :]
+        std = self._variation_std
+        if std is None:
+            std = self._persona_variation_std[draws[:, DRAWS.persona].astype(np.int64)][:, None]
+        np.multiply(factors, std, out=factors)
+        np.exp(factors, out=factors)
         _reset_rows(
             indices,
             _NO_OVERRIDE if initial_xi is None else initial_xi,
@@ -793,23 +777,6 @@ class SitToStandCore:
             self.report[indices, REPORT.p_uncooperative : REPORT.p_cooperative + 1] = self.mm.probabilities[indices]
             _observe(indices, self.state, self.obs, self.consts)
 
-    def _draw_resets(self, indices: NDArray[np.int64], persona_index: int | None) -> NDArray[np.float64]:
-        """The draws of resets of envs ``indices`` (row ``r``: env ``indices[r]``), normals turned into factors."""
-        draws = self._draws[: indices.shape[0]]
-        override = _NO_OVERRIDE if persona_index is None else persona_index
-        failed = _draw_reset(indices, self.generators, len(self.personas), override, draws)
-        if failed >= 0:
-            raise RuntimeError(f"env {failed} has no random generator; call reset_env(i, rng) or set_rng first")
-        # The variation factors exp(std * z) with NumPy's exp, not a compiled one: NumPy's SIMD
-        # exp can differ in the last bit, and the person must equal sample_person's exactly.
-        factors = draws[:, DRAWS.normals :]
-        std = self._variation_std
-        if std is None:
-            std = self._persona_variation_std[draws[:, DRAWS.persona].astype(np.int64)][:, None]
-        np.multiply(factors, std, out=factors)
-        np.exp(factors, out=factors)
-        return draws
-
     # --- stepping -------------------------------------------------------------
 
     def step(
@@ -824,7 +791,7 @@ class SitToStandCore:
         self.step_commands(cmd)
         return self.out
 
-    def _advance_threaded(self, cmd: NDArray[np.float64], chunks: int, reset_slot: NDArray[np.int64]) -> None:
+    def _advance_threaded(self, cmd: NDArray[np.float64], chunks: int) -> None:
         """Step the envs on up to ``chunks`` threads (this one and ``chunks - 1`` workers).
 
         The envs are cut into blocks of about :data:`ENVS_PER_BLOCK`, and each thread takes the
@@ -834,7 +801,7 @@ class SitToStandCore:
         """
         n = self.n_envs
         blocks = max(chunks, n // ENVS_PER_BLOCK)
-        args = (cmd, self.state, self.generators, self.obs, self.consts, reset_slot, self._draws, self.persona_table)
+        args = (cmd, self.state, self.generators, self.obs, self.consts)
         claims = itertools.count()  # next() on it is atomic under the GIL
 
         def step_blocks() -> None:
@@ -850,50 +817,20 @@ class SitToStandCore:
                 if not helper.cancel():  # it started: wait for its last block
                     helper.result()
 
-    def step_commands(self, cmd: NDArray[np.float64], reset: NDArray[np.int64] | None = None) -> None:
+    def step_commands(self, cmd: NDArray[np.float64]) -> None:
         """Advance the active envs by one agent action; results land in ``report`` and ``obs``.
 
         Args:
             cmd: (N, 4) float64 C-contiguous rows ``[push_force_n, verbal_cue, lift, active]``
                 (decoded and validated); envs with ``active == 0`` are left untouched.
-            reset: Inactive envs (int64 indices) that start new episodes in the same call, with
-                what ``reset_envs(reset)`` right after the step gives, bit for bit (the vector
-                env's autoresets). Their draws are made before the step -- each env has a
-                generator of its own, so the order across envs changes no number -- and each is
-                reset in the compiled step, on the step's threads, while its row is in cache.
-                When two envs share a generator, or a multiple-model estimator runs, this is
-                literally the step and then ``reset_envs(reset)``.
         """
-        chunks = self._chunks or self._plan_chunks()  # (re)planned after set_rng: _distinct_generators too
-        if reset is not None and reset.shape[0] == 0:
-            reset = None
-        if reset is not None:
-            if np.any(cmd[reset, CMD.active] > 0.5):
-                raise ValueError("envs reset in a step must be inactive in its commands (active == 0)")
-            if self.mm is not None or not self._distinct_generators:
-                self.step_commands(cmd)
-                self.reset_envs(reset)
-                return
-            # Checked before anything is drawn: a failed call changes nothing.
+        chunks = self._chunks or self._plan_chunks()
+        if chunks > 1:
             failed = _unready(cmd, self.generators)
-            if failed >= 0:
-                raise RuntimeError(f"env {failed} was stepped before it was reset")
-            self._draw_resets(reset, None)
-            slots = self._reset_slot
-            slots[reset] = self._all[: reset.shape[0]]  # env reset[r] starts from draws row r
+            if failed < 0:
+                self._advance_threaded(cmd, chunks)
         else:
-            slots = self._no_resets
-        try:
-            if chunks > 1:
-                failed = _unready(cmd, self.generators)
-                if failed < 0:
-                    self._advance_threaded(cmd, chunks, slots)
-            else:
-                args = (self.state, self.generators, self.obs, self.consts, slots, self._draws, self.persona_table)
-                failed = _advance(cmd, *args)
-        finally:
-            if reset is not None:
-                slots[reset] = -1
+            failed = _advance(cmd, self.state, self.generators, self.obs, self.consts)
         if failed >= 0:
             raise RuntimeError(f"env {failed} was stepped before it was reset")
         if self.mm is not None:

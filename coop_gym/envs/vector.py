@@ -227,13 +227,11 @@ class SitToStandVectorEnv(VectorEnv):
                 f"envs {np.flatnonzero(pending).tolist()} finished their episodes and autoreset is disabled; "
                 'reset them with reset(options={"reset_mask": mask}) before stepping'
             )
-        # NEXT_STEP: the envs that finished last step are reset now instead of stepped, inside
-        # the compiled step (as core.reset_envs right after it would: the same numbers).
+        # NEXT_STEP: the envs that finished last step are reset now instead of stepped.
         stepped = ~pending
         cmd = core.cmd
         cmd[:, CMD.active] = stepped
-        autoreset = mode == AutoresetMode.NEXT_STEP and pending.any()
-        core.step_commands(cmd, self._all[pending] if autoreset else None)
+        core.step_commands(cmd)
         if stepped[0]:
             self._env0_stepped = True
             self._env0_lift = bool(cmd[0, CMD.lift] > 0.5)
@@ -250,7 +248,7 @@ class SitToStandVectorEnv(VectorEnv):
         done = terminated | truncated
         final = None
         if mode == AutoresetMode.NEXT_STEP:
-            self._reset_finished(pending, reset_core=False)  # the core reset them above
+            self._reset_finished(pending)
             self._done = done
         elif mode == AutoresetMode.SAME_STEP:
             if done.any():
@@ -284,11 +282,10 @@ class SitToStandVectorEnv(VectorEnv):
 
     # --- helpers ----------------------------------------------------------------
 
-    def _reset_finished(self, mask: NDArray[np.bool_], reset_core: bool = True) -> None:
-        """Autoreset the envs of ``mask``, each continuing its own generator (``reset_core``: reset their core rows)."""
+    def _reset_finished(self, mask: NDArray[np.bool_]) -> None:
+        """Autoreset the envs of ``mask``, each continuing its own generator."""
         if mask.any():
-            if reset_core:
-                self.core.reset_envs(self._all[mask])
+            self.core.reset_envs(self._all[mask])
             self._episode_steps[mask] = 0
             if mask[0]:
                 self._env0_stepped = False

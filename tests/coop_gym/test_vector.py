@@ -14,7 +14,6 @@ from gymnasium.vector import AutoresetMode
 
 import coop_gym
 from coop_gym.envs.config import Outcome
-from coop_gym.envs.contract import CMD
 from coop_gym.envs.vector import SitToStandVectorEnv
 from coop_gym.model.dynamics import (
     PARAM_COLUMNS,
@@ -382,57 +381,3 @@ def test_core_step_arrays_stay_consistent_with_the_info() -> None:
     assert out.reward[0] == reward and out.push_force_n[0] == 0.0
     assert dataclasses.asdict(out).keys() >= {"features", "reward_terms", "reward"}
     assert info["outcome"] == "unsafe"
-
-
-def _core_pair(n: int, env_id: str = "CoopGym/SitToStand-v0", **kwargs: Any) -> list[Any]:
-    """Two cores of ``n`` envs in the same state, each env with a generator of its own (seeded alike)."""
-    cores = []
-    for _ in range(2):
-        envs = gym.make_vec(env_id, num_envs=n, **kwargs)
-        envs.reset(seed=11)
-        cores.append(envs.unwrapped.core)
-    return cores
-
-
-@pytest.mark.parametrize("env_id", ["CoopGym/SitToStand-v0", "CoopGym/SitToStandIMM-v0", "CoopGym/SitToStandHard-v1"])
-def test_a_reset_inside_the_step_equals_the_step_then_reset_envs(env_id: str) -> None:
-    # The vector env's autoresets: the rows of `reset` are reset inside the compiled step (their
-    # draws made first); the result must be what stepping and then calling reset_envs gives.
-    n = 150
-    fused, reference = _core_pair(n, env_id)
-    rng = np.random.default_rng(3)
-    for _ in range(25):
-        reset = np.flatnonzero(rng.random(n) < 0.3).astype(np.int64)
-        cmd = np.column_stack(
-            [rng.choice([0.0, 10.0, 30.0], n), rng.integers(-1, 2, n), rng.random(n) < 0.2, np.ones(n)]
-        )
-        cmd[reset, CMD.active] = 0.0
-        fused.step_commands(cmd.copy(), reset)
-        reference.step_commands(cmd.copy())
-        reference.reset_envs(reset)
-        np.testing.assert_array_equal(fused.state, reference.state)
-        np.testing.assert_array_equal(fused.obs, reference.obs)
-        assert fused.generators[:, 3].tolist() != reference.generators[:, 3].tolist()  # two sets of generators
-        assert [r.bit_generator.state for r in fused.rngs] == [r.bit_generator.state for r in reference.rngs]
-    assert (fused._reset_slot == -1).all()
-
-
-def test_a_reset_inside_the_step_with_a_shared_generator_keeps_the_envs_order() -> None:
-    # Envs 0 and 2 drawing from one generator: the step's draws come before the reset's, in env order.
-    fused, reference = _core_pair(4)
-    for core in (fused, reference):
-        core.set_rng(2, core.rngs[0])
-    cmd = np.array([[10.0, 1.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0], [30.0, 0.0, 0.0, 1.0]])
-    fused.step_commands(cmd.copy(), np.array([2]))
-    reference.step_commands(cmd.copy())
-    reference.reset_envs(np.array([2]))
-    np.testing.assert_array_equal(fused.state, reference.state)
-    assert fused.rngs[0].bit_generator.state == reference.rngs[0].bit_generator.state
-
-
-def test_a_reset_inside_the_step_refuses_active_envs_and_changes_nothing() -> None:
-    (core,) = _core_pair(3)[:1]
-    before = core.state.copy()
-    with pytest.raises(ValueError, match="inactive"):
-        core.step_commands(np.ones((3, len(CMD))), np.array([1]))
-    np.testing.assert_array_equal(core.state, before)
