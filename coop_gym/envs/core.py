@@ -73,7 +73,7 @@ from coop_gym.model.dynamics import (
     measure,
     pack_person,
     person_substep,
-    zoh_coefficients,
+    zoh_coefficients_batch,
 )
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import VARIED_PARAMETERS, Persona
@@ -329,10 +329,13 @@ def _reset_rows(
     n_varied = int(consts[CONSTS.n_varied])
     varied_at = int(consts[CONSTS.varied_at])
     template_at = int(consts[CONSTS.template_at])
-    for r in range(indices.shape[0]):
+    count = indices.shape[0]
+    damping = np.empty(count)
+    gain = np.empty(count)
+    dt = np.empty(count)
+    for r in range(count):
         i = indices[r]
-        k = int(draws[r, DRAWS.persona])
-        persona = persona_table[k]
+        persona = persona_table[int(draws[r, DRAWS.persona])]
         row = state[i]
         row[:] = 0.0
         # The person: the persona's packed row with the varied gains scaled (= sample_person + pack_person).
@@ -342,15 +345,24 @@ def _reset_rows(
             for j in range(n_varied):
                 column = int(consts[varied_at + j])
                 p[column] = persona[PERSONA_BLOCKS.params + column] * draws[r, DRAWS.normals + j]
-        a00, a01, a10, a11, b0, b1 = zoh_coefficients(
-            p[PERSON.damping_rate_per_s], p[PERSON.voluntary_gain_per_s2], p[PERSON.dt_s]
-        )
-        p[PERSON.zoh_a00] = a00
-        p[PERSON.zoh_a01] = a01
-        p[PERSON.zoh_a10] = a10
-        p[PERSON.zoh_a11] = a11
-        p[PERSON.zoh_b0] = b0
-        p[PERSON.zoh_b1] = b1
+        damping[r] = p[PERSON.damping_rate_per_s]
+        gain[r] = p[PERSON.voluntary_gain_per_s2]
+        dt[r] = p[PERSON.dt_s]
+    # eq. 1's zero-order hold of every reset person in one batch (zoh_coefficients, bit for bit).
+    zoh = np.empty((count, 6))
+    zoh_coefficients_batch(damping, gain, dt, zoh)
+    for r in range(count):
+        i = indices[r]
+        k = int(draws[r, DRAWS.persona])
+        persona = persona_table[k]
+        row = state[i]
+        p = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
+        p[PERSON.zoh_a00] = zoh[r, 0]
+        p[PERSON.zoh_a01] = zoh[r, 1]
+        p[PERSON.zoh_a10] = zoh[r, 2]
+        p[PERSON.zoh_a11] = zoh[r, 3]
+        p[PERSON.zoh_b0] = zoh[r, 4]
+        p[PERSON.zoh_b1] = zoh[r, 5]
         u = draws[r, DRAWS.uniform]
         xi = -1.0 if u < persona[PERSONA_BLOCKS.xi_cuts] else (1.0 if u > persona[PERSONA_BLOCKS.xi_cuts + 1] else 0.0)
         if xi_override != _NO_OVERRIDE:

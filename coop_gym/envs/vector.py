@@ -18,7 +18,7 @@ from coop_gym.envs.contract import (
     ActionDecoder,
     EnvArguments,
     InfoBuilder,
-    episode_ends,
+    count_steps_and_end_episodes,
     parse_reset_options,
 )
 from coop_gym.envs.core import check_threads
@@ -232,15 +232,19 @@ class SitToStandVectorEnv(VectorEnv):
         cmd = core.cmd
         cmd[:, CMD.active] = stepped
         core.step_commands(cmd)
-        self._episode_steps += stepped
         if stepped[0]:
             self._env0_stepped = True
             self._env0_lift = bool(cmd[0, CMD.lift] > 0.5)
         report = core.report
-        rewards = np.where(stepped, report[:, REPORT.reward], 0.0)
-        # Truncated by the step limit or by the episode clock of ``timing``, whichever comes first.
-        out_of_steps = self._episode_steps >= self.max_episode_steps
-        terminated, truncated = episode_ends(report[:, REPORT.outcome], stepped, out_of_steps)
+        n = self.num_envs
+        rewards = np.empty(n)
+        terminated = np.empty(n, dtype=bool)
+        truncated = np.empty(n, dtype=bool)
+        # Truncated by the step limit or by the episode clock of ``timing``, whichever comes first
+        # (the rule of contract.episode_ends, with the step count, in one compiled pass).
+        count_steps_and_end_episodes(
+            report, cmd, self._episode_steps, self.max_episode_steps, rewards, terminated, truncated
+        )
         done = terminated | truncated
         final = None
         if mode == AutoresetMode.NEXT_STEP:

@@ -49,6 +49,7 @@ __all__ = [
     "person_substep",
     "simulate",
     "zoh_coefficients",
+    "zoh_coefficients_batch",
     "zoh_matrices",
 ]
 
@@ -157,6 +158,91 @@ def zoh_coefficients(
             e10 * e02 + e11 * e12 + e12,
         )
     return e00, e01, e10, e11, e02, e12
+
+
+@njit(cache=True)
+def zoh_coefficients_batch(
+    damping_rate_per_s: NDArray[np.float64],
+    voluntary_gain_per_s2: NDArray[np.float64],
+    dt_s: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
+    """:func:`zoh_coefficients` of ``m`` people at once: ``out[r] = zoh_coefficients(damping[r], gain[r], dt[r])``.
+
+    The same operations in the same order on each person's numbers, so the results are equal
+    bit for bit (tests/coop_gym/test_vector.py); only the loops are turned around. One person's
+    Taylor sum waits on its divisions one term after the other, while the people of a batch are
+    independent: with the people in the inner loop the compiler runs several divisions at once
+    (SIMD), ~3x faster for a batch of resets.
+
+    Args:
+        damping_rate_per_s: (m,) each person's damping ``lambda1`` [1/s].
+        voluntary_gain_per_s2: (m,) each person's voluntary gain ``k1`` [1/s^2].
+        dt_s: (m,) each person's simulation step [s].
+        out: (m, 6) ``(a00, a01, a10, a11, b0, b1)`` of each person.
+    """
+    m = damping_rate_per_s.shape[0]
+    a = np.empty(m)
+    b = np.empty(m)
+    c = np.empty(m)
+    d = np.empty(m)
+    squarings = np.empty(m, dtype=np.int64)
+    for r in range(m):  # the block and its scaling, as zoh_coefficients
+        ar = dt_s[r]
+        br = -voluntary_gain_per_s2[r] * dt_s[r]
+        cr = -damping_rate_per_s[r] * dt_s[r]
+        dr = dt_s[r]
+        norm = max(abs(br), abs(ar) + abs(cr), abs(dr))
+        count = 0
+        while norm > 0.5 and count < 64:
+            norm *= 0.5
+            count += 1
+        scale = 0.5**count
+        a[r] = ar * scale
+        b[r] = br * scale
+        c[r] = cr * scale
+        d[r] = dr * scale
+        squarings[r] = count
+    e = np.zeros((6, m))  # rows: e00, e01, e02, e10, e11, e12 of every person
+    t = np.zeros((6, m))
+    e[0, :] = 1.0
+    e[4, :] = 1.0
+    t[0, :] = 1.0
+    t[4, :] = 1.0
+    e00, e01, e02, e10, e11, e12 = e[0], e[1], e[2], e[3], e[4], e[5]
+    t00, t01, t02, t10, t11, t12 = t[0], t[1], t[2], t[3], t[4], t[5]
+    for k in range(1, 19):
+        for r in range(m):
+            n00 = t01[r] * b[r] / k
+            n01 = (t00[r] * a[r] + t01[r] * c[r]) / k
+            n02 = t01[r] * d[r] / k
+            n10 = t11[r] * b[r] / k
+            n11 = (t10[r] * a[r] + t11[r] * c[r]) / k
+            n12 = t11[r] * d[r] / k
+            t00[r], t01[r], t02[r], t10[r], t11[r], t12[r] = n00, n01, n02, n10, n11, n12
+            e00[r] += n00
+            e01[r] += n01
+            e02[r] += n02
+            e10[r] += n10
+            e11[r] += n11
+            e12[r] += n12
+    for r in range(m):
+        f00, f01, f02, f10, f11, f12 = e00[r], e01[r], e02[r], e10[r], e11[r], e12[r]
+        for _ in range(squarings[r]):
+            f00, f01, f02, f10, f11, f12 = (
+                f00 * f00 + f01 * f10,
+                f00 * f01 + f01 * f11,
+                f00 * f02 + f01 * f12 + f02,
+                f10 * f00 + f11 * f10,
+                f10 * f01 + f11 * f11,
+                f10 * f02 + f11 * f12 + f12,
+            )
+        out[r, 0] = f00
+        out[r, 1] = f01
+        out[r, 2] = f10
+        out[r, 3] = f11
+        out[r, 4] = f02
+        out[r, 5] = f12
 
 
 def pack_person(person: PersonParams, timing: Timing, hold_xi: bool = False) -> NDArray[np.float64]:

@@ -17,9 +17,12 @@ from coop_gym.envs.contract import (
     EPISODE_END,
     FEATURE_BOUNDS,
     FEATURES,
+    REPORT,
+    REPORT_COLUMNS,
     ActionDecoder,
     EnvArguments,
     batched_infos,
+    count_steps_and_end_episodes,
     decode_actions,
     encode_actions,
     episode_ends,
@@ -73,6 +76,45 @@ def test_episode_end_comes_from_the_outcome() -> None:
     assert truncated.tolist() == [not o.terminates for o in Outcome] + [False] * len(Outcome)
 
 
+@pytest.mark.parametrize("dtype", [np.int64, np.int32, np.uint8, np.uint64])
+def test_the_compiled_multidiscrete_decoding_takes_any_integer_dtype_and_refuses_out_of_range(dtype: type) -> None:
+    decoder = ActionDecoder("multidiscrete", Cues())
+    want = np.zeros((len(CHOICES), len(CMD)))
+    decoder.batch(CHOICES, want)
+    got = np.zeros((len(CHOICES), len(CMD)))
+    decoder.batch(CHOICES.astype(dtype), got)
+    assert np.array_equal(got, want)
+    for bad in ([0, 3, 0], [0, 0, 2], [3, 0, 0]):
+        actions = CHOICES.astype(dtype)
+        actions[-1] = bad
+        cmd = np.full((len(CHOICES), len(CMD)), 7.0)
+        with pytest.raises(ValueError, match="multidiscrete action must be"):
+            decoder.batch(actions, cmd)
+        assert (cmd == 7.0).all()  # nothing written
+    with pytest.raises(ValueError, match="multidiscrete action must be"):
+        decoder.batch(np.array([[0, 0, 0], [-1, 0, 0]]), np.zeros((2, len(CMD))))
+
+
+def test_the_compiled_episode_end_and_step_count_follow_episode_ends() -> None:
+    rng = np.random.default_rng(5)
+    n, limit = 400, 3
+    report = np.zeros((n, len(REPORT_COLUMNS)))
+    steps = rng.integers(0, limit + 1, n)
+    for _ in range(4):
+        report[:, REPORT.outcome] = rng.integers(0, len(Outcome), n)
+        report[:, REPORT.reward] = rng.normal(size=n)
+        cmd = np.zeros((n, len(CMD)))
+        cmd[:, CMD.active] = rng.random(n) < 0.7
+        stepped = cmd[:, CMD.active] > 0.5
+        want_steps = steps + stepped
+        want = episode_ends(report[:, REPORT.outcome], stepped, want_steps >= limit)
+        rewards, terminated, truncated = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        count_steps_and_end_episodes(report, cmd, steps, limit, rewards, terminated, truncated)
+        assert np.array_equal(steps, want_steps)
+        assert np.array_equal(terminated, want[0]) and np.array_equal(truncated, want[1])
+        assert np.array_equal(rewards, np.where(stepped, report[:, REPORT.reward], 0.0))
+
+
 def test_the_vector_infos_hold_the_single_env_info_of_each_env() -> None:
     envs = gym.make_vec("CoopGym/SitToStandMM-v0", num_envs=3)
     envs.reset(seed=2)
@@ -87,6 +129,50 @@ def test_the_vector_infos_hold_the_single_env_info_of_each_env() -> None:
                 assert value == {k: batched[key][k][i] for k in value}
             else:
                 assert np.array_equal(batched[key][i], value), key
+
+
+def _shares_memory(a: object, b: object) -> bool:
+    return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and np.shares_memory(a, b)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs"),
+    [
+        ("CoopGym/SitToStand-v0", {}),
+        ("CoopGym/SitToStandMM-v0", {}),
+        ("CoopGym/SitToStandUnit-v0", {}),
+        ("CoopGym/SitToStand-v0", {"info_mode": "numeric"}),
+        ("CoopGym/SitToStandIMM-v0", {"info_mode": "numeric"}),
+    ],
+)
+def test_the_infos_of_every_env_are_the_masked_infos_with_an_all_true_mask(env_id: str, kwargs: dict) -> None:
+    # The per-step infos (mask None: one compiled gather into fresh blocks) against the masked
+    # path with every env selected: the same keys in the same order, dtypes and values, and no
+    # two arrays sharing memory (a caller may keep or change any of them).
+    envs = gym.make_vec(env_id, num_envs=5, **kwargs)
+    envs.reset(seed=4)
+    builder, core = envs.unwrapped._info, envs.unwrapped.core
+    for _ in range(6):
+        envs.step(np.array([[1, 2, 0], [0, 0, 1], [2, 1, 0], [2, 2, 1], [0, 1, 0]]))
+        fast = builder.batched(core.report, None)
+        masked = builder.batched(core.report, np.ones(5, dtype=bool))
+        assert list(fast) == list(masked)
+        arrays = []
+        for key in fast:
+            pairs = (
+                [(k, fast[key][k], masked[key][k]) for k in fast[key]]
+                if key == "reward_terms"
+                else [(key, fast[key], masked[key])]
+            )
+            assert isinstance(fast[key], dict) == isinstance(masked[key], dict), key
+            if isinstance(fast[key], dict):
+                assert list(fast[key]) == list(masked[key])
+            for name, got, want in pairs:
+                assert got.dtype == want.dtype and got.shape == want.shape, name
+                assert got.tolist() == want.tolist(), name
+                arrays.append(got)
+        assert not any(_shares_memory(a, b) for a, b in itertools.combinations(arrays, 2))
+        assert not any(_shares_memory(a, core.state) for a in arrays)
 
 
 def test_one_list_of_env_keywords() -> None:

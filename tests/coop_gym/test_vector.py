@@ -21,6 +21,7 @@ from coop_gym.model.dynamics import (
     initial_state_row,
     pack_person,
     zoh_coefficients,
+    zoh_coefficients_batch,
     zoh_matrices,
 )
 from coop_gym.model.params import PersonParams, Realism, Timing
@@ -361,6 +362,20 @@ def test_zero_order_hold_agrees_with_scipy_expm() -> None:
         got = zoh_matrices(damping, gain, dt)
         assert np.max(np.abs(got - expected)) <= 1e-13 * np.max(np.abs(expected))
     assert all(np.isnan(zoh_coefficients(float("inf"), 9.0, 0.02)))  # terminates on bad input
+
+
+def test_the_batched_zero_order_hold_equals_the_scalar_one_bit_for_bit() -> None:
+    # Resets compute the ZOH of all their people in one batch; the person must stay the one
+    # pack_person builds, to the last bit, whatever the gains (squarings from 0 to the cap).
+    rng = np.random.default_rng(1)
+    m = 2000
+    damping = np.concatenate([rng.uniform(0.1, 60.0, m), [np.inf, np.nan, 0.0, 1e300]])
+    gain = np.concatenate([rng.uniform(0.1, 400.0, m), [9.0, 9.0, 0.0, 1e300]])
+    dt = np.concatenate([rng.choice([0.005, 0.02, 0.1, 1.0], m), [0.02, 0.02, 0.02, 0.02]])
+    out = np.empty((len(dt), 6))
+    zoh_coefficients_batch(damping, gain, dt, out)
+    want = np.array([zoh_coefficients(*args) for args in zip(damping, gain, dt, strict=True)])
+    assert np.array_equal(out.view(np.uint64), want.view(np.uint64))
 
 
 def test_step_before_reset_and_unknown_generator_raise_in_the_core() -> None:
