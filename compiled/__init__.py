@@ -7,6 +7,12 @@
 - :mod:`compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
 
+Every kernel is ``@njit(cache=True, error_model="numpy")``: NumPy's error model leaves out the
+ZeroDivisionError check (and its message formatting) that Python's model compiles into every
+division (seconds of every cold compile) and changes no result of a division by a
+non-zero number; where a divisor can be zero the kernels test it first
+(``tests/test_style.py`` holds every kernel to it).
+
 Imports nothing of ``coop_gym``, ``estimator`` or ``agents``; both the model/env side and
 the filters may import it.
 """

@@ -122,13 +122,13 @@ _MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
 _LOW32 = np.uint64(0xFFFFFFFF)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def random(g: NDArray[np.uint64]) -> float:
     """``Generator.random()``: a double in [0, 1) from the bit generator row ``g``."""
     return _call_double(g[G_NEXT_DOUBLE], g[G_STATE])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def standard_normal(g: NDArray[np.uint64]) -> float:
     """``Generator.standard_normal()``: NumPy's 256-layer ziggurat, step for step."""
     while True:
@@ -155,7 +155,7 @@ def standard_normal(g: NDArray[np.uint64]) -> float:
             return x
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def integers(g: NDArray[np.uint64], high: int) -> int:
     """``Generator.integers(high)`` for ``1 <= high < 2**32``: Lemire's bounded draw on 32 bits."""
     span = np.uint64(high - 1)

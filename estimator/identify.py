@@ -181,7 +181,7 @@ class IdentificationResult:
 # --------------------------------------------------------------------------- likelihood kernel
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _trial_mode_log_likelihoods(
     rows: NDArray[np.float64],
     initial_velocity_var: float,

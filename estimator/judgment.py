@@ -60,7 +60,7 @@ JUDGMENT_COLUMNS = ("since_onset_s", "pending", "judgment", "cue_was_active")
 JUDGE = index_table("JudgmentColumns", JUDGMENT_COLUMNS)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def judgment_substep(
     row: NDArray[np.float64], cue_active: bool, xi_estimate: float, delay_s: float, threshold: float, dt_s: float
 ) -> bool:

@@ -76,7 +76,7 @@ def nominal_row(model: NominalModel) -> NDArray[np.float64]:
     return np.array([values[name] for name in NOMINAL_COLUMNS])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _needs_repair(P: NDArray[np.float64]) -> bool:
     """Whether the symmetric ``P`` (4, 4) fails a Cholesky test of positive semi-definiteness.
 
@@ -116,7 +116,7 @@ def _needs_repair(P: NDArray[np.float64]) -> bool:
     return a33 < 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _all_finite(P: NDArray[np.float64]) -> bool:
     for i in range(4):
         for j in range(4):
@@ -125,7 +125,7 @@ def _all_finite(P: NDArray[np.float64]) -> bool:
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _symmetric_eigen(A: NDArray[np.float64], V: NDArray[np.float64]) -> None:
     """Cyclic Jacobi eigendecomposition of the symmetric ``A`` (4, 4), in place.
 
@@ -175,7 +175,7 @@ def _symmetric_eigen(A: NDArray[np.float64], V: NDArray[np.float64]) -> None:
             return
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _nearest_psd(P: NDArray[np.float64]) -> None:
     """Project the symmetric ``P`` (4, 4) back onto the PSD cone, in place, in its own scale.
 
@@ -207,7 +207,7 @@ def _nearest_psd(P: NDArray[np.float64]) -> None:
             P[j, i] = s
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, error_model="numpy", fastmath=False)
 def kalman_step(
     m: NDArray[np.float64],
     P: NDArray[np.float64],
@@ -288,7 +288,7 @@ def kalman_step(
     return innovation, S
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _kalman_run(
     m: NDArray[np.float64],
     P: NDArray[np.float64],

@@ -70,7 +70,7 @@ _NON_FINITE_INPUT = 1
 # --------------------------------------------------------------------------- kernels
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _log_normalise(log_mu: NDArray[np.float64]) -> None:
     """Normalise three log-probabilities in place with log-sum-exp."""
     mx = max(log_mu[0], max(log_mu[1], log_mu[2]))
@@ -89,7 +89,7 @@ def _log_normalise(log_mu: NDArray[np.float64]) -> None:
         log_mu[j] = (log_mu[j] - mx) - log_total
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _logaddexp(a: float, b: float) -> float:
     """``log(exp(a) + exp(b))`` without overflow; -inf arguments allowed."""
     if a < b:
@@ -99,7 +99,7 @@ def _logaddexp(a: float, b: float) -> float:
     return a + math.log1p(math.exp(b - a))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _riccati_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArray[np.float64]) -> float:
     """Predict and Joseph-update one mode covariance ``P`` (3, 3) in place; write the gain ``K`` (3,).
 
@@ -160,7 +160,7 @@ def _riccati_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArr
     return S
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _mean_step(
     m: NDArray[np.float64],
     nominal: NDArray[np.float64],
@@ -198,7 +198,7 @@ def _mean_step(
     return innovation
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _inputs_finite(push_force_n: NDArray[np.float64], verbal_cue: NDArray[np.float64], y: NDArray[np.float64]) -> bool:
     for i in range(y.shape[0]):
         if not (math.isfinite(push_force_n[i]) and math.isfinite(verbal_cue[i]) and math.isfinite(y[i])):
@@ -206,7 +206,7 @@ def _inputs_finite(push_force_n: NDArray[np.float64], verbal_cue: NDArray[np.flo
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _write_outputs(
     i: int,
     means: NDArray[np.float64],
@@ -223,7 +223,7 @@ def _write_outputs(
         mean_out[i, k] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mmae_env_step(
     i: int,
     means: NDArray[np.float64],
@@ -254,7 +254,7 @@ def _mmae_env_step(
     _log_normalise(log_mu[i])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _imm_env_step(
     i: int,
     means: NDArray[np.float64],
@@ -321,7 +321,7 @@ def _imm_env_step(
     _log_normalise(lm)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _filter(
     means: NDArray[np.float64],
     P: NDArray[np.float64],

@@ -30,3 +30,18 @@ def test_mypy_is_clean() -> None:
         timeout=600,
     )
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_every_kernel_uses_numpys_error_model() -> None:
+    """``compiled/__init__.py``: every project kernel is ``@njit(cache=True, error_model="numpy")``."""
+    import re
+
+    decorators = []
+    for package in ("compiled", "coop_gym", "estimator", "experiment", "agents"):
+        for path in (ROOT / package).rglob("*.py"):
+            for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                if re.match(r"\s*@(numba\.)?(njit|jit)\b", line):
+                    decorators.append((f"{path.relative_to(ROOT)}:{number}", line.strip()))
+    assert len(decorators) >= 30, decorators  # the scan finds the kernels
+    wrong = [(where, line) for where, line in decorators if 'cache=True, error_model="numpy"' not in line]
+    assert not wrong, wrong

@@ -328,7 +328,7 @@ def episode_ends(
     return terminated, truncated
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def count_steps_and_end_episodes(
     report: NDArray[np.float64],
     cmd: NDArray[np.float64],
@@ -444,7 +444,7 @@ def command_table(cues: Cues) -> NDArray[np.float64]:
     return np.ascontiguousarray(table[:, None, :])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _decode_multidiscrete(actions: NDArray[np.int64], flat: NDArray[np.float64], cmd: NDArray[np.float64]) -> bool:
     # cmd[i, :3] = flat[ravel_multi_index(actions[i], ACTION_SHAPE)] for every row, or False (and
     # nothing written) when any component is out of range.
@@ -751,7 +751,7 @@ multiple-model estimator adds ``p_uncooperative``, ``p_unresponsive``, ``p_coope
 default info's ``xi_probabilities``); ``observation_scale="unit"`` adds ``unscaled_obs``."""
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _gather_info_columns(
     report: NDArray[np.float64],
     float_columns: NDArray[np.int64],

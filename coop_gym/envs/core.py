@@ -272,7 +272,7 @@ class StepArrays:
 # as a whole env step's arithmetic.
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _observe_row(row: NDArray[np.float64], obs_row: NDArray[np.float32], consts: NDArray[np.float64]) -> None:
     # Select the features and clip in float64, then round: as np.clip(f, low, high).astype(float32).
     n_obs = int(consts[CONSTS.n_obs])
@@ -282,7 +282,7 @@ def _observe_row(row: NDArray[np.float64], obs_row: NDArray[np.float32], consts:
         obs_row[k] = min(max(value, consts[at + n_obs + k]), consts[at + 2 * n_obs + k])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _observe(
     indices: NDArray[np.int64], state: NDArray[np.float64], obs: NDArray[np.float32], consts: NDArray[np.float64]
 ) -> None:
@@ -290,7 +290,7 @@ def _observe(
         _observe_row(state[i], obs[i], consts)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _draw_reset(
     indices: NDArray[np.int64],
     generators: NDArray[np.uint64],
@@ -314,7 +314,7 @@ def _draw_reset(
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _reset_rows(
     indices: NDArray[np.int64],
     xi_override: int,
@@ -337,10 +337,14 @@ def _reset_rows(
         i = indices[r]
         persona = persona_table[int(draws[r, DRAWS.persona])]
         row = state[i]
-        row[:] = 0.0
+        # Element loops, not slice assignments: those compile numba's shape-mismatch error
+        # formatting (~4 s of every cold start); the copies are the same.
+        for j in range(row.shape[0]):
+            row[j] = 0.0
         # The person: the persona's packed row with the varied gains scaled (= sample_person + pack_person).
         p = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
-        p[:] = persona[PERSONA_BLOCKS.params : PERSONA_BLOCKS.params + len(PARAM_COLUMNS)]
+        for j in range(len(PARAM_COLUMNS)):
+            p[j] = persona[PERSONA_BLOCKS.params + j]
         if consts[CONSTS.vary] > 0.5:
             for j in range(n_varied):
                 column = int(consts[varied_at + j])
@@ -370,15 +374,15 @@ def _reset_rows(
         x0 = draws[r, DRAWS.lean]
         # initial_state_row(xi, x0): at rest at x0, intending to stay.
         s = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
-        s[:] = consts[template_at : template_at + len(STATE_COLUMNS)]
+        for j in range(len(STATE_COLUMNS)):
+            s[j] = consts[template_at + j]
         s[STATE.x_m] = x0
         s[STATE.eta_m] = x0
         s[STATE.xi] = xi
         # The filter, centred on the first reading with the nominal model's prior.
         nominal_width = len(NOMINAL_COLUMNS)
-        row[BLOCKS.nominal : BLOCKS.nominal + nominal_width] = persona[
-            PERSONA_BLOCKS.nominal : PERSONA_BLOCKS.nominal + nominal_width
-        ]
+        for j in range(nominal_width):
+            row[BLOCKS.nominal + j] = persona[PERSONA_BLOCKS.nominal + j]
         row[BLOCKS.mean] = x0
         row[BLOCKS.mean + 2] = x0
         row[BLOCKS.cov] = persona[PERSONA_BLOCKS.nominal + NOMINAL.r_position]  # P[0, 0] = R
@@ -401,7 +405,7 @@ def _reset_rows(
             _observe_row(row, obs[i], consts)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _lift_outcome(s: NDArray[np.float64], consts: NDArray[np.float64]) -> int:
     # The lift is judged on the true state at the moment it starts (§II).
     if s[STATE.xi] > 0.5 and s[STATE.x_m] >= consts[CONSTS.success_lean_m]:
@@ -411,7 +415,7 @@ def _lift_outcome(s: NDArray[np.float64], consts: NDArray[np.float64]) -> int:
     return _PREMATURE
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _simulate_action(
     row: NDArray[np.float64],
     cp: float,
@@ -476,7 +480,7 @@ def _simulate_action(
     return _NONE
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _write_reward_and_truth(
     row: NDArray[np.float64], result: int, lift: bool, cp: float, consts: NDArray[np.float64]
 ) -> None:
@@ -502,7 +506,7 @@ def _write_reward_and_truth(
     f[REPORT.info_true_xi] = s[STATE.xi]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _unready(cmd: NDArray[np.float64], generators: NDArray[np.uint64]) -> int:
     # The first active env that was never reset (has no generator), or -1. Checked before any
     # env is stepped, in order, so a failed call changes nothing and names the lowest such env.
@@ -512,7 +516,7 @@ def _unready(cmd: NDArray[np.float64], generators: NDArray[np.uint64]) -> int:
     return -1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, error_model="numpy", nogil=True)
 def _advance_rows(
     start: int,
     stop: int,
@@ -548,7 +552,7 @@ def _advance_rows(
             _observe_row(row, obs[i], consts)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _advance(
     cmd: NDArray[np.float64],
     state: NDArray[np.float64],

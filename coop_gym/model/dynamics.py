@@ -108,7 +108,7 @@ def zoh_matrices(damping_rate_per_s: float, voluntary_gain_per_s2: float, dt_s: 
     return np.array([[a00, a01, b0], [a10, a11, b1]])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def zoh_coefficients(
     damping_rate_per_s: float, voluntary_gain_per_s2: float, dt_s: float
 ) -> tuple[float, float, float, float, float, float]:
@@ -160,7 +160,7 @@ def zoh_coefficients(
     return e00, e01, e10, e11, e02, e12
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def zoh_coefficients_batch(
     damping_rate_per_s: NDArray[np.float64],
     voluntary_gain_per_s2: NDArray[np.float64],
@@ -290,14 +290,14 @@ def initial_state_row(xi: int, x0_m: float = 0.0) -> NDArray[np.float64]:
     return row
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _normal_cdf(z: float) -> float:
     # A standard normal mapped through its CDF is uniform on (0, 1): one stream of
     # normals serves every random need.
     return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cooperativeness_rates(
     p: NDArray[np.float64],
     xi: float,
@@ -348,7 +348,7 @@ def cooperativeness_rates(
     return up, down
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def person_substep(
     s: NDArray[np.float64],
     p: NDArray[np.float64],
@@ -442,7 +442,7 @@ def person_substep(
                     s[STATE.xi] = xi - 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def measure(
     s: NDArray[np.float64], p: NDArray[np.float64], push_force_n: float, z_position: float, z_force: float
 ) -> tuple[float, float]:
@@ -452,7 +452,7 @@ def measure(
     ] * z_force
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _simulate_kernel(
     s: NDArray[np.float64],
     p: NDArray[np.float64],
