@@ -194,6 +194,9 @@ def test_train_py_framework_rllib_with_two_env_runners(tmp_path):
         assert (run_dir / name).exists(), name
     results = json.loads((run_dir / "results.json").read_text())
     assert results["training"]["timesteps"] >= 2000 and results["training"]["num_env_runners"] == 2
+    assert results["training"]["num_envs_per_env_runner"] == 2  # --n-envs 4 split over the runners
+    # Trained behind the observation filter, loaded with its statistics.
+    assert load_rllib_agent(run_dir).normalizer is not None
     agents = [r["agent"] for r in results["evaluation"]["results"]]
     assert agents == ["rllib ppo (learned)", "handbook"]
     assert load_rllib_agent(run_dir).predict(np.zeros((2, 11), np.float32))[0].shape == (2, 3)
