@@ -173,6 +173,9 @@ def test_train_py_framework_rllib_with_two_env_runners(tmp_path):
         str(ROOT / "train.py"),
         "--framework",
         "rllib",
+        # PPO's own env is the hard level since 521485a; this test names the -v0 run folder.
+        "--env",
+        ENV_ID,
         "--num-env-runners",
         "2",
         "--n-envs",
