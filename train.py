@@ -62,7 +62,7 @@ class Args:
     timesteps: int | None = None
     """training env steps (default: agents/hyperparams.py); with --resume, steps added to the saved count"""
     n_envs: int | None = None
-    """parallel training envs (default: agents/hyperparams.py)"""
+    """parallel training envs (default: agents/hyperparams.py; --framework rllib: 64, split over the env runners)"""
     seed: int = 0
     """seed of training (envs, network init, sampling)"""
     out: str = "runs"
@@ -93,8 +93,9 @@ class Args:
     """show a progress bar while training"""
     framework: str = "sb3"
     """sb3 (Stable-Baselines3, in this process) or rllib (Ray RLlib PPO, new API stack; needs the [rllib] extra)"""
-    num_env_runners: int = 2
-    """--framework rllib: sampling actors (0: sample in the driver)"""
+    num_env_runners: int = 0
+    """--framework rllib: sampling actors (0: sample in the driver, measured fastest on one 2-core machine;
+    on a cluster, one or more per node)"""
     address: str | None = None
     """--framework rllib: an existing Ray cluster (ray://head:10001 or auto; default: start a local instance)"""
 

@@ -18,14 +18,22 @@ import pytest
 
 pytest.importorskip("ray.rllib")
 
+from ray.rllib.connectors.env_to_module import MeanStdFilter
 from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import coop_gym  # noqa: F401
 from agents.evaluate import evaluate
+from agents.hyperparams import hyperparams_for
 from agents.rllib import (
     CHECKPOINT_DIR,
+    DEFAULT_NUM_ENVS,
+    OBS_CLIP,
+    ObservationNormalizer,
     RLlibAgent,
+    _filter_path,
     _module_path,
+    envs_per_runner,
     is_rllib_run,
     load_rllib_agent,
     ppo_config,
@@ -71,6 +79,7 @@ def test_a_saved_module_loads_from_a_run_folder_and_the_evaluate_cli_takes_it(tm
     for path in (run_dir, run_dir / CHECKPOINT_DIR):
         loaded = load_rllib_agent(path)
         assert loaded.env_id == ENV_ID
+        assert loaded.normalizer is None  # no filter saved: raw observations, as trained
         assert np.array_equal(loaded.predict(obs)[0], expected)
 
     cli = [sys.executable, "-m", "agents.evaluate", "--model", str(run_dir), "--episodes", "4", "--json"]
@@ -88,6 +97,75 @@ def test_config_uses_the_new_api_stack_and_the_prefixed_id():
         ppo_config("CartPole-v1")
 
 
+def test_config_mirrors_sb3_ppo_lr_decay_no_kl_penalty_and_normalised_observations():
+    sb3 = hyperparams_for("ppo", ENV_ID)
+    config = ppo_config(ENV_ID, timesteps=300_000)
+    # SB3's "lin_3e-4": from 3e-4 to 0 over the budget (RLlib interpolates between the points).
+    assert config.lr == [[0, 3e-4], [300_000, 0.0]]
+    assert ppo_config(ENV_ID).lr == 3e-4  # no budget: constant
+    assert config.use_kl_loss is False  # SB3 has no KL penalty; RLlib's default adds one
+    assert sb3.normalize
+    env = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point")
+    pipeline = config.build_env_to_module_connector(env=env, spaces=None, device=None)
+    env.close()
+    (obs_filter,) = [c for c in pipeline.connectors if isinstance(c, MeanStdFilter)]
+    assert obs_filter.clip_by_value == OBS_CLIP == 10.0  # VecNormalize's clip_obs
+
+
+def test_env_runners_share_64_envs_unless_told():
+    # 8 envs per runner (SB3's count) sampled ~1,000 env steps/s, 64 ~4,000: RLlib's cost is per vector step.
+    assert DEFAULT_NUM_ENVS == 64
+    assert envs_per_runner(None, 0) == 64  # sampling in the driver
+    assert envs_per_runner(None, 1) == 64
+    assert envs_per_runner(None, 2) == 32
+    assert envs_per_runner(8, 2) == 4 and envs_per_runner(3, 4) == 1
+    # One 4096-step batch: fragments of 4096 / 64 steps.
+    config = ppo_config(ENV_ID, num_env_runners=2, num_envs_per_env_runner=envs_per_runner(None, 2))
+    assert config.get_rollout_fragment_length(1) * 2 * 32 == config.train_batch_size_per_learner == 4096
+
+
+def _trained_filter(rng: np.random.Generator, space: gym.spaces.Box, steps: int = 60) -> MeanStdFilter:
+    """A MeanStdFilter that has seen ``steps`` observations, as in an env runner."""
+    obs_filter = MeanStdFilter(clip_by_value=OBS_CLIP)
+    obs_filter.input_observation_space = space
+    observations = rng.normal(loc=np.linspace(-5, 100, 11), scale=np.linspace(0.1, 30, 11), size=(steps, 11))
+    for x in observations.astype(np.float32):
+        obs_filter(rl_module=None, batch={}, episodes=[SingleAgentEpisode(observations=[x], observation_space=space)])
+    return obs_filter
+
+
+def test_the_agent_normalises_observations_as_the_training_filter_did(tmp_path):
+    rng = np.random.default_rng(3)
+    module = _module()
+    space = gym.spaces.Box(-np.inf, np.inf, (11,), np.float32)
+    obs_filter = _trained_filter(rng, space)
+    normalizer = ObservationNormalizer.from_filter_state(obs_filter.get_state())
+
+    # The frozen filter (update_stats=False) is what the policy saw; the agent must match it.
+    frozen = MeanStdFilter(clip_by_value=OBS_CLIP, update_stats=False)
+    frozen.input_observation_space = space
+    frozen.set_state(obs_filter.get_state())
+    probes = rng.normal(loc=np.linspace(-5, 100, 11), scale=60.0, size=(20, 11)).astype(np.float32)
+    for x in probes:
+        episode = SingleAgentEpisode(observations=[x], observation_space=space)
+        frozen(rl_module=None, batch={}, episodes=[episode])
+        np.testing.assert_allclose(normalizer(x), episode.get_observations(-1), rtol=1e-6, atol=1e-6)
+    assert np.abs(normalizer(probes)).max() == pytest.approx(OBS_CLIP)  # some probes are clipped
+
+    # Saved beside the module in a checkpoint, the loader finds it; the agent acts on normalised input.
+    run_dir = tmp_path / "run"
+    module.save_to_path(str(_module_path(run_dir / CHECKPOINT_DIR)))
+    obs_filter.save_to_path(str(_filter_path(run_dir / CHECKPOINT_DIR)))
+    info = {"framework": "rllib", "algo": "ppo", "env_id": ENV_ID, "checkpoint": CHECKPOINT_DIR}
+    (run_dir / "agent.json").write_text(json.dumps(info))
+    loaded = load_rllib_agent(run_dir)
+    assert loaded.normalizer is not None
+    np.testing.assert_array_equal(loaded.normalizer.mean, normalizer.mean)
+    np.testing.assert_array_equal(loaded.normalizer.std, normalizer.std)
+    expected, _ = RLlibAgent(module).predict(normalizer(probes))
+    assert np.array_equal(loaded.predict(probes)[0], expected)
+
+
 @pytest.mark.slow
 def test_train_py_framework_rllib_with_two_env_runners(tmp_path):
     argv = [
@@ -95,6 +173,9 @@ def test_train_py_framework_rllib_with_two_env_runners(tmp_path):
         str(ROOT / "train.py"),
         "--framework",
         "rllib",
+        # PPO's own env is the hard level since 521485a; this test names the -v0 run folder.
+        "--env",
+        ENV_ID,
         "--num-env-runners",
         "2",
         "--n-envs",
@@ -116,6 +197,9 @@ def test_train_py_framework_rllib_with_two_env_runners(tmp_path):
         assert (run_dir / name).exists(), name
     results = json.loads((run_dir / "results.json").read_text())
     assert results["training"]["timesteps"] >= 2000 and results["training"]["num_env_runners"] == 2
+    assert results["training"]["num_envs_per_env_runner"] == 2  # --n-envs 4 split over the runners
+    # Trained behind the observation filter, loaded with its statistics.
+    assert load_rllib_agent(run_dir).normalizer is not None
     agents = [r["agent"] for r in results["evaluation"]["results"]]
     assert agents == ["rllib ppo (learned)", "handbook"]
     assert load_rllib_agent(run_dir).predict(np.zeros((2, 11), np.float32))[0].shape == (2, 3)
