@@ -320,11 +320,13 @@ def episode_ends(
         outcome: (N,) outcome codes (the report's ``outcome`` column).
         stepped: (N,) which envs were stepped (others neither terminate nor truncate).
         out_of_steps: (N,) envs at a step limit of their own (the vector env's
-            ``max_episode_steps``); they truncate unless they terminated.
+            ``max_episode_steps``); they truncate, also when the step terminated them: a
+            lift on the last allowed step is ``terminated`` and ``truncated``, exactly as
+            Gymnasium's ``TimeLimit`` reports it for the single env.
     """
     codes = outcome.astype(np.int64)
     terminated = stepped & TERMINATES[codes]
-    truncated = stepped & ~terminated & (out_of_steps | TRUNCATES[codes])
+    truncated = stepped & (out_of_steps | TRUNCATES[codes])
     return terminated, truncated
 
 
@@ -349,7 +351,7 @@ def count_steps_and_end_episodes(
             code = int(report[i, REPORT.outcome])
             rewards[i] = report[i, REPORT.reward]
             terminated[i] = TERMINATES[code]
-            truncated[i] = not terminated[i] and (episode_steps[i] >= max_episode_steps or TRUNCATES[code])
+            truncated[i] = episode_steps[i] >= max_episode_steps or TRUNCATES[code]
         else:
             rewards[i] = 0.0
             terminated[i] = False

@@ -71,9 +71,29 @@ def test_episode_end_comes_from_the_outcome() -> None:
     terminated, truncated = episode_ends(outcome, stepped, np.zeros(len(outcome), dtype=bool))
     assert terminated.tolist() == [o.terminates for o in Outcome] + [False] * len(Outcome)
     assert truncated.tolist() == [o.truncates for o in Outcome] + [False] * len(Outcome)
-    # A step limit truncates whatever did not terminate.
-    _, truncated = episode_ends(outcome, stepped, np.ones(len(outcome), dtype=bool))
-    assert truncated.tolist() == [not o.terminates for o in Outcome] + [False] * len(Outcome)
+    # A step limit truncates every stepped env, a terminated one too (as Gymnasium's TimeLimit).
+    terminated, truncated = episode_ends(outcome, stepped, np.ones(len(outcome), dtype=bool))
+    assert terminated.tolist() == [o.terminates for o in Outcome] + [False] * len(Outcome)
+    assert truncated.tolist() == [True] * len(Outcome) + [False] * len(Outcome)
+
+
+@pytest.mark.parametrize("lift", [0, 1])
+def test_the_last_allowed_step_ends_alike_in_the_single_and_the_vector_env(lift: int) -> None:
+    """A lift on the last allowed step: terminated and truncated in both (the single env's
+    TimeLimit sets truncated at the limit whatever the step did); a wait: truncated only."""
+    import gymnasium as gym
+
+    env_id, limit, seed = "CoopGym/SitToStand-v0", 5, 3
+    single = gym.make(env_id, max_episode_steps=limit)
+    vector = gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point", max_episode_steps=limit)
+    single.reset(seed=seed)
+    vector.reset(seed=seed)
+    for step in range(limit):
+        action = [2, 2, lift if step == limit - 1 else 0]
+        _, r_s, term_s, trunc_s, _ = single.step(np.array(action))
+        _, r_v, term_v, trunc_v, _ = vector.step(np.array([action]))
+        assert (r_s, term_s, trunc_s) == (r_v[0], term_v[0], trunc_v[0]), step
+    assert trunc_s and term_s == bool(lift)
 
 
 @pytest.mark.parametrize("dtype", [np.int64, np.int32, np.uint8, np.uint64])
