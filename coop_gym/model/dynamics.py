@@ -108,6 +108,48 @@ def zoh_matrices(damping_rate_per_s: float, voluntary_gain_per_s2: float, dt_s: 
     return np.array([[a00, a01, b0], [a10, a11, b1]])
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _van_loan_block(
+    damping_rate_per_s: float, voluntary_gain_per_s2: float, dt_s: float
+) -> tuple[float, float, float, float, int]:
+    # The block [[0, dt, 0], [-k1 dt, -lambda1 dt, dt], [0, 0, 0]] as (a, b, c, d), halved
+    # ``squarings`` times until its 1-norm (largest column sum) is at most 1/2.
+    a = dt_s
+    b = -voluntary_gain_per_s2 * dt_s
+    c = -damping_rate_per_s * dt_s
+    d = dt_s
+    norm = max(abs(b), abs(a) + abs(c), abs(d))
+    squarings = 0
+    while norm > 0.5 and squarings < 64:  # the cap stops the loop on inf/NaN gains
+        norm *= 0.5
+        squarings += 1
+    scale = 0.5**squarings
+    return a * scale, b * scale, c * scale, d * scale, squarings
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _taylor_term(
+    t00: float, t01: float, t10: float, t11: float, a: float, b: float, c: float, d: float, k: int
+) -> tuple[float, float, float, float, float, float]:
+    # T_k = T_(k-1) M / k, the top two rows of the block's Taylor term.
+    return t01 * b / k, (t00 * a + t01 * c) / k, t01 * d / k, t11 * b / k, (t10 * a + t11 * c) / k, t11 * d / k
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _squared(
+    e00: float, e01: float, e02: float, e10: float, e11: float, e12: float
+) -> tuple[float, float, float, float, float, float]:
+    # E E for E = [[e00, e01, e02], [e10, e11, e12], [0, 0, 1]], top two rows.
+    return (
+        e00 * e00 + e01 * e10,
+        e00 * e01 + e01 * e11,
+        e00 * e02 + e01 * e12 + e02,
+        e10 * e00 + e11 * e10,
+        e10 * e01 + e11 * e11,
+        e10 * e02 + e11 * e12 + e12,
+    )
+
+
 @njit(cache=True, error_model="numpy")
 def zoh_coefficients(
     damping_rate_per_s: float, voluntary_gain_per_s2: float, dt_s: float
@@ -119,29 +161,14 @@ def zoh_coefficients(
     1e-22 relative) and squared back. It agrees with ``scipy.linalg.expm`` to ~1e-15;
     scipy's BLAS calls cost 10 us to milliseconds (thread contention) per episode reset.
     """
-    # The block is [[0, dt, 0], [-k1 dt, -lambda1 dt, dt], [0, 0, 0]]. Its powers keep a zero
-    # last row and its exponential the last row [0, 0, 1], so only the top two rows (six
-    # numbers) are carried: no arrays, nothing allocated.
-    a = dt_s
-    b = -voluntary_gain_per_s2 * dt_s
-    c = -damping_rate_per_s * dt_s
-    d = dt_s
-    norm = max(abs(b), abs(a) + abs(c), abs(d))  # largest column sum
-    squarings = 0
-    while norm > 0.5 and squarings < 64:  # the cap stops the loop on inf/NaN gains
-        norm *= 0.5
-        squarings += 1
-    scale = 0.5**squarings
-    a *= scale
-    b *= scale
-    c *= scale
-    d *= scale
+    # The block's powers keep a zero last row and its exponential the last row [0, 0, 1], so
+    # only the top two rows (six numbers) are carried: no arrays, nothing allocated.
+    a, b, c, d, squarings = _van_loan_block(damping_rate_per_s, voluntary_gain_per_s2, dt_s)
     # Taylor: E = sum_k T_k with T_0 = I and T_k = T_(k-1) M / k.
     e00, e01, e02, e10, e11, e12 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0
-    t00, t01, t02, t10, t11, t12 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0
+    t00, t01, t10, t11 = 1.0, 0.0, 0.0, 1.0
     for k in range(1, 19):
-        t00, t01, t02 = t01 * b / k, (t00 * a + t01 * c) / k, t01 * d / k
-        t10, t11, t12 = t11 * b / k, (t10 * a + t11 * c) / k, t11 * d / k
+        t00, t01, t02, t10, t11, t12 = _taylor_term(t00, t01, t10, t11, a, b, c, d, k)
         e00 += t00
         e01 += t01
         e02 += t02
@@ -149,14 +176,7 @@ def zoh_coefficients(
         e11 += t11
         e12 += t12
     for _ in range(squarings):
-        e00, e01, e02, e10, e11, e12 = (
-            e00 * e00 + e01 * e10,
-            e00 * e01 + e01 * e11,
-            e00 * e02 + e01 * e12 + e02,
-            e10 * e00 + e11 * e10,
-            e10 * e01 + e11 * e11,
-            e10 * e02 + e11 * e12 + e12,
-        )
+        e00, e01, e02, e10, e11, e12 = _squared(e00, e01, e02, e10, e11, e12)
     return e00, e01, e10, e11, e02, e12
 
 
@@ -169,11 +189,11 @@ def zoh_coefficients_batch(
 ) -> None:
     """:func:`zoh_coefficients` of ``m`` people at once: ``out[r] = zoh_coefficients(damping[r], gain[r], dt[r])``.
 
-    The same operations in the same order on each person's numbers, so the results are equal
-    bit for bit (tests/coop_gym/test_vector.py); only the loops are turned around. One person's
-    Taylor sum waits on its divisions one term after the other, while the people of a batch are
-    independent: with the people in the inner loop the compiler runs several divisions at once
-    (SIMD), ~3x faster for a batch of resets.
+    The same operations (the same helpers) in the same order on each person's numbers, so the
+    results are equal bit for bit (tests/coop_gym/test_vector.py); only the loops are turned
+    around. One person's Taylor sum waits on its divisions one term after the other, while the
+    people of a batch are independent: with the people in the inner loop the compiler runs
+    several divisions at once (SIMD), ~3x faster for a batch of resets.
 
     Args:
         damping_rate_per_s: (m,) each person's damping ``lambda1`` [1/s].
@@ -182,44 +202,26 @@ def zoh_coefficients_batch(
         out: (m, 6) ``(a00, a01, a10, a11, b0, b1)`` of each person.
     """
     m = damping_rate_per_s.shape[0]
-    a = np.empty(m)
-    b = np.empty(m)
-    c = np.empty(m)
-    d = np.empty(m)
+    block = np.empty((4, m))  # a, b, c, d of every person
     squarings = np.empty(m, dtype=np.int64)
-    for r in range(m):  # the block and its scaling, as zoh_coefficients
-        ar = dt_s[r]
-        br = -voluntary_gain_per_s2[r] * dt_s[r]
-        cr = -damping_rate_per_s[r] * dt_s[r]
-        dr = dt_s[r]
-        norm = max(abs(br), abs(ar) + abs(cr), abs(dr))
-        count = 0
-        while norm > 0.5 and count < 64:
-            norm *= 0.5
-            count += 1
-        scale = 0.5**count
-        a[r] = ar * scale
-        b[r] = br * scale
-        c[r] = cr * scale
-        d[r] = dr * scale
-        squarings[r] = count
+    for r in range(m):
+        block[0, r], block[1, r], block[2, r], block[3, r], squarings[r] = _van_loan_block(
+            damping_rate_per_s[r], voluntary_gain_per_s2[r], dt_s[r]
+        )
+    a, b, c, d = block[0], block[1], block[2], block[3]
     e = np.zeros((6, m))  # rows: e00, e01, e02, e10, e11, e12 of every person
-    t = np.zeros((6, m))
-    e[0, :] = 1.0
-    e[4, :] = 1.0
-    t[0, :] = 1.0
-    t[4, :] = 1.0
+    t = np.zeros((4, m))  # rows: t00, t01, t10, t11
+    for r in range(m):
+        e[0, r] = 1.0
+        e[4, r] = 1.0
+        t[0, r] = 1.0
+        t[3, r] = 1.0
     e00, e01, e02, e10, e11, e12 = e[0], e[1], e[2], e[3], e[4], e[5]
-    t00, t01, t02, t10, t11, t12 = t[0], t[1], t[2], t[3], t[4], t[5]
+    t00, t01, t10, t11 = t[0], t[1], t[2], t[3]
     for k in range(1, 19):
         for r in range(m):
-            n00 = t01[r] * b[r] / k
-            n01 = (t00[r] * a[r] + t01[r] * c[r]) / k
-            n02 = t01[r] * d[r] / k
-            n10 = t11[r] * b[r] / k
-            n11 = (t10[r] * a[r] + t11[r] * c[r]) / k
-            n12 = t11[r] * d[r] / k
-            t00[r], t01[r], t02[r], t10[r], t11[r], t12[r] = n00, n01, n02, n10, n11, n12
+            n00, n01, n02, n10, n11, n12 = _taylor_term(t00[r], t01[r], t10[r], t11[r], a[r], b[r], c[r], d[r], k)
+            t00[r], t01[r], t10[r], t11[r] = n00, n01, n10, n11
             e00[r] += n00
             e01[r] += n01
             e02[r] += n02
@@ -229,14 +231,7 @@ def zoh_coefficients_batch(
     for r in range(m):
         f00, f01, f02, f10, f11, f12 = e00[r], e01[r], e02[r], e10[r], e11[r], e12[r]
         for _ in range(squarings[r]):
-            f00, f01, f02, f10, f11, f12 = (
-                f00 * f00 + f01 * f10,
-                f00 * f01 + f01 * f11,
-                f00 * f02 + f01 * f12 + f02,
-                f10 * f00 + f11 * f10,
-                f10 * f01 + f11 * f11,
-                f10 * f02 + f11 * f12 + f12,
-            )
+            f00, f01, f02, f10, f11, f12 = _squared(f00, f01, f02, f10, f11, f12)
         out[r, 0] = f00
         out[r, 1] = f01
         out[r, 2] = f10
