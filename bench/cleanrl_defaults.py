@@ -59,7 +59,7 @@ class ScriptAgent:
         return actions.numpy().astype(np.int64), state
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--script", required=True, help="path of CleanRL's ppo.py (or another script defining `agent`)")
     parser.add_argument("--env-id", default="CoopGym/SitToStandDiscreteUnit-v0", choices=sorted(coop_gym.ENV_IDS))
@@ -67,7 +67,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1, help="the script's --seed (CleanRL's default is 1)")
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--out", default="runs/cleanrl")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     script = Path(args.script)
     if not script.is_file():
         parser.error(f"--script: no such file {str(script)!r}")

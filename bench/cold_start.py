@@ -69,14 +69,14 @@ def _summary(values: list[float]) -> str:
     return f"{statistics.median(values):6.2f} s ({min(values):.2f}..{max(values):.2f})"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="CoopGym/SitToStand-v0", help="env id (default: %(default)s)")
     parser.add_argument("--num-envs", type=int, nargs="*", default=[0, 1024], help="0 = gym.make; N = make_vec xN")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--kernels", action="store_true", help="list the cold run's compilations")
     parser.add_argument("--json", type=Path, help="also write the measurements here")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error(f"--repeats: must be a positive integer, got {args.repeats}")
     if any(n < 0 for n in args.num_envs):
