@@ -35,16 +35,28 @@ ENV_IDS = {"ppo": "CoopGym/SitToStand-v0", "dqn": "CoopGym/SitToStandDiscrete-v0
 
 
 class _Snapshots(BaseCallback):
-    """Save the model the first time ``num_timesteps`` reaches each of ``steps``."""
+    """Save the model once ``num_timesteps`` has reached each of ``steps``, after that rollout's update.
+
+    ``learn(total_timesteps=n)`` stops after the update of the rollout that reaches ``n``, so the
+    model saved at the start of the next rollout (or at the end of training) is that run's model.
+    """
 
     def __init__(self, steps: list[int], path_for: Callable[[int], Path]) -> None:
         super().__init__()
         self.pending = sorted(steps)
         self.path_for = path_for
 
-    def _on_step(self) -> bool:
+    def _save_reached(self) -> None:
         while self.pending and self.num_timesteps >= self.pending[0]:
             self.model.save(self.path_for(self.pending.pop(0)))
+
+    def _on_rollout_start(self) -> None:
+        self._save_reached()
+
+    def _on_training_end(self) -> None:
+        self._save_reached()
+
+    def _on_step(self) -> bool:
         return True
 
 
