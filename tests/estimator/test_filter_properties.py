@@ -250,15 +250,19 @@ def _compare_with_filterpy(model: NominalModel, data: tuple[np.ndarray, ...], st
             np.testing.assert_allclose(got[1], exact[1][t], rtol=0, atol=atol_p, err_msg=f"{name} cov {t}")
 
 
-@settings(COMMON, max_examples=40)
+# The default run's accuracy properties draw a fixed set of examples (derandomize): their 1e-9
+# bound is at the edge of double precision on the strongest pushes, and the long runs below
+# (random, thousands of examples) found models past it (the strict xfail above). A CI run must
+# not pass or fail by the luck of the draw; the exploration is the long runs' job.
+@settings(COMMON, max_examples=40, derandomize=True)
 @given(model=well_conditioned_models(), data=sequences(max_steps=150))
 def test_fast_filter_matches_filterpy_everywhere(model: NominalModel, data: tuple[np.ndarray, ...]) -> None:
-    """Agreement with filterpy to 1e-9 wherever the problem is well conditioned."""
+    """Both filters within 1e-9 of the extended-precision answer wherever the problem is well conditioned."""
     EXAMPLES["fast_filter_matches_filterpy_everywhere"] += 1
     _compare_with_filterpy(model, data, strict=True)
 
 
-@settings(COMMON, max_examples=20)
+@settings(COMMON, max_examples=20, derandomize=True)
 @given(model=any_model(), data=sequences(max_steps=150))
 def test_fast_filter_and_filterpy_accurate_at_the_edges(model: NominalModel, data: tuple[np.ndarray, ...]) -> None:
     EXAMPLES["fast_filter_and_filterpy_accurate_at_the_edges"] += 1
