@@ -28,7 +28,7 @@ def _dummy(env_id: str, n: int, seed: int, **kwargs: Any) -> DummyVecEnv:
 
 
 def _assert_same_info(got: dict[str, Any], expected: dict[str, Any]) -> None:
-    assert set(got) - set(expected) <= {"persona_index", "outcome_code"}, set(got) ^ set(expected)
+    assert set(got) == set(expected), set(got) ^ set(expected)
     for key, value in expected.items():
         if key == "episode":
             assert got["episode"]["r"] == pytest.approx(value["r"]) and got["episode"]["l"] == value["l"]
