@@ -874,7 +874,6 @@ class InfoBuilder:
         """The vector env's infos from its report rows; entries outside ``mask`` (default all) are zero."""
         if mask is None:
             return self._all_envs(report)
-            mask = np.ones(report.shape[0], dtype=bool)
         outside = ~mask
         infos: dict[str, Any] = {}
         if self.numeric:
