@@ -1,11 +1,12 @@
 """The declared gymnasium range is the tested one: both checkers pass at its lowest and highest version.
 
 The default install takes the newest gymnasium (1.4.0 here), so the ``highest`` test runs
-in every default run; the ``lowest`` one runs only in a venv pinned to the lower bound::
+in every default run; the ``lowest`` one runs in a venv pinned to the lower bound, which the
+README's test command builds after the default suite (``scripts/test_other_installs.sh``)::
 
     python -m venv .venv-gymlow && . .venv-gymlow/bin/activate
     pip install "torch==2.13.0" "gymnasium==1.1.1" -e ".[train,test]"
-    python -m pytest tests/coop_gym
+    python -m pytest tests/coop_gym/test_gymnasium_range.py
 
 Each is skipped (saying why) under any other version. Gymnasium 1.0 lacks
 ``gymnasium.vector.AutoresetMode``; ray[rllib] 2.60 pins 1.2.2, inside the range.
