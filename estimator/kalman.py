@@ -175,22 +175,32 @@ def _symmetric_eigen(A: NDArray[np.float64], V: NDArray[np.float64]) -> None:
             return
 
 
+_EPS = float(np.finfo(np.float64).eps)
+"""Double precision's relative spacing (2.2e-16): the floor of the repair's diagonal scale."""
+
+
 @njit(cache=True, error_model="numpy")
 def _nearest_psd(P: NDArray[np.float64]) -> None:
     """Project the symmetric ``P`` (4, 4) back onto the PSD cone, in place, in its own scale.
 
     Only for a covariance that rounding has pushed out of the PSD cone (see :func:`kalman_step`).
     The eigenvalues are clipped at 0 in the diagonally scaled matrix ``C = D^-1/2 P D^-1/2``
-    (``D`` = the positive diagonal of ``P``; 1 where it is not positive) and ``P`` becomes
+    (``D`` = the diagonal of ``P``, each entry at least ``eps * max(P_ii)``; 1 where all are 0) and ``P`` becomes
     ``D^1/2 V max(w, 0) V^T D^1/2``. So each entry moves by at most ``|w_min| sqrt(P_ii P_jj)``,
     relative to its own variances: clipping in ``P``'s own scale would move a 1e-12 position
     variance by ``eps * 100`` when the intention variance is 100 -- a 1 % error that the
     extended-precision filter shows is rounding, not information. Each diagonal entry is a sum
     of non-negative terms, so ``P_00 >= 0`` and ``S = P_00 + R >= R`` hold exactly afterwards.
     """
+    # A variance below eps * the largest one is rounding in P's own scale, not information:
+    # dividing by it would blow its row's rounding up (a 5e-45 intention variance beside
+    # off-diagonal rounding of 1e-18 made |C_ij| ~ 1e4 and the repaired P[1, 1] 2e9).
+    largest = max(P[0, 0], P[1, 1], P[2, 2], P[3, 3])
+    floor = _EPS * largest
     scale = np.empty(4)
     for i in range(4):
-        scale[i] = math.sqrt(P[i, i]) if P[i, i] > 0.0 else 1.0
+        variance = max(P[i, i], floor)
+        scale[i] = math.sqrt(variance) if variance > 0.0 else 1.0
     C = np.empty((4, 4))
     V = np.empty((4, 4))
     for i in range(4):

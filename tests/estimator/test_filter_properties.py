@@ -438,6 +438,23 @@ def test_repair_keeps_small_variances_accurate() -> None:
     _compare_with_filterpy(model, data, strict=False)
 
 
+def test_repair_ignores_variances_below_rounding() -> None:
+    """Found by the long edge property: no intention noise or prior, a 1 um camera, opposite verbal
+    cues. After 4 steps the intention variance is ~5e-41 (known exactly, up to rounding) beside
+    off-diagonal rounding of ~1e-18, and P fails the PSD test. Scaling the repair by that variance
+    made the scaled entries ~1e4 and the repaired P[1, 1] 2.3e9 (exact: 1.04). The repair's scale
+    now ignores variances below eps * the largest; the filter is within 1e-6 of the exact answer."""
+    model = NominalModel(
+        dt_s=0.046875, damping_rate_per_s=2.5, voluntary_gain_per_s2=26.666666666666668, push_compliance_m_per_s2_n=0.0,
+        push_gain_m_per_s_n=0.0, verbal_gain_m_per_s=3.9940423778111542, position_noise_std_m=1e-06,
+        velocity_process_std_m_per_s=1.0, intention_process_std_m=0.0, cooperativeness_process_std=0.0,
+        position_process_std_m=0.0, initial_velocity_std_m_per_s=0.0, initial_intention_std_m=0.0,
+        initial_cooperativeness_std=1.0,
+    )  # fmt: skip
+    data = (np.zeros((1, 4)), np.array([[-1.0, -1.0, 1.0, 1.0]]), np.full((1, 4), -0.01))
+    assert _compare_with_filterpy(model, data, strict=False) == EDGE
+
+
 @settings(COMMON, max_examples=30)
 @given(model=raw_models(), data=sequences(n_envs=2, max_steps=300))
 def test_fast_filter_stays_finite_and_psd_on_any_model(model: NominalModel, data: tuple[np.ndarray, ...]) -> None:
