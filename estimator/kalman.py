@@ -5,8 +5,10 @@ Two implementations of the same maths:
 * :class:`PaperKalmanFilter` -- built on ``filterpy.kalman.KalmanFilter``; the
   reference, readable and slow (~40 us a step).
 * :class:`FastKalmanFilter` -- a batched, compiled (numba) version of the identical
-  predict/update used in the environments' hot path. Tests hold it to the filterpy
-  filter within 1e-9 on long random cue sequences.
+  predict/update used in the environments' hot path. Tests hold both to the
+  extended-precision answer within 1e-9 on long random cue sequences, wherever double
+  precision allows that (tests/estimator/test_filter_properties.py), and within 1e-6 on
+  edge models.
 
 Symbols (shapes for one filter; the batched arrays add a leading env axis ``N``):
 
@@ -185,11 +187,11 @@ def _nearest_psd(P: NDArray[np.float64]) -> None:
 
     Only for a covariance that rounding has pushed out of the PSD cone (see :func:`kalman_step`).
     The eigenvalues are clipped at 0 in the diagonally scaled matrix ``C = D^-1/2 P D^-1/2``
-    (``D`` = the diagonal of ``P``, each entry at least ``eps * max(P_ii)``; 1 where all are 0) and ``P`` becomes
-    ``D^1/2 V max(w, 0) V^T D^1/2``. So each entry moves by at most ``|w_min| sqrt(P_ii P_jj)``,
-    relative to its own variances: clipping in ``P``'s own scale would move a 1e-12 position
-    variance by ``eps * 100`` when the intention variance is 100 -- a 1 % error that the
-    extended-precision filter shows is rounding, not information. Each diagonal entry is a sum
+    (``D`` = the diagonal of ``P``, each entry raised to at least ``eps * max(P_ii)``; 1 where
+    all are 0) and ``P`` becomes ``D^1/2 V max(w, 0) V^T D^1/2``. So each entry moves by at most
+    ``|w_min| sqrt(P_ii P_jj)``, relative to its own variances: clipping in ``P``'s own scale
+    would move a 1e-12 position variance by ``eps * 100`` when the intention variance is 100 --
+    a 1 % error that the extended-precision filter shows is rounding, not information. Each diagonal entry is a sum
     of non-negative terms, so ``P_00 >= 0`` and ``S = P_00 + R >= R`` hold exactly afterwards.
     """
     # A variance below eps * the largest one is rounding in P's own scale, not information:

@@ -235,8 +235,9 @@ STRICT, EDGE = 1e-9, 1e-6
 
 FLOOR_FRACTION = 0.1
 """A problem is well conditioned for the strict bound when double precision itself allows it
-with room to spare: the exact filter with its state stored in doubles (the error floor of any
-double-precision filter) stays within ``FLOOR_FRACTION * STRICT`` of the exact answer."""
+with room to spare: the exact filter with its prior and posterior stored in doubles (the error
+floor of a predict/update filter in double precision) stays within ``FLOOR_FRACTION * STRICT``
+of the exact answer."""
 
 
 def _scaled_errors(
