@@ -191,8 +191,9 @@ def _nearest_psd(P: NDArray[np.float64]) -> None:
     all are 0) and ``P`` becomes ``D^1/2 V max(w, 0) V^T D^1/2``. So each entry moves by at most
     ``|w_min| sqrt(P_ii P_jj)``, relative to its own variances: clipping in ``P``'s own scale
     would move a 1e-12 position variance by ``eps * 100`` when the intention variance is 100 --
-    a 1 % error that the extended-precision filter shows is rounding, not information. Each diagonal entry is a sum
-    of non-negative terms, so ``P_00 >= 0`` and ``S = P_00 + R >= R`` hold exactly afterwards.
+    a 1 % error that the extended-precision filter shows is rounding, not information. Each
+    diagonal entry is a sum of non-negative terms, so ``P_00 >= 0`` and ``S = P_00 + R >= R``
+    hold exactly afterwards.
     """
     # A variance below eps * the largest one is rounding in P's own scale, not information:
     # dividing by it would blow its row's rounding up (a 5e-45 intention variance beside
