@@ -371,18 +371,25 @@ def test_edge_model_from_the_long_run_stays_finite_and_psd() -> None:
     _check_fast_run(model, data)
 
 
+def _pushed_model(**changes: float) -> NominalModel:
+    """The long strict property's found push models: damping 1 /s, push gain 1, no verbal gain, a
+    0.1 mm camera, process noise 1e-4 (cooperativeness 1) and a 1e-3 prior; ``changes`` set the
+    step, the voluntary gain and the push compliance."""
+    base = NominalModel(
+        damping_rate_per_s=1.0, push_gain_m_per_s_n=1.0, verbal_gain_m_per_s=0.0, position_noise_std_m=1e-4,
+        velocity_process_std_m_per_s=1e-4, intention_process_std_m=1e-4, cooperativeness_process_std=1.0,
+        position_process_std_m=1e-4, initial_velocity_std_m_per_s=1e-3, initial_intention_std_m=1e-3,
+        initial_cooperativeness_std=1e-3,
+    )  # fmt: skip
+    return base.replace(**changes)
+
+
 def test_both_filters_accurate_where_they_disagree_by_their_summed_rounding() -> None:
     """Found by the long strict property: after a 200 N push at dt 0.1 s (condition ~1.6e9) the
     compiled filter and filterpy were 1.007e-9 apart on the velocity mean, each within 1e-9 of
     the extended-precision answer (7.7e-10 and 2.4e-10). Its double-precision floor is 1.6e-10
     (past FLOOR_FRACTION, so the property now holds it at the edge bound); held here to 1e-9."""
-    model = NominalModel(
-        dt_s=0.1, damping_rate_per_s=1.0, voluntary_gain_per_s2=4.999999999999999, push_compliance_m_per_s2_n=0.0,
-        push_gain_m_per_s_n=1.0, verbal_gain_m_per_s=0.0, position_noise_std_m=1e-4,
-        velocity_process_std_m_per_s=1e-4, intention_process_std_m=1e-4, cooperativeness_process_std=1.0,
-        position_process_std_m=1e-4, initial_velocity_std_m_per_s=1e-3, initial_intention_std_m=1e-3,
-        initial_cooperativeness_std=1e-3,
-    )  # fmt: skip
+    model = _pushed_model(dt_s=0.1, voluntary_gain_per_s2=4.999999999999999, push_compliance_m_per_s2_n=0.0)
     push = np.zeros((1, 16))
     push[0, 6] = 200.0
     data = (push, np.full((1, 16), -1.0), np.array([[-0.01] + [0.01] * 15]))
@@ -401,13 +408,7 @@ def test_repeated_200n_pushes_are_past_the_double_precision_floor() -> None:
     exactly but storing its prior and posterior in doubles is 5.1e-10 off -- half the strict
     bound. So the strict bound does not apply (FLOOR_FRACTION); both filters stay within a few
     times that floor (compiled 2.2x, filterpy 0.5x)."""
-    model = NominalModel(
-        dt_s=0.09375, damping_rate_per_s=1.0, voluntary_gain_per_s2=5.333333333333333, push_compliance_m_per_s2_n=1.0,
-        push_gain_m_per_s_n=1.0, verbal_gain_m_per_s=0.0, position_noise_std_m=1e-4,
-        velocity_process_std_m_per_s=1e-4, intention_process_std_m=1e-4, cooperativeness_process_std=1.0,
-        position_process_std_m=1e-4, initial_velocity_std_m_per_s=1e-3, initial_intention_std_m=1e-3,
-        initial_cooperativeness_std=1e-3,
-    )  # fmt: skip
+    model = _pushed_model(dt_s=0.09375, voluntary_gain_per_s2=5.333333333333333, push_compliance_m_per_s2_n=1.0)
     data = (np.array([[200.0, 200.0, 0.0, 200.0, 200.0]]), np.full((1, 5), -1.0), np.full((1, 5), -0.01))
     means, covs = _check_fast_run(model, data)
     errors = _scaled_errors(model, data, means, covs)
