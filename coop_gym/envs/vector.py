@@ -227,11 +227,13 @@ class SitToStandVectorEnv(VectorEnv):
                 f"envs {np.flatnonzero(pending).tolist()} finished their episodes and autoreset is disabled; "
                 'reset them with reset(options={"reset_mask": mask}) before stepping'
             )
-        # NEXT_STEP: the envs that finished last step are reset now instead of stepped.
+        # NEXT_STEP: the envs that finished last step are reset now instead of stepped (in the
+        # same call: on a threaded step the resets overlap the stepping).
         stepped = ~pending
         cmd = core.cmd
         cmd[:, CMD.active] = stepped
-        core.step_commands(cmd)
+        resetting = mode == AutoresetMode.NEXT_STEP and pending.any()
+        core.step_commands(cmd, reset=self._all[pending] if resetting else None)
         if stepped[0]:
             self._env0_stepped = True
             self._env0_lift = bool(cmd[0, CMD.lift] > 0.5)
@@ -248,7 +250,8 @@ class SitToStandVectorEnv(VectorEnv):
         done = terminated | truncated
         final = None
         if mode == AutoresetMode.NEXT_STEP:
-            self._reset_finished(pending)
+            if resetting:
+                self._restart_counts(pending)
             self._done = done
         elif mode == AutoresetMode.SAME_STEP:
             if done.any():
@@ -286,11 +289,15 @@ class SitToStandVectorEnv(VectorEnv):
         """Autoreset the envs of ``mask``, each continuing its own generator."""
         if mask.any():
             self.core.reset_envs(self._all[mask])
-            self._episode_steps[mask] = 0
-            if mask[0]:
-                self._env0_stepped = False
-                self._env0_lift = False
+            self._restart_counts(mask)
         self._done = np.zeros(self.num_envs, dtype=bool)
+
+    def _restart_counts(self, mask: NDArray[np.bool_]) -> None:
+        """The bookkeeping of an autoreset of the envs of ``mask`` (the core has reset them)."""
+        self._episode_steps[mask] = 0
+        if mask[0]:
+            self._env0_stepped = False
+            self._env0_lift = False
 
     def _seed_list(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
         n = self.num_envs

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
+from numpy.typing import NDArray
 
 import coop_gym
 from coop_gym.envs import core as core_module
@@ -172,3 +173,53 @@ def test_a_child_forked_after_a_parallel_step_still_steps_and_agrees() -> None:
     child.join(timeout=60)
     assert child.exitcode == 0
     np.testing.assert_array_equal(obs, expected)
+
+
+def _stepped_core(threads: int) -> Any:
+    """A core of 300 envs (above the threshold for two threads) a few steps into its episodes."""
+    envs = gym.make_vec("CoopGym/SitToStand-v0", num_envs=300, threads=threads, **SHORT)
+    envs.reset(seed=5)
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        envs.step(np.column_stack([rng.integers(0, 3, 300), rng.integers(0, 3, 300), np.zeros(300, dtype=np.int64)]))
+    return envs.unwrapped.core
+
+
+def _commands(core: Any, active: NDArray[np.bool_]) -> NDArray[np.float64]:
+    cmd = core.cmd.copy()
+    cmd[:, core_module.CMD.push_force_n] = 10.0
+    cmd[:, core_module.CMD.verbal_cue] = 1.0
+    cmd[:, core_module.CMD.lift] = 0.0
+    cmd[:, core_module.CMD.active] = active
+    return cmd
+
+
+@pytest.mark.parametrize("threads", [1, TWO_THREADS])
+def test_a_step_with_resets_equals_the_step_then_the_resets(threads: int) -> None:
+    together, apart = _stepped_core(threads), _stepped_core(threads)
+    active = np.random.default_rng(0).random(300) < 0.6
+    reset = np.flatnonzero(~active).astype(np.int64)
+    together.step_commands(_commands(together, active), reset=reset)
+    assert together._chunks == threads
+    apart.step_commands(_commands(apart, active))
+    apart.reset_envs(reset)
+    np.testing.assert_array_equal(together.state, apart.state)
+    np.testing.assert_array_equal(together.obs, apart.obs)
+    for a, b in zip(together.rngs, apart.rngs, strict=True):
+        assert a.bit_generator.state == b.bit_generator.state
+
+
+@pytest.mark.parametrize("threads", [1, TWO_THREADS])
+def test_a_step_that_would_reset_a_stepped_env_or_one_without_a_generator_changes_nothing(threads: int) -> None:
+    core = _stepped_core(threads)
+    before = core.state.copy()
+    draws = [rng.bit_generator.state for rng in core.rngs]
+    active = np.ones(300, dtype=bool)
+    active[10:20] = False
+    with pytest.raises(ValueError, match="both stepped and reset"):
+        core.step_commands(_commands(core, active), reset=np.arange(5, 15, dtype=np.int64))
+    core.generators[12, core_module.G_STATE] = 0  # as if env 12 had never had a generator
+    with pytest.raises(RuntimeError, match="env 12 has no random generator"):
+        core.step_commands(_commands(core, active), reset=np.arange(10, 20, dtype=np.int64))
+    np.testing.assert_array_equal(core.state, before)
+    assert [rng.bit_generator.state for rng in core.rngs] == draws
