@@ -6,6 +6,8 @@
   every validator of the project.
 - :mod:`compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
+- :mod:`compiled.atomics`: atomic loads, compare-and-swap and add on int64 array elements (how
+  the threaded step shares work without the GIL).
 
 Every kernel is ``@njit(cache=True, error_model="numpy")``: NumPy's error model leaves out the
 ZeroDivisionError check (and its message formatting) that Python's model compiles into every

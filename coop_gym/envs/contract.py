@@ -980,9 +980,9 @@ class EnvArguments:
     estimator_options: dict[str, Any] | None = None
     render_mode: str | None = None
     difficulty: str | Difficulty | None = None
-    # The vector env's compiled step: at most this many threads (None: the cores). One by default:
-    # on the shared 2-core dev machine 2 threads ran at 0.79-0.86x of one (README, "Speed").
-    threads: int | None = 1
+    # The vector env's compiled step: at most this many threads (None, the default: the cores
+    # this process may use; README, "Threads").
+    threads: int | None = None
     observation_scale: str = "none"
     info_mode: str = "default"
 

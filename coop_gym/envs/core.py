@@ -18,9 +18,9 @@ passes few arrays.
 
 Threads: a batch of at least 2 x :data:`MIN_ENVS_PER_THREAD` envs steps on up to
 :attr:`SitToStandCore.threads` threads (:meth:`SitToStandCore.set_threads`), each running the
-compiled step, without the GIL, on a contiguous range of envs. Env ``i``'s numbers depend
-only on its own row and generator, so the results are bit-identical whatever the thread
-count (tests/coop_gym/test_threads.py).
+compiled step, without the GIL, on blocks of envs it claims from an atomic counter. Env ``i``'s
+numbers depend only on its own row and generator, so the results are bit-identical whatever
+the thread count (tests/coop_gym/test_threads.py).
 
 Randomness: env ``i`` draws only from its own ``numpy.random.Generator``, in a fixed
 order -- at reset ``integers(n_personas)``, the person's variation normals, ``random()``
@@ -38,10 +38,10 @@ Numba caches the kernels on disk, keyed by every project source they compile in
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import os
 import threading
-from concurrent.futures import Future, ThreadPoolExecutor
+import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,6 +49,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from compiled.atomics import atomic_add, atomic_cas, atomic_load
 from compiled.cache import guard_kernel_cache
 from compiled.rng import G_STATE, bit_generator_row, integers, random, standard_normal
 from compiled.schema import field_values, index_table, offset_table
@@ -166,13 +167,12 @@ INITIAL_LEAN_STD_M = 0.005
 
 _NO_OVERRIDE = -99  # "draw it" for the persona / initial-xi overrides of a reset
 
-MIN_ENVS_PER_THREAD = 128
-"""Fewer envs per thread than this step on one thread. Measured on the shared 2-core dev machine
-(core.step_commands, 2 threads vs 1, load 2.5-3.5): a threaded step costs ~40 us more (waking a
-worker), so 16 envs ran at 0.3-0.4x, 64 at 0.6x, 128 at 0.7-0.8x, 256 at 0.85-0.9x, 1024 at
-0.85-0.9x -- that machine never had an idle core to gain. The env-step itself is ~1 us of
-CPU, so with a free core a second thread pays from ~80 envs: 128 per thread keeps the single
-env and small batches serial, and large batches lose little when no core is free."""
+MIN_ENVS_PER_THREAD = 512
+"""Fewer envs per thread than this step on one thread. Measured on the quiet 2-core VM (the vector
+env under random actions, 20 alternating runs of 100 steps, 2 threads over 1, three sessions):
+256 envs 0.75-0.88x, 512 envs 0.89-1.08x, 1024 envs 1.04-1.29x. A threaded step costs a worker's
+wake-up (~0.1 ms on that VM) and moves the envs' rows between the cores' caches (~2 KB per env),
+so two threads pay only from ~1024 envs; the single env and SB3-sized batches step on one."""
 
 
 ENVS_PER_BLOCK = 64
@@ -556,6 +556,71 @@ def _advance_rows(
             _observe_row(row, obs[i], consts)
 
 
+# The threaded step's control words (an int64 array per core): the claim word -- the step's
+# number in the high 32 bits, the next unclaimed block in the low 32 -- and the blocks done.
+_CLAIM, _DONE = 0, 1
+_LOW32 = (1 << 32) - 1
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _advance_claimed(
+    step: int,
+    blocks: int,
+    control: NDArray[np.int64],
+    cmd: NDArray[np.float64],
+    state: NDArray[np.float64],
+    generators: NDArray[np.uint64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> None:
+    # Step blocks of envs, claimed one at a time, until step ``step`` has none left. A worker that
+    # starts after its step is over finds another step's number in the claim word and does nothing.
+    n = cmd.shape[0]
+    while True:
+        word = atomic_load(control, _CLAIM)
+        block = word & _LOW32
+        if word >> 32 != step or block >= blocks:
+            return
+        if atomic_cas(control, _CLAIM, word, word + 1) == word:
+            _advance_rows(block * n // blocks, (block + 1) * n // blocks, cmd, state, generators, obs, consts)
+            atomic_add(control, _DONE, 1)
+
+
+def _yield_core() -> None:
+    # The scheduler may run another thread on this core now (the GIL is released meanwhile).
+    if hasattr(os, "sched_yield"):
+        os.sched_yield()
+    else:  # Windows
+        time.sleep(0)
+
+
+_WAIT_SPINS = 20_000
+"""Reads of the done count before the waiting thread yields its core (tens of microseconds: about
+one block's work, the usual wait; on a busy machine a worker holding a block gets the core)."""
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _close_step(control: NDArray[np.int64], blocks: int) -> int:
+    # Leave no block of the current step to claim; returns how many were claimed (all of them,
+    # unless the calling thread was interrupted before it had claimed the rest).
+    while True:
+        word = atomic_load(control, _CLAIM)
+        claimed = word & _LOW32
+        if claimed >= blocks:
+            return blocks
+        if atomic_cas(control, _CLAIM, word, word - claimed + blocks) == word:
+            return claimed
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _blocks_done(control: NDArray[np.int64], blocks: int, spins: int) -> bool:
+    # Whether every block is done, read up to ``spins`` times: a wait too short to sleep through.
+    for _ in range(spins):
+        if atomic_load(control, _DONE) >= blocks:
+            return True
+    return False
+
+
 @njit(cache=True, error_model="numpy")
 def _advance(
     cmd: NDArray[np.float64],
@@ -633,6 +698,8 @@ class SitToStandCore:
         self.mm = self._make_multiple_model(multiple_model_options or {}) if estimator != "kalman" else None
         self.threads = available_threads()
         self._chunks = 0  # threads a step uses; 0: plan again (see _plan_chunks)
+        self._control = np.zeros(2, dtype=np.int64)  # a threaded step's claim word and blocks done
+        self._step_number = 0  # of threaded steps, in the claim word
         # With a multiple-model estimator the observation waits for its probabilities.
         self.consts[CONSTS.build_obs] = 1.0 if self.mm is None else 0.0
 
@@ -814,32 +881,36 @@ class SitToStandCore:
     def _advance_threaded(self, cmd: NDArray[np.float64], chunks: int, reset: NDArray[np.int64] | None) -> None:
         """Step the envs on up to ``chunks`` threads (this one and ``chunks - 1`` workers).
 
-        The envs are cut into blocks of about :data:`ENVS_PER_BLOCK`, and each thread takes the
-        next unclaimed block until none is left: on a busy machine a worker that is not
-        scheduled in time is cancelled and this thread steps every block (one thread's speed,
-        not a wait for the slowest); with a free core the blocks are shared. The envs of
-        ``reset`` (not active in ``cmd``) are reset by this thread first, while the workers
-        wake up (~0.1 ms on the 2-core VM) and start on the blocks.
+        The envs are cut into blocks of about :data:`ENVS_PER_BLOCK`, and each thread claims the
+        next unclaimed block (an atomic counter in a ``nogil`` kernel) until none is left: on a
+        busy machine a worker that is not scheduled in time finds the step over and does
+        nothing, and this thread steps every block (one thread's speed, not a wait for the
+        slowest); with a free core the blocks are shared. The envs of ``reset`` (not active in
+        ``cmd``) are reset by this thread first, while the workers wake up (~0.1 ms on the
+        2-core VM). This thread then waits for the workers' last blocks in a kernel, not on a
+        lock: a lock's wake-up would cost as much again (after :data:`_WAIT_SPINS` reads it yields the
+        core between reads).
         """
         n = self.n_envs
         blocks = max(chunks, n // ENVS_PER_BLOCK)
-        args = (cmd, self.state, self.generators, self.obs, self.consts)
-        claims = itertools.count()  # next() on it is atomic under the GIL
-
-        def step_blocks() -> None:
-            while (b := next(claims)) < blocks:
-                _advance_rows(b * n // blocks, (b + 1) * n // blocks, *args)
-
+        control = self._control
+        self._step_number = step = (self._step_number + 1) & _LOW32
+        control[_DONE] = 0
+        control[_CLAIM] = step << 32  # after the done count: a worker may claim as soon as it sees this
+        args = (step, blocks, control, cmd, self.state, self.generators, self.obs, self.consts)
         pool = _worker_pool(chunks - 1)
-        helpers: list[Future[None]] = [pool.submit(step_blocks) for _ in range(chunks - 1)]
+        for _ in range(chunks - 1):
+            pool.submit(_advance_claimed, *args)
         try:
             if reset is not None:
                 self.reset_envs(reset)
-            step_blocks()
+            _advance_claimed(*args)
         finally:
-            for helper in helpers:
-                if not helper.cancel():  # it started: wait for its last block
-                    helper.result()
+            # Every block is claimed -- or, if this thread was interrupted (Ctrl-C), none will be
+            # from now on: no worker goes on changing the envs once this call has returned.
+            claimed = _close_step(control, blocks)
+            while not _blocks_done(control, claimed, _WAIT_SPINS):
+                _yield_core()
 
     def step_commands(self, cmd: NDArray[np.float64], reset: NDArray[np.int64] | None = None) -> None:
         """Advance the active envs by one agent action; results land in ``report`` and ``obs``.

@@ -51,9 +51,8 @@ class SitToStandVectorEnv(VectorEnv):
     * ``DISABLED``: finished envs must be reset by the caller with
       ``reset(options={"reset_mask": mask})``; stepping them raises.
 
-    ``threads``: the compiled step runs on up to this many threads (default 1; ``None``: the
-    cores this process may use); batches under 128 envs per thread step on one. One is the
-    default because two never won on the shared 2-core machine it was measured on (0.79-0.86x). Every env draws only
+    ``threads``: the compiled step runs on up to this many threads (default ``None``: the cores
+    this process may use); batches under 512 envs per thread step on one. Every env draws only
     from its own generator, so the results are bit-identical whatever the count.
 
     ## Reset

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing
+import time
 from typing import Any
 
 import gymnasium as gym
@@ -114,10 +115,10 @@ def test_bad_threads_raise_naming_the_argument(threads: Any) -> None:
         SitToStandVectorEnv(num_envs=2, threads=threads)
 
 
-def test_threads_default_to_one_none_means_the_cores_and_small_batches_step_on_one() -> None:
-    assert SitToStandVectorEnv(num_envs=4, threads=None).threads == core_module.available_threads() >= 1
+def test_threads_default_to_the_cores_and_small_batches_step_on_one() -> None:
+    assert SitToStandVectorEnv(num_envs=4, threads=1).threads == 1
     envs = SitToStandVectorEnv(num_envs=4)
-    assert envs.threads == 1
+    assert envs.threads == core_module.available_threads() >= 1
     envs.reset(seed=0)
     envs.step(envs.action_space.sample())
     assert envs.core._chunks == 1  # 4 envs: below MIN_ENVS_PER_THREAD on any thread count
@@ -176,7 +177,7 @@ def test_a_child_forked_after_a_parallel_step_still_steps_and_agrees() -> None:
 
 
 def _stepped_core(threads: int) -> Any:
-    """A core of 300 envs (above the threshold for two threads) a few steps into its episodes."""
+    """A core of 300 envs a few steps into its episodes (split over threads: parallel_for_small_batches)."""
     envs = gym.make_vec("CoopGym/SitToStand-v0", num_envs=300, threads=threads, **SHORT)
     envs.reset(seed=5)
     rng = np.random.default_rng(3)
@@ -194,6 +195,7 @@ def _commands(core: Any, active: NDArray[np.bool_]) -> NDArray[np.float64]:
     return cmd
 
 
+@pytest.mark.usefixtures("parallel_for_small_batches")
 @pytest.mark.parametrize("threads", [1, TWO_THREADS])
 def test_a_step_with_resets_equals_the_step_then_the_resets(threads: int) -> None:
     together, apart = _stepped_core(threads), _stepped_core(threads)
@@ -209,6 +211,7 @@ def test_a_step_with_resets_equals_the_step_then_the_resets(threads: int) -> Non
         assert a.bit_generator.state == b.bit_generator.state
 
 
+@pytest.mark.usefixtures("parallel_for_small_batches")
 @pytest.mark.parametrize("threads", [1, TWO_THREADS])
 def test_a_step_that_would_reset_a_stepped_env_or_one_without_a_generator_changes_nothing(threads: int) -> None:
     core = _stepped_core(threads)
@@ -223,3 +226,46 @@ def test_a_step_that_would_reset_a_stepped_env_or_one_without_a_generator_change
         core.step_commands(_commands(core, active), reset=np.arange(10, 20, dtype=np.int64))
     np.testing.assert_array_equal(core.state, before)
     assert [rng.bit_generator.state for rng in core.rngs] == draws
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+def test_a_worker_that_starts_after_its_step_is_over_changes_nothing() -> None:
+    # On a busy machine a worker may be scheduled only after the calling thread stepped every
+    # block: it must neither step an env twice nor take a block of the next step.
+    core = _stepped_core(TWO_THREADS)
+    cmd = _commands(core, np.ones(300, dtype=bool))
+    core.step_commands(cmd)
+    assert core._chunks == TWO_THREADS
+    before = core.state.copy()
+    draws = [rng.bit_generator.state for rng in core.rngs]
+    arrays = (cmd, core.state, core.generators, core.obs, core.consts)
+    blocks = 300 // core_module.ENVS_PER_BLOCK
+    step = core._step_number
+    core_module._advance_claimed(step, blocks, core._control, *arrays)  # this step's worker, late: none left
+    core._control[core_module._CLAIM] = (step + 1) << 32  # the next step has begun, no block claimed yet
+    core_module._advance_claimed(step, blocks, core._control, *arrays)  # the late worker finds another step
+    assert core._control[core_module._CLAIM] == (step + 1) << 32
+    np.testing.assert_array_equal(core.state, before)
+    assert [rng.bit_generator.state for rng in core.rngs] == draws
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+def test_an_interrupted_threaded_step_leaves_no_worker_running(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Ctrl-C while the calling thread resets envs, before the worker has woken (~0.1 ms): when
+    # the exception leaves step_commands, no worker may go on to step the envs behind its back.
+    core = _stepped_core(TWO_THREADS)
+    active = np.ones(300, dtype=bool)
+    active[:10] = False
+
+    def interrupted_reset(indices: Any) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(core, "reset_envs", interrupted_reset)
+    with pytest.raises(KeyboardInterrupt):
+        core.step_commands(_commands(core, active), reset=np.arange(10, dtype=np.int64))
+    claimed = int(core._control[core_module._CLAIM] & core_module._LOW32)
+    blocks = 300 // core_module.ENVS_PER_BLOCK
+    assert claimed == blocks  # closed: nothing is left to claim
+    after = core.state.copy()
+    time.sleep(0.05)  # the worker wakes meanwhile, and must find the step over
+    np.testing.assert_array_equal(core.state, after)
