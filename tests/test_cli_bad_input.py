@@ -184,6 +184,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/run.py", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
     ("bench/cold_start.py", "repeats 0", ["--repeats", "0"], r"--repeats: must be a positive integer, got 0"),
+    ("bench/render.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
     ("bench/cold_start.py", "unknown env", ["--env", "CartPole-v1"], r"--env: unknown env id 'CartPole-v1'"),
     ("bench/cold_start.py", "negative env count", ["--num-envs", "-1"], r"--num-envs: must be >= 0, got \[-1\]"),
     ("bench/cleanrl_defaults.py", "missing script", ["--script", "/nonexistent/ppo.py"], r"--script: no such file"),
