@@ -20,8 +20,6 @@ from numba.core import cgutils
 from numba.core.extending import intrinsic
 from numpy.typing import NDArray
 
-from compiled.cache import guard_kernel_cache
-
 __all__ = ["atomic_add", "atomic_cas", "atomic_load"]
 
 _ORDER = "seq_cst"
@@ -107,5 +105,3 @@ else:
 atomic_load.__doc__ = """``array[index]``, read atomically."""
 atomic_cas.__doc__ = """If ``array[index] == expected`` set it to ``new``, atomically; returns the old value."""
 atomic_add.__doc__ = """``array[index] += amount``, atomically; returns the old value."""
-
-guard_kernel_cache(__name__)
