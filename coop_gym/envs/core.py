@@ -557,9 +557,11 @@ def _advance_rows(
 
 
 # The threaded step's control words (an int64 array per core): the claim word -- the step's
-# number in the high 32 bits, the next unclaimed block in the low 32 -- and the blocks done.
+# number in the high bits, the next unclaimed block in the low 32 -- and the blocks done. Step
+# numbers wrap at 2**31, so the claim word stays a non-negative int64.
 _CLAIM, _DONE = 0, 1
 _LOW32 = (1 << 32) - 1
+_STEP_NUMBERS = 1 << 31
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -699,7 +701,6 @@ class SitToStandCore:
         self.threads = available_threads()
         self._chunks = 0  # threads a step uses; 0: plan again (see _plan_chunks)
         self._control = np.zeros(2, dtype=np.int64)  # a threaded step's claim word and blocks done
-        self._step_number = 0  # of threaded steps, in the claim word
         # With a multiple-model estimator the observation waits for its probabilities.
         self.consts[CONSTS.build_obs] = 1.0 if self.mm is None else 0.0
 
@@ -894,7 +895,7 @@ class SitToStandCore:
         n = self.n_envs
         blocks = max(chunks, n // ENVS_PER_BLOCK)
         control = self._control
-        self._step_number = step = (self._step_number + 1) & _LOW32
+        step = (int(control[_CLAIM] >> 32) + 1) % _STEP_NUMBERS  # the last step's number, plus one
         control[_DONE] = 0
         control[_CLAIM] = step << 32  # after the done count: a worker may claim as soon as it sees this
         args = (step, blocks, control, cmd, self.state, self.generators, self.obs, self.consts)

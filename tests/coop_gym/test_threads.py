@@ -240,7 +240,7 @@ def test_a_worker_that_starts_after_its_step_is_over_changes_nothing() -> None:
     draws = [rng.bit_generator.state for rng in core.rngs]
     arrays = (cmd, core.state, core.generators, core.obs, core.consts)
     blocks = 300 // core_module.ENVS_PER_BLOCK
-    step = core._step_number
+    step = int(core._control[core_module._CLAIM] >> 32)
     core_module._advance_claimed(step, blocks, core._control, *arrays)  # this step's worker, late: none left
     core._control[core_module._CLAIM] = (step + 1) << 32  # the next step has begun, no block claimed yet
     core_module._advance_claimed(step, blocks, core._control, *arrays)  # the late worker finds another step
@@ -269,3 +269,17 @@ def test_an_interrupted_threaded_step_leaves_no_worker_running(monkeypatch: pyte
     after = core.state.copy()
     time.sleep(0.05)  # the worker wakes meanwhile, and must find the step over
     np.testing.assert_array_equal(core.state, after)
+
+
+@pytest.mark.usefixtures("parallel_for_small_batches")
+def test_step_numbers_wrap_without_overflowing_the_claim_word() -> None:
+    # After 2**31 - 1 threaded steps the next number is 0 (a shift of 2**31 would overflow int64).
+    core = _stepped_core(TWO_THREADS)
+    twin = _stepped_core(TWO_THREADS)
+    core._control[core_module._CLAIM] = (core_module._STEP_NUMBERS - 1) << 32
+    cmd = _commands(core, np.ones(300, dtype=bool))
+    core.step_commands(cmd)
+    twin.step_commands(_commands(twin, np.ones(300, dtype=bool)))
+    blocks = 300 // core_module.ENVS_PER_BLOCK
+    assert core._control[core_module._CLAIM] == blocks  # step 0, every block claimed
+    np.testing.assert_array_equal(core.state, twin.state)
