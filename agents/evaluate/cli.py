@@ -28,12 +28,12 @@ from agents.evaluate import (
     PLOT_SUFFIXES,
     EvaluationResult,
     evaluate,
-    headroom,
     print_table,
     results_json,
     write_csv,
     write_json,
 )
+from agents.run_folder import is_rllib_run
 from agents.scripted import SCRIPTED_AGENTS
 from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.model.personas import resolve_personas
@@ -159,7 +159,7 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
     if entry in SCRIPTED_AGENTS:
         return entry, args.env or DEFAULT_ENV_ID, entry
     folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
-    if _is_rllib_run(entry):
+    if is_rllib_run(entry):
         from agents.rllib import load_rllib_agent
 
         try:
@@ -198,10 +198,7 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
     if args.json:
         print(json.dumps(results_json(results)))
     else:
-        print_table(results)
-        room = headroom(results)
-        if room is not None:
-            print("\n".join(room.lines()))
+        print_table(results)  # with the headroom and mind-reading lines when there is an oracle and a blind agent
         if args.by_persona:
             split = [sub for r in results for sub in _split_named(r)]
             print_table(split, title="by persona")
@@ -218,19 +215,6 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
         print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
         return 1
     return 0
-
-
-def _is_rllib_run(entry: str) -> bool:
-    """A run folder of ``train.py --framework rllib`` (its ``agent.json`` says so); no Ray import."""
-    path = Path(entry)
-    folder = path.parent if path.name == "checkpoint" else path
-    info = folder / "agent.json"
-    if not (path.is_dir() and info.exists()):
-        return False
-    try:
-        return bool(json.loads(info.read_text()).get("framework") == "rllib")
-    except (OSError, ValueError, AttributeError):
-        return False  # not an RLlib run; the SB3 loader names what is wrong with the file
 
 
 def _split_named(result: EvaluationResult) -> list[EvaluationResult]:

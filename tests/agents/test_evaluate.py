@@ -17,7 +17,6 @@ from agents.evaluate import (
     EvaluationResult,
     env_kwargs_for,
     evaluate,
-    vector_env_available,
     wilson_interval,
     write_csv,
 )
@@ -68,7 +67,6 @@ def test_oracle_variant_plays_the_same_episodes():
             assert b_info["true_x_m"] == o_info["true_x_m"] and b_info["true_xi"] == o_info["true_xi"]
 
 
-@pytest.mark.skipif(not vector_env_available(), reason="coop_gym.envs.vector not available yet")
 def test_vector_and_single_env_backends_agree():
     for name in ("handbook", "push_then_lift"):
         single = evaluate(name, personas="test", episodes=20, seed=5, n_envs=8, backend="single")

@@ -1,0 +1,322 @@
+r"""What a comparison says about reading the mind: headroom, insight and the mind-reading score.
+
+On one level (one env id) and the same seeded episodes, three success rates anchor it:
+
+* the oracle's (it sees the true ``xi``: the upper bound),
+* the best mental-state-blind policy's (:data:`BLIND_AGENTS`; the tuned ``blind`` of
+  ``agents.scripted.make_scripted("blind", level=LEVEL)`` is the family's best),
+* and every other agent's.
+
+From them: the **value of reading the mind** = oracle - best blind (what knowing ``xi`` is
+worth on this level), the **achieved insight** = best non-oracle - best blind (how much of
+it a policy obtains from the cue answers), and per agent the **mind-reading score**
+
+.. math:: s = \frac{\text{success} - \text{best blind}}{\text{oracle} - \text{best blind}},
+
+0 for a policy that ignores the mind, 1 for the oracle. Its 95 % interval is a paired
+percentile bootstrap: episodes are resampled, and the agent, the best blind policy and the
+oracle are scored on the same resampled episodes (they played the same seeds), so the
+interval reflects the episodes drawn, not three independent samples.
+
+Across training seeds (one score per run and level), :func:`iqm_across_runs` reports the
+interquartile mean with a stratified bootstrap interval: runs are resampled within each
+level, as rliable does (Agarwal et al., "Deep RL at the Edge of the Statistical Precipice",
+NeurIPS 2021). Both intervals come from :func:`scipy.stats.bootstrap`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from agents.evaluate.results import EvaluationResult
+
+__all__ = [
+    "BLIND_AGENTS",
+    "ORACLE_AGENTS",
+    "AggregateScore",
+    "Headroom",
+    "MindReadingScore",
+    "headroom",
+    "iqm_across_runs",
+]
+
+ORACLE_AGENTS = ("oracle",)
+"""Agents that see the true mental state: upper bounds, never the "best non-oracle"."""
+BLIND_AGENTS = ("blind", "push_then_lift", "lift_at_once", "random")
+"""Scripted agents that never use the cue-response evidence (lean, timers and pushes only)."""
+N_RESAMPLES = 2000
+"""Bootstrap resamples: the percentile interval's ends move by well under a point beyond this."""
+BOOTSTRAP_SEED = 0
+"""The resampling is seeded: the same results give the same intervals."""
+
+Interval = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class MindReadingScore:
+    """One agent's mind-reading score on one level.
+
+    Attributes:
+        agent: The agent's name in the comparison.
+        score: ``(success - best blind) / (oracle - best blind)``; NaN when the oracle does not
+            beat the best blind policy (nothing to read on this level).
+        ci95: Paired percentile bootstrap 95 % interval (NaN ends when undefined, e.g. when in some
+            resample of a small comparison the oracle does not beat the best blind policy).
+    """
+
+    agent: str
+    score: float
+    ci95: Interval
+
+    def text(self) -> str:
+        """``0.78 [0.74, 0.82]`` (``-`` when undefined)."""
+        if not math.isfinite(self.score):
+            return "-"
+        return f"{self.score:.2f} [{self.ci95[0]:.2f}, {self.ci95[1]:.2f}]"
+
+
+@dataclass(frozen=True)
+class Headroom:
+    """What a comparison says about reading the mind (success rates in [0, 1]).
+
+    Attributes:
+        oracle: Best success of the agents that see the true ``xi``.
+        best_blind: Best success of the mental-state-blind agents (:data:`BLIND_AGENTS`).
+        best_reader: Best success of every other agent (learned or scripted, no oracle).
+        best_blind_agent, best_reader_agent: Their names.
+        value_ci95, insight_ci95: Paired bootstrap 95 % intervals of the two differences.
+        scores: The mind-reading score of every agent in the comparison, in its order.
+    """
+
+    oracle: float
+    best_blind: float
+    best_reader: float
+    best_blind_agent: str
+    best_reader_agent: str
+    oracle_agent: str = "oracle"
+    value_ci95: Interval = (math.nan, math.nan)
+    insight_ci95: Interval = (math.nan, math.nan)
+    scores: tuple[MindReadingScore, ...] = field(default=())
+
+    @property
+    def value_of_reading_the_mind(self) -> float:
+        """Oracle minus best blind: what knowing the mental state is worth on this env."""
+        return self.oracle - self.best_blind
+
+    @property
+    def achieved_insight(self) -> float:
+        """Best non-oracle minus best blind: how much of it the non-oracle agents obtain."""
+        return self.best_reader - self.best_blind
+
+    def score_of(self, agent: str) -> MindReadingScore | None:
+        """The mind-reading score of ``agent`` (None if it is not in the comparison)."""
+        return next((s for s in self.scores if s.agent == agent), None)
+
+    def lines(self) -> list[str]:
+        """Human-readable lines for the report: value, insight, the best reader's score."""
+
+        def points(value: float, ci: Interval) -> str:
+            return f"{100 * value:+.1f} points [{100 * ci[0]:+.1f}, {100 * ci[1]:+.1f}]"
+
+        out = [
+            f"value of reading the mind = oracle {100 * self.oracle:.1f} % - best blind ({self.best_blind_agent}) "
+            f"{100 * self.best_blind:.1f} % = {points(self.value_of_reading_the_mind, self.value_ci95)}",
+            f"achieved insight = best non-oracle ({self.best_reader_agent}) {100 * self.best_reader:.1f} % - best "
+            f"blind {100 * self.best_blind:.1f} % = {points(self.achieved_insight, self.insight_ci95)}",
+        ]
+        best = self.score_of(self.best_reader_agent)
+        if best is not None:
+            out.append(
+                f"mind-reading score = (success - best blind) / (oracle - best blind): "
+                f"{self.best_reader_agent} {best.text()} (0: ignores the mind, 1: the oracle)"
+            )
+        return out
+
+    def as_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (NaN becomes None)."""
+        return _finite(
+            {
+                "oracle": self.oracle,
+                "best_blind": self.best_blind,
+                "best_reader": self.best_reader,
+                "oracle_agent": self.oracle_agent,
+                "best_blind_agent": self.best_blind_agent,
+                "best_reader_agent": self.best_reader_agent,
+                "value_of_reading_the_mind": self.value_of_reading_the_mind,
+                "value_of_reading_the_mind_ci95": list(self.value_ci95),
+                "achieved_insight": self.achieved_insight,
+                "achieved_insight_ci95": list(self.insight_ci95),
+                "mind_reading_score": {s.agent: {"score": s.score, "ci95": list(s.ci95)} for s in self.scores},
+            }
+        )
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by None (JSON has no NaN)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _kind(name: str) -> str:
+    """``"oracle"``, ``"blind"`` or ``"reader"`` from an agent's name in a comparison."""
+    base = name.split(":")[0].split(" ")[0]
+    return "oracle" if base in ORACLE_AGENTS else ("blind" if base in BLIND_AGENTS else "reader")
+
+
+def _paired(results: Sequence[EvaluationResult]) -> bool:
+    """True when every result played the same seeded episodes (the bootstrap resamples them together)."""
+    seeds = [tuple(r.seed for r in result.records) for result in results]
+    return bool(seeds) and all(s == seeds[0] for s in seeds) and len(seeds[0]) > 0
+
+
+def _successes(result: EvaluationResult) -> NDArray[np.float64]:
+    return np.array([r.outcome == "success" for r in result.records], dtype=np.float64)
+
+
+def _paired_interval(statistic: Any, samples: Sequence[NDArray[np.float64]]) -> Interval:
+    """95 % percentile interval of ``statistic(*samples)`` with the episodes resampled together."""
+    if len(samples[0]) < 2:
+        return math.nan, math.nan
+    # A resample in which the oracle does not beat the best blind policy has no score: the
+    # interval is then NaN (scipy warns; said here instead, in the docstring of MindReadingScore).
+    with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", stats.DegenerateDataWarning)
+        found = stats.bootstrap(
+            tuple(samples),
+            statistic,
+            paired=True,
+            vectorized=True,
+            axis=-1,
+            n_resamples=N_RESAMPLES,
+            batch=500,
+            method="percentile",
+            rng=np.random.default_rng(BOOTSTRAP_SEED),
+        )
+    return float(found.confidence_interval.low), float(found.confidence_interval.high)
+
+
+def _difference(a: NDArray[np.float64], b: NDArray[np.float64], axis: int = -1) -> Any:
+    return np.mean(a, axis=axis) - np.mean(b, axis=axis)
+
+
+def _score(agent: Any, blind: Any, oracle: Any, axis: int = -1) -> Any:
+    """The mind-reading score of success indicators (NaN where the oracle does not beat blind)."""
+    blind_rate = np.mean(blind, axis=axis)
+    room = np.mean(oracle, axis=axis) - blind_rate
+    gained = np.mean(agent, axis=axis) - blind_rate
+    return np.where(room > 0, gained / np.where(room > 0, room, 1.0), np.nan)
+
+
+def mind_reading_score(result: EvaluationResult, blind: EvaluationResult, oracle: EvaluationResult) -> MindReadingScore:
+    """The mind-reading score of ``result`` against ``blind`` and ``oracle`` on the same episodes."""
+    samples = (_successes(result), _successes(blind), _successes(oracle))
+    point = float(_score(*samples))
+    ci = _paired_interval(_score, samples) if math.isfinite(point) else (math.nan, math.nan)
+    return MindReadingScore(result.agent, point, ci)
+
+
+def headroom(results: Sequence[EvaluationResult]) -> Headroom | None:
+    """:class:`Headroom` of a comparison on the same episodes.
+
+    None without an oracle and a blind agent, or when the results did not play the same seeded
+    episodes (e.g. rows split by persona).
+    """
+    if not _paired(results):
+        return None
+    best: dict[str, EvaluationResult] = {}
+    for result in results:
+        k = _kind(result.agent)
+        if k not in best or result.success_rate > best[k].success_rate:
+            best[k] = result
+    if "oracle" not in best or "blind" not in best:
+        return None
+    oracle, blind = best["oracle"], best["blind"]
+    reader = best.get("reader", blind)
+    return Headroom(
+        oracle.success_rate,
+        blind.success_rate,
+        reader.success_rate,
+        blind.agent,
+        reader.agent,
+        oracle_agent=oracle.agent,
+        value_ci95=_paired_interval(_difference, (_successes(oracle), _successes(blind))),
+        insight_ci95=_paired_interval(_difference, (_successes(reader), _successes(blind))),
+        scores=tuple(mind_reading_score(r, blind, oracle) for r in results),
+    )
+
+
+@dataclass(frozen=True)
+class AggregateScore:
+    """The interquartile mean of per-run scores, with its stratified bootstrap interval.
+
+    Attributes:
+        iqm: Mean of the middle 50 % of all the per-run scores (every level pooled).
+        ci95: 95 % percentile interval, runs resampled within each level (NaN ends when a
+            level has fewer than two runs: nothing to resample).
+        runs: Scores per level that went into it.
+    """
+
+    iqm: float
+    ci95: Interval
+    runs: dict[str, int]
+
+    def text(self) -> str:
+        """``IQM 0.81 [0.77, 0.85] over 3 runs``."""
+        ci = "" if not math.isfinite(self.ci95[0]) else f" [{self.ci95[0]:.2f}, {self.ci95[1]:.2f}]"
+        return f"IQM {self.iqm:.2f}{ci} over {sum(self.runs.values())} runs"
+
+
+def _iqm(*samples: Any, axis: int = -1) -> Any:
+    return stats.trim_mean(np.concatenate(samples, axis=axis), 0.25, axis=axis)
+
+
+def iqm_across_runs(scores_by_level: Mapping[str, Sequence[float]]) -> AggregateScore:
+    """Interquartile mean of per-run scores across training seeds, stratified by level (rliable's method).
+
+    Args:
+        scores_by_level: For each level (env id), one score per training run (NaN scores are dropped).
+
+    Returns:
+        The :class:`AggregateScore`.
+
+    Raises:
+        ValueError: no finite score at all.
+
+    Example:
+        >>> agg = iqm_across_runs({"hard": [0.7, 0.8, 0.9, 1.0], "medium": [0.5, 0.6]})
+        >>> round(agg.iqm, 3), agg.runs
+        (0.75, {'hard': 4, 'medium': 2})
+    """
+    finite = {level: [s for s in v if math.isfinite(s)] for level, v in scores_by_level.items()}
+    samples = {level: np.asarray(v, dtype=np.float64) for level, v in finite.items() if v}
+    if not samples:
+        raise ValueError("no finite mind-reading score to aggregate")
+    point = float(_iqm(*samples.values()))
+    ci: Interval = (math.nan, math.nan)
+    if all(len(v) >= 2 for v in samples.values()):
+        # paired=False resamples each level's runs on their own: rliable's stratified bootstrap.
+        found = stats.bootstrap(
+            tuple(samples.values()),
+            _iqm,
+            paired=False,
+            vectorized=True,
+            axis=-1,
+            n_resamples=N_RESAMPLES,
+            method="percentile",
+            rng=np.random.default_rng(BOOTSTRAP_SEED),
+        )
+        ci = float(found.confidence_interval.low), float(found.confidence_interval.high)
+    return AggregateScore(point, ci, {level: len(v) for level, v in samples.items()})

@@ -1,0 +1,70 @@
+"""The files of a saved agent and of a ``train.py`` run folder, and which kind a path holds.
+
+One place for the names, so the trainer that writes them and the loaders that read them
+agree. Plain paths and JSON: no torch, SB3 or Ray (``python -m agents.evaluate`` asks
+:func:`is_rllib_run` before it decides which of them to import).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+__all__ = [
+    "AGENT_FILE",
+    "ARGS_FILE",
+    "CHECKPOINTS_DIR",
+    "COMPLETE_FILE",
+    "INTERRUPTED_FILE",
+    "MODEL_FILE",
+    "RLLIB_CHECKPOINT_DIR",
+    "RLLIB_FRAMEWORK",
+    "TRAINING_FILE",
+    "VECNORMALIZE_FILE",
+    "is_rllib_run",
+    "is_unfinished_run",
+]
+
+MODEL_FILE = "model.zip"
+"""The SB3 model, self-contained (metadata and normaliser inside)."""
+VECNORMALIZE_FILE = "vecnormalize.pkl"
+"""The observation statistics beside the model (what older run folders hold)."""
+AGENT_FILE = "agent.json"
+"""The agent's metadata: algorithm, env id, features, framework."""
+CHECKPOINTS_DIR = "checkpoints"
+"""SB3 training checkpoints, ``step_N/`` each."""
+RLLIB_FRAMEWORK = "rllib"
+"""``agent.json``'s ``framework`` of an RLlib run."""
+RLLIB_CHECKPOINT_DIR = "checkpoint"
+"""The RLlib algorithm checkpoint of an RLlib run folder."""
+ARGS_FILE = "args.json"
+"""The run's settings (what ``--resume`` continues)."""
+TRAINING_FILE = "training.json"
+"""The training summary, written once training finished."""
+INTERRUPTED_FILE = "INTERRUPTED"
+"""Marker: stopped by a signal; says how to resume."""
+COMPLETE_FILE = "COMPLETE"
+"""Marker: the run finished (written last)."""
+
+
+def is_rllib_run(path: str | Path) -> bool:
+    """True for a run folder (or its ``checkpoint/``) of ``train.py --framework rllib``: its ``agent.json`` says so.
+
+    Anything else -- an SB3 model or folder, a damaged ``agent.json`` -- is False: the SB3
+    loader then names what is wrong with it.
+    """
+    path = Path(path)
+    folder = path.parent if path.name == RLLIB_CHECKPOINT_DIR else path
+    info = folder / AGENT_FILE
+    if not (path.is_dir() and info.exists()):
+        return False
+    try:
+        return bool(json.loads(info.read_text()).get("framework") == RLLIB_FRAMEWORK)
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def is_unfinished_run(path: str | Path) -> bool:
+    """True for a run folder that recorded its settings but did not finish (``--resume`` continues it in place)."""
+    path = Path(path)
+    return path.is_dir() and (path / ARGS_FILE).exists() and not (path / COMPLETE_FILE).exists()
