@@ -43,6 +43,7 @@ __all__ = [
     "STATE",
     "STATE_COLUMNS",
     "Trajectory",
+    "fill_initial_state",
     "initial_state_row",
     "measure",
     "pack_person",
@@ -274,14 +275,22 @@ def pack_person(person: PersonParams, timing: Timing, hold_xi: bool = False) -> 
     return np.array([values[name] for name in PARAM_COLUMNS], dtype=np.float64)
 
 
+@njit(cache=True, error_model="numpy")
+def fill_initial_state(s: NDArray[np.float64], xi: float, x0_m: float) -> None:
+    """Write a person sitting still at ``x0_m``, intending to stay there, with cooperativeness ``xi`` into ``s``."""
+    for j in range(s.shape[0]):
+        s[j] = 0.0
+    s[STATE.x_m] = x0_m
+    s[STATE.eta_m] = x0_m
+    s[STATE.xi] = xi
+    s[STATE.since_explanation_s] = _LONG_AGO_S
+    s[STATE.since_cue_s] = _LONG_AGO_S
+
+
 def initial_state_row(xi: int, x0_m: float = 0.0) -> NDArray[np.float64]:
     """A person sitting still at ``x0_m``, intending to stay there, with cooperativeness ``xi``."""
     row = np.zeros(len(STATE_COLUMNS))
-    row[STATE.x_m] = x0_m
-    row[STATE.eta_m] = x0_m
-    row[STATE.xi] = float(xi)
-    row[STATE.since_explanation_s] = _LONG_AGO_S
-    row[STATE.since_cue_s] = _LONG_AGO_S
+    fill_initial_state(row, float(xi), float(x0_m))
     return row
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from coop_gym.envs import contract, core
+from coop_gym.envs import step as step_module
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
 from coop_gym.model.dynamics import STATE
 from coop_gym.model.params import Cues, Realism, Timing
@@ -23,22 +24,23 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_core_has_no_assert_and_its_kernel_no_outcome_literal() -> None:
-    tree = ast.parse(Path(core.__file__).read_text())
-    asserts = [node.lineno for node in ast.walk(tree) if isinstance(node, ast.Assert)]
-    assert not asserts, f"asserts vanish under python -O; raise instead (lines {asserts})"
-    kernel = ast.parse(inspect.getsource(core._advance.py_func))
+    for module in (core, step_module):
+        tree = ast.parse(Path(module.__file__).read_text())
+        asserts = [node.lineno for node in ast.walk(tree) if isinstance(node, ast.Assert)]
+        assert not asserts, f"asserts vanish under python -O; raise instead ({module.__name__} lines {asserts})"
+    kernel = ast.parse(inspect.getsource(step_module.step_env.py_func))
     literals = [
         node.lineno
         for node in ast.walk(kernel)
         if isinstance(node, (ast.Assign, ast.Compare))
-        and any(isinstance(n, ast.Name) and n.id == "result" for n in ast.walk(node))
+        and any(isinstance(n, ast.Name) and n.id == "outcome" for n in ast.walk(node))
         and any(isinstance(n, ast.Constant) and n.value in (1, 2, 3, 4) for n in ast.walk(node))
     ]
-    assert not literals, f"outcome literals in _advance (lines {literals}): use the enum's codes"
+    assert not literals, f"outcome literals in step_env (lines {literals}): use the enum's codes"
 
 
 def test_the_kernel_codes_are_the_enums() -> None:
-    codes = (core._NONE, core._SUCCESS, core._UNSAFE, core._PREMATURE, core._TIMEOUT)
+    codes = (step_module._NONE, step_module._SUCCESS, step_module._UNSAFE, step_module._PREMATURE, step_module._TIMEOUT)
     assert codes == tuple(Outcome)
     lifts = [o in (Outcome.SUCCESS, Outcome.UNSAFE, Outcome.PREMATURE) for o in Outcome]
     assert contract.TERMINATES.tolist() == lifts and [o.terminates for o in Outcome] == lifts
@@ -57,7 +59,7 @@ def test_outcome_codes_that_are_not_consecutive_are_refused() -> None:
 
 def test_the_package_imports_and_checks_under_python_optimize() -> None:
     code = (
-        "import coop_gym.envs.core as c, coop_gym.envs.contract as k; k.check_outcome_codes(k.Outcome); "
+        "import coop_gym.envs.step as c, coop_gym.envs.contract as k; k.check_outcome_codes(k.Outcome); "
         "print(c._SUCCESS)"
     )
     out = subprocess.run([sys.executable, "-O", "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)

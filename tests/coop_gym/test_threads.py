@@ -13,7 +13,9 @@ from gymnasium.vector import AutoresetMode
 from numpy.typing import NDArray
 
 import coop_gym
-from coop_gym.envs import core as core_module
+from compiled.rng import G_STATE
+from coop_gym.envs import threads as threads_module
+from coop_gym.envs.contract import CMD
 from coop_gym.envs.vector import SitToStandVectorEnv
 from coop_gym.model.params import Timing
 
@@ -24,7 +26,7 @@ TWO_THREADS = 2
 @pytest.fixture
 def parallel_for_small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
     """Split even a handful of envs across threads (by default small batches step on one)."""
-    monkeypatch.setattr(core_module, "MIN_ENVS_PER_THREAD", 1)
+    monkeypatch.setattr(threads_module, "MIN_ENVS_PER_THREAD", 1)
 
 
 def _rollout(threads: int, n: int, steps: int, mode: AutoresetMode, env_id: str = "CoopGym/SitToStand-v0") -> Any:
@@ -118,7 +120,7 @@ def test_bad_threads_raise_naming_the_argument(threads: Any) -> None:
 def test_threads_default_to_the_cores_and_small_batches_step_on_one() -> None:
     assert SitToStandVectorEnv(num_envs=4, threads=1).threads == 1
     envs = SitToStandVectorEnv(num_envs=4)
-    assert envs.threads == core_module.available_threads() >= 1
+    assert envs.threads == threads_module.available_threads() >= 1
     envs.reset(seed=0)
     envs.step(envs.action_space.sample())
     assert envs.core._chunks == 1  # 4 envs: below MIN_ENVS_PER_THREAD on any thread count
@@ -188,10 +190,10 @@ def _stepped_core(threads: int) -> Any:
 
 def _commands(core: Any, active: NDArray[np.bool_]) -> NDArray[np.float64]:
     cmd = core.cmd.copy()
-    cmd[:, core_module.CMD.push_force_n] = 10.0
-    cmd[:, core_module.CMD.verbal_cue] = 1.0
-    cmd[:, core_module.CMD.lift] = 0.0
-    cmd[:, core_module.CMD.active] = active
+    cmd[:, CMD.push_force_n] = 10.0
+    cmd[:, CMD.verbal_cue] = 1.0
+    cmd[:, CMD.lift] = 0.0
+    cmd[:, CMD.active] = active
     return cmd
 
 
@@ -221,7 +223,7 @@ def test_a_step_that_would_reset_a_stepped_env_or_one_without_a_generator_change
     active[10:20] = False
     with pytest.raises(ValueError, match="both stepped and reset"):
         core.step_commands(_commands(core, active), reset=np.arange(5, 15, dtype=np.int64))
-    core.generators[12, core_module.G_STATE] = 0  # as if env 12 had never had a generator
+    core.generators[12, G_STATE] = 0  # as if env 12 had never had a generator
     with pytest.raises(RuntimeError, match="env 12 has no random generator"):
         core.step_commands(_commands(core, active), reset=np.arange(10, 20, dtype=np.int64))
     np.testing.assert_array_equal(core.state, before)
@@ -239,12 +241,12 @@ def test_a_worker_that_starts_after_its_step_is_over_changes_nothing() -> None:
     before = core.state.copy()
     draws = [rng.bit_generator.state for rng in core.rngs]
     arrays = (cmd, core.state, core.generators, core.obs, core.consts)
-    blocks = 300 // core_module.ENVS_PER_BLOCK
-    step = int(core._control[core_module._CLAIM] >> 32)
-    core_module._advance_claimed(step, blocks, core._control, *arrays)  # this step's worker, late: none left
-    core._control[core_module._CLAIM] = (step + 1) << 32  # the next step has begun, no block claimed yet
-    core_module._advance_claimed(step, blocks, core._control, *arrays)  # the late worker finds another step
-    assert core._control[core_module._CLAIM] == (step + 1) << 32
+    blocks = 300 // threads_module.ENVS_PER_BLOCK
+    step = int(core._control[threads_module._CLAIM] >> 32)
+    threads_module.step_claimed(step, blocks, core._control, *arrays)  # this step's worker, late: none left
+    core._control[threads_module._CLAIM] = (step + 1) << 32  # the next step has begun, no block claimed yet
+    threads_module.step_claimed(step, blocks, core._control, *arrays)  # the late worker finds another step
+    assert core._control[threads_module._CLAIM] == (step + 1) << 32
     np.testing.assert_array_equal(core.state, before)
     assert [rng.bit_generator.state for rng in core.rngs] == draws
 
@@ -263,8 +265,8 @@ def test_an_interrupted_threaded_step_leaves_no_worker_running(monkeypatch: pyte
     monkeypatch.setattr(core, "reset_envs", interrupted_reset)
     with pytest.raises(KeyboardInterrupt):
         core.step_commands(_commands(core, active), reset=np.arange(10, dtype=np.int64))
-    claimed = int(core._control[core_module._CLAIM] & core_module._LOW32)
-    blocks = 300 // core_module.ENVS_PER_BLOCK
+    claimed = int(core._control[threads_module._CLAIM] & threads_module._LOW32)
+    blocks = 300 // threads_module.ENVS_PER_BLOCK
     assert claimed == blocks  # closed: nothing is left to claim
     after = core.state.copy()
     time.sleep(0.05)  # the worker wakes meanwhile, and must find the step over
@@ -276,10 +278,10 @@ def test_step_numbers_wrap_without_overflowing_the_claim_word() -> None:
     # After 2**31 - 1 threaded steps the next number is 0 (a shift of 2**31 would overflow int64).
     core = _stepped_core(TWO_THREADS)
     twin = _stepped_core(TWO_THREADS)
-    core._control[core_module._CLAIM] = (core_module._STEP_NUMBERS - 1) << 32
+    core._control[threads_module._CLAIM] = (threads_module._STEP_NUMBERS - 1) << 32
     cmd = _commands(core, np.ones(300, dtype=bool))
     core.step_commands(cmd)
     twin.step_commands(_commands(twin, np.ones(300, dtype=bool)))
-    blocks = 300 // core_module.ENVS_PER_BLOCK
-    assert core._control[core_module._CLAIM] == blocks  # step 0, every block claimed
+    blocks = 300 // threads_module.ENVS_PER_BLOCK
+    assert core._control[threads_module._CLAIM] == blocks  # step 0, every block claimed
     np.testing.assert_array_equal(core.state, twin.state)

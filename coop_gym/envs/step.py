@@ -1,0 +1,244 @@
+r"""One env step, compiled: :func:`step_env` takes one agent action from command row to reward and observation.
+
+The maths it sequences lives elsewhere -- the person in :mod:`coop_gym.model.dynamics`, the
+filter in :mod:`estimator.kalman`, the judgment in :mod:`estimator.judgment`; the layout of the
+rows it reads in :mod:`coop_gym.envs.layout`. :func:`step_envs` runs it over a range of envs;
+the core calls that on one thread or, through :mod:`coop_gym.envs.threads`, on several.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from compiled.cache import guard_kernel_cache
+from compiled.rng import G_STATE, standard_normal
+from coop_gym.envs.config import Outcome
+from coop_gym.envs.contract import CMD, REPORT, REPORT_COLUMNS
+from coop_gym.envs.layout import BLOCKS, CONSTS, CUE_COLUMNS, CUES
+from coop_gym.model.dynamics import (
+    DELAY_LINE_LENGTH,
+    NORMALS_PER_SUBSTEP,
+    PARAM_COLUMNS,
+    PERSON,
+    STATE,
+    STATE_COLUMNS,
+    measure,
+    person_substep,
+)
+from estimator.judgment import JUDGE, JUDGMENT_COLUMNS, judgment_substep
+from estimator.kalman import NOMINAL_COLUMNS, kalman_step
+from estimator.nominal import STATE_DIM
+
+__all__ = ["first_unready", "observe", "observe_row", "step_all", "step_env", "step_envs"]
+
+# Outcome codes the kernel writes, from the enum (Numba freezes them into the machine code).
+_NONE = int(Outcome.NONE)
+_SUCCESS = int(Outcome.SUCCESS)
+_UNSAFE = int(Outcome.UNSAFE)
+_PREMATURE = int(Outcome.PREMATURE)
+_TIMEOUT = int(Outcome.TIMEOUT)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def step_env(
+    row: NDArray[np.float64],
+    command: NDArray[np.float64],
+    generator: NDArray[np.uint64],
+    normals: NDArray[np.float64],
+    obs_row: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> None:
+    r"""One agent action of one env: cues -> (person -> sensors -> filter -> judgment) x substeps -> outcome -> reward.
+
+    A lift ends the episode, judged on the true state (§II): success if the person is
+    cooperative and leans past ``success_lean_m``, unsafe if uncooperative or not yet past
+    ``upright_m``, else premature. Otherwise the cues play for ``substeps`` filter steps and
+    the episode times out at ``episode_s``. The reward is the sum of the named terms
+    (:class:`~coop_gym.envs.config.RewardWeights`), each written to the report:
+
+    .. math::
+
+        r = w_\text{success}[\text{success}] - w_\text{unsafe}[\text{unsafe}]
+            - w_\text{premature}[\text{premature}] - w_\text{time}\,\Delta t_\text{action}[\text{no lift}]
+            - w_\text{force} \int F_\text{push}\,dt
+
+    Args:
+        row: The env's packed state (:data:`~coop_gym.envs.layout.BLOCKS`), updated in place.
+        command: The decoded action (:data:`~coop_gym.envs.contract.CMD`).
+        generator: The env's bit generator row (:mod:`compiled.rng`).
+        normals: Scratch for one substep's standard normals.
+        obs_row: The env's observation, written when ``consts[build_obs]`` is set.
+        consts: The constants row (:data:`~coop_gym.envs.layout.CONSTS`).
+    """
+    substeps = int(consts[CONSTS.substeps])
+    person = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
+    params = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
+    cue = row[BLOCKS.cues : BLOCKS.cues + len(CUE_COLUMNS)]
+    report = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+    # The multiple-model bank's inputs of each substep: measured force, verbal cue, position.
+    bank_inputs = row[BLOCKS.end : BLOCKS.end + 3 * substeps]
+    push_force_n = command[CMD.push_force_n]
+    lift = command[CMD.lift] > 0.5
+    cue[CUES.impulse_n_s] = 0.0
+    if lift:
+        if person[STATE.xi] > 0.5 and person[STATE.x_m] >= consts[CONSTS.success_lean_m]:
+            outcome = _SUCCESS
+        elif person[STATE.xi] < -0.5 or person[STATE.x_m] < consts[CONSTS.upright_m]:
+            outcome = _UNSAFE
+        else:
+            outcome = _PREMATURE
+        # The bank's inputs hold still: no push, no cue, the last reading.
+        for k in range(substeps):
+            bank_inputs[k] = 0.0
+            bank_inputs[substeps + k] = 0.0
+            bank_inputs[2 * substeps + k] = report[REPORT.measured_position_m]
+    else:
+        mean = row[BLOCKS.mean : BLOCKS.mean + STATE_DIM]
+        covariance = row[BLOCKS.cov : BLOCKS.cov + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
+        judge = row[BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
+        nominal = row[BLOCKS.nominal : BLOCKS.nominal + len(NOMINAL_COLUMNS)]
+        delay_push = row[BLOCKS.delay_push : BLOCKS.delay_push + DELAY_LINE_LENGTH]
+        delay_verbal = row[BLOCKS.delay_verbal : BLOCKS.delay_verbal + DELAY_LINE_LENGTH]
+        dt = params[PERSON.dt_s]
+        # A verbal cue is an utterance of fixed length; one can't talk over oneself.
+        if cue[CUES.verbal_remaining_s] <= 0.0 and command[CMD.verbal_cue] != 0.0:
+            cue[CUES.verbal_value] = command[CMD.verbal_cue]
+            cue[CUES.verbal_remaining_s] = consts[CONSTS.verbal_duration_s]
+        for k in range(substeps):
+            verbal_cue = cue[CUES.verbal_value] if cue[CUES.verbal_remaining_s] > 1e-9 else 0.0
+            for j in range(NORMALS_PER_SUBSTEP):
+                normals[j] = standard_normal(generator)
+            person_substep(person, params, delay_push, delay_verbal, push_force_n, verbal_cue, normals)
+            position_m, force_n = measure(person, params, push_force_n, normals[3], normals[4])
+            kalman_step(mean, covariance, nominal, force_n, verbal_cue, position_m)
+            cue_active = push_force_n > 0.0 or verbal_cue != 0.0
+            judgment_substep(judge, cue_active, mean[3], consts[CONSTS.judgment_delay_s],
+                             consts[CONSTS.judgment_threshold], dt)  # fmt: skip
+            bank_inputs[k] = force_n
+            bank_inputs[substeps + k] = verbal_cue
+            bank_inputs[2 * substeps + k] = position_m
+            cue[CUES.verbal_remaining_s] -= dt
+            cue[CUES.impulse_n_s] += push_force_n * dt
+            report[REPORT.measured_position_m] = position_m
+            report[REPORT.measured_force_n] = force_n
+        if cue[CUES.verbal_remaining_s] <= 1e-9:
+            cue[CUES.verbal_remaining_s] = 0.0
+            cue[CUES.verbal_value] = 0.0
+        cue[CUES.elapsed_s] += substeps * dt
+        _report_belief(report, person, cue, mean, covariance, judge, consts[CONSTS.episode_s])
+        outcome = _TIMEOUT if cue[CUES.elapsed_s] >= consts[CONSTS.episode_s] - 1e-9 else _NONE
+    report[REPORT.reward_success] = consts[CONSTS.reward_success] if outcome == _SUCCESS else 0.0
+    report[REPORT.reward_unsafe] = -consts[CONSTS.reward_unsafe] if outcome == _UNSAFE else 0.0
+    report[REPORT.reward_premature] = -consts[CONSTS.reward_premature] if outcome == _PREMATURE else 0.0
+    report[REPORT.reward_time] = 0.0 if lift else consts[CONSTS.time_term]
+    report[REPORT.reward_force] = -consts[CONSTS.force_per_n_s] * cue[CUES.impulse_n_s]
+    report[REPORT.reward] = (report[REPORT.reward_success] + report[REPORT.reward_unsafe]
+                             + report[REPORT.reward_premature] + report[REPORT.reward_time]
+                             + report[REPORT.reward_force])  # fmt: skip
+    _report_truth(report, person, outcome, 0.0 if lift else push_force_n)
+    if consts[CONSTS.build_obs] > 0.5:
+        observe_row(row, obs_row, consts)
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _report_belief(
+    report: NDArray[np.float64], person: NDArray[np.float64], cue: NDArray[np.float64], mean: NDArray[np.float64],
+    covariance: NDArray[np.float64], judge: NDArray[np.float64], episode_s: float,
+) -> None:  # fmt: skip
+    # The features after a non-lift step: the cue, the filter's belief, the judgment, the clocks.
+    report[REPORT.verbal_cue] = cue[CUES.verbal_value]
+    report[REPORT.time_since_cue_onset_s] = min(judge[JUDGE.since_onset_s], episode_s)
+    report[REPORT.x_hat_m] = mean[0]
+    report[REPORT.xdot_hat_m_per_s] = mean[1]
+    report[REPORT.eta_hat_m] = mean[2]
+    report[REPORT.xi_hat] = mean[3]
+    report[REPORT.xi_std] = np.sqrt(max(covariance[3, 3], 0.0))
+    report[REPORT.judgment] = judge[JUDGE.judgment]
+    report[REPORT.elapsed_s] = cue[CUES.elapsed_s]
+    report[REPORT.true_xi] = person[STATE.xi]
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _report_truth(report: NDArray[np.float64], person: NDArray[np.float64], outcome: int, push_force_n: float) -> None:
+    # What the info tells and the agent never sees: the outcome, the push and the true state.
+    report[REPORT.outcome] = outcome
+    report[REPORT.push_force_n] = push_force_n
+    report[REPORT.true_x_m] = person[STATE.x_m]
+    report[REPORT.true_xdot_m_per_s] = person[STATE.xdot_m_per_s]
+    report[REPORT.true_eta_m] = person[STATE.eta_m]
+    report[REPORT.info_true_xi] = person[STATE.xi]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def observe_row(row: NDArray[np.float64], obs_row: NDArray[np.float32], consts: NDArray[np.float64]) -> None:
+    """The env's observation from its report: the selected features clipped into their bounds, float32."""
+    # Select the features and clip in float64, then round: as np.clip(f, low, high).astype(float32).
+    n_obs = int(consts[CONSTS.n_obs])
+    at = int(consts[CONSTS.obs_at])
+    for k in range(n_obs):
+        value = row[BLOCKS.report + int(consts[at + k])]
+        obs_row[k] = min(max(value, consts[at + n_obs + k]), consts[at + 2 * n_obs + k])
+
+
+@njit(cache=True, error_model="numpy")
+def observe(
+    indices: NDArray[np.int64], state: NDArray[np.float64], obs: NDArray[np.float32], consts: NDArray[np.float64]
+) -> None:
+    """:func:`observe_row` of envs ``indices``."""
+    for i in indices:
+        observe_row(state[i], obs[i], consts)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def step_envs(
+    start: int,
+    stop: int,
+    cmd: NDArray[np.float64],
+    state: NDArray[np.float64],
+    generators: NDArray[np.uint64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> None:
+    """:func:`step_env` of the active envs ``start .. stop - 1``.
+
+    Each env touches only its own rows and its own generator, so disjoint ranges can run on
+    different threads.
+    """
+    normals = np.empty(NORMALS_PER_SUBSTEP)  # this call's scratch
+    for i in range(start, stop):
+        if cmd[i, CMD.active] < 0.5:
+            continue
+        step_env(state[i], cmd[i], generators[i], normals, obs[i], consts)
+
+
+@njit(cache=True, error_model="numpy")
+def first_unready(cmd: NDArray[np.float64], generators: NDArray[np.uint64]) -> int:
+    """The first active env that was never reset (has no generator), or -1.
+
+    Checked before any env is stepped, in order, so a failed call changes nothing and names the
+    lowest such env.
+    """
+    for i in range(cmd.shape[0]):
+        if cmd[i, CMD.active] > 0.5 and generators[i, G_STATE] == 0:
+            return i
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def step_all(
+    cmd: NDArray[np.float64],
+    state: NDArray[np.float64],
+    generators: NDArray[np.uint64],
+    obs: NDArray[np.float32],
+    consts: NDArray[np.float64],
+) -> int:
+    """Step every active env on this thread; returns -1, or an active env never reset (nothing stepped then)."""
+    failed = first_unready(cmd, generators)
+    if failed < 0:
+        step_envs(0, cmd.shape[0], cmd, state, generators, obs, consts)
+    return failed
+
+
+guard_kernel_cache(__name__)
