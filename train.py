@@ -4,7 +4,8 @@
 level, where reading the mind decides the outcome; training personas only), evaluates it and
 every scripted baseline -- the mental-state-blind policy, the probing caregiver, the oracle on the oracle
 observation of the same episodes -- on the held-out test personas over 1000 seeded
-episodes, prints the comparison table and saves everything in one run folder::
+episodes, prints the comparison table (with each agent's mind-reading score) and saves
+everything in one run folder::
 
     runs/{env}__{algo}__{seed}__{time}/
         args.json                                 the run's settings (what --resume continues)
@@ -28,26 +29,38 @@ SIGKILL, ``python train.py --resume RUN`` continues the unfinished run in its ow
 from the last checkpoint with the run's recorded settings and reaches the same weights as
 a run that never stopped. A run folder without ``COMPLETE`` is a failed or interrupted run.
 Read top to bottom: arguments -> training env -> model -> learn -> save -> evaluate -> report.
+The arguments are the typed :class:`Args`, parsed by tyro (as CleanRL does): its field
+docstrings are the ``--help``.
 """
 
 from __future__ import annotations
 
-import argparse
-import ast
 import dataclasses
 import importlib.util
-import inspect
-import itertools
 import json
 import signal
 import sys
 import time
-import types
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Union, get_args, get_origin, get_type_hints
+from typing import Any, NoReturn
+
+import tyro
+
+from agents.run_folder import ARGS_FILE, TRAINING_FILE, is_unfinished_run
+from agents.training_run import (
+    Stopped,
+    StopSignals,
+    clean_leftovers,
+    monitor_curve,
+    remove_checkpoints,
+    resume_settings,
+    write_interrupted,
+)
 
 __all__ = ["Args", "main", "parse_args"]
+
+PROG = "python train.py"
 
 
 @dataclass
@@ -81,84 +94,41 @@ class Args:
     model: str | None = None
     """saved model (a run folder or its model.zip) for --eval-only"""
     baselines: str = "random,lift_at_once,push_then_lift,handbook,blind,prober,oracle"
-    """scripted agents to compare with, joined by ',' (empty: none)"""
+    """scripted agents to compare with, joined by ',' (empty: none); with blind and oracle among them the
+    table adds each agent's mind-reading score"""
     eval_points: int = 8
     """evaluations during training for the learning curve (min(200, eval_episodes) episodes each; 0: none)"""
     checkpoint_every: int | None = None
     """env steps between checkpoints, taken at the next rollout boundary (default: a tenth of --timesteps;
     0: only when interrupted)"""
     threads: int = 1
-    """torch CPU threads (1 measured fastest for these small networks on a shared 2-core machine)"""
+    """torch CPU threads (1 by default: these small networks gain little from more threads, and the envs
+    need the cores; compare with python bench/time_to_quality.py)"""
     progress: bool = True
     """show a progress bar while training"""
     framework: str = "sb3"
     """sb3 (Stable-Baselines3, in this process) or rllib (Ray RLlib PPO, new API stack; needs the [rllib] extra)"""
     num_env_runners: int = 0
-    """--framework rllib: sampling actors (0: sample in the driver, measured fastest on one 2-core machine;
-    on a cluster, one or more per node)"""
+    """--framework rllib: sampling actors (0: sample in the driver, which saves moving episodes between
+    processes on a single machine; on a cluster, one or more per node)"""
     address: str | None = None
     """--framework rllib: an existing Ray cluster (ray://head:10001 or auto; default: start a local instance)"""
 
 
-# --- arguments: a typed dataclass whose field docstrings are the --help -------------
+# --- arguments: tyro parses Args; the checks below name what is wrong ----------------
 
 
-def _field_docs(cls: type) -> dict[str, str]:
-    """The string literal under each field of a dataclass (the attribute docstrings)."""
-    tree = ast.parse(inspect.getsource(cls))
-    body = tree.body[0].body  # type: ignore[attr-defined]
-    docs: dict[str, str] = {}
-    for node, following in itertools.pairwise(body):
-        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
-            if isinstance(following, ast.Expr) and isinstance(following.value, ast.Constant):
-                docs[node.target.id] = " ".join(str(following.value.value).split())
-    return docs
+def _fail(message: str) -> NoReturn:
+    """A usage error found after parsing: the usage line and one error line on stderr, exit status 2."""
+    print(f"usage: {PROG} [-h] [OPTIONS]\n{PROG}: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
 
 
-def _build_parser(suppress_defaults: bool = False) -> argparse.ArgumentParser:
-    """The parser; with ``suppress_defaults`` it returns only the flags given on the command line."""
-    parser = argparse.ArgumentParser(
-        prog="python train.py",
-        description=(__doc__ or "").split("\n\n")[0],
-        argument_default=argparse.SUPPRESS if suppress_defaults else None,
-    )
-    docs = _field_docs(Args)
-    hints = get_type_hints(Args)
-    for f in dataclasses.fields(Args):
-        flag = "--" + f.name.replace("_", "-")
-        hint = hints[f.name]
-        origin = get_origin(hint)
-        if origin in (Union, types.UnionType):
-            hint = next(a for a in get_args(hint) if a is not type(None))
-        doc = docs.get(f.name, "")
-        default = argparse.SUPPRESS if suppress_defaults else f.default
-        if hint is bool and f.default:  # on by default: --no-<flag> turns it off
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=doc)
-        elif hint is bool:
-            parser.add_argument(flag, action="store_true", default=default, help=doc)
-        else:
-            shown = "" if f.default is None else f" (default: {f.default})"
-            parser.add_argument(flag, type=hint, default=default, help=doc + shown, metavar=f.name.upper())
-    return parser
-
-
-# Settings that define a run: --resume of an unfinished run takes them from its args.json.
-RUN_FIELDS = (
-    "algo",
-    "env",
-    "seed",
-    "timesteps",
-    "n_envs",
-    "eval_episodes",
-    "eval_seed",
-    "eval_personas",
-    "baselines",
-    "eval_points",
-    "checkpoint_every",
-)
-ARGS_FILE = "args.json"
-TRAINING_FILE = "training.json"
-INTERRUPTED_FILE = "INTERRUPTED"
+def _given(argv: list[str]) -> set[str]:
+    """The fields set on the command line (``--n-envs 4``, ``--n-envs=4``, ``--no-progress``)."""
+    names = {f.name for f in dataclasses.fields(Args)}
+    flags = {token[2:].split("=")[0].replace("-", "_") for token in argv if token.startswith("--")}
+    return {name for flag in flags for name in (flag, flag.removeprefix("no_")) if name in names}
 
 
 def parse_args(argv: list[str] | None = None) -> Args:
@@ -167,178 +137,115 @@ def parse_args(argv: list[str] | None = None) -> Args:
     With ``--resume`` of an unfinished run folder the run's own settings fill in the flags not
     given; a given flag that contradicts the run is an error naming it.
     """
-    import gymnasium as gym  # noqa: F401  (coop_gym registers into it)
-
-    import coop_gym
-    from agents.hyperparams import ALGORITHMS, hyperparams_for
-    from agents.scripted import SCRIPTED_AGENTS
-    from coop_gym.cli import output_path_problem, seed_range_problem
-    from coop_gym.model.personas import resolve_personas
-
-    parser = _build_parser()
-    args = Args(**vars(parser.parse_args(argv)))
-    given = set(vars(_build_parser(suppress_defaults=True).parse_args(argv)))
+    argv = sys.argv[1:] if argv is None else list(argv)
+    description = (__doc__ or "").split("\n\n")[0]
+    args = tyro.cli(Args, args=argv, prog=PROG, description=description, config=(tyro.conf.DisallowNone,))
     if args.eval_only and args.resume is not None:
-        parser.error("--eval-only and --resume exclude each other")
+        _fail("--eval-only and --resume exclude each other")
     if args.resume is not None:
-        args = _resume_args(parser, args, given)
-    if args.algo not in ALGORITHMS:
-        parser.error(f"--algo must be one of {', '.join(ALGORITHMS)}, got {args.algo!r}")
-    if args.env is not None and args.env not in coop_gym.ENV_IDS:
-        parser.error(
-            f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
-        )
-    for name in ("timesteps", "n_envs"):
-        value = getattr(args, name)
-        if value is not None and value < 1:
-            parser.error(f"--{name.replace('_', '-')} must be >= 1, got {value}")
-    if args.eval_episodes < 1:
-        parser.error(f"--eval-episodes must be >= 1, got {args.eval_episodes}")
-    if args.seed < 0 or args.eval_seed < 0:
-        parser.error("--seed and --eval-seed must be >= 0")
-    # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
-    n_envs = args.n_envs or hyperparams_for(args.algo).n_envs
-    problem = seed_range_problem("--seed", args.seed, n_envs) or seed_range_problem(
-        "--eval-seed", args.eval_seed, args.eval_episodes
-    )
+        args = _resumed(args, _given(argv))
+    problem = _problem_with_numbers(args) or _problem_with_names(args) or _problem_with_framework(args)
+    problem = problem or _problem_with_paths(args)
     if problem:
-        parser.error(problem)
-    if args.eval_points < 0 or args.threads < 1:
-        parser.error("--eval-points must be >= 0 and --threads >= 1")
-    if args.checkpoint_every is not None and args.checkpoint_every < 0:
-        parser.error(f"--checkpoint-every must be >= 0, got {args.checkpoint_every}")
-    try:
-        resolve_personas(args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas)
-    except ValueError as exc:
-        parser.error(f"--eval-personas: {exc}")
-    unknown = [b for b in _baselines(args) if b not in SCRIPTED_AGENTS]
-    if unknown:
-        parser.error(f"--baselines: unknown agent(s) {unknown}; known: {', '.join(SCRIPTED_AGENTS)}")
-    if args.framework not in ("sb3", "rllib"):
-        parser.error(f"--framework must be sb3 or rllib, got {args.framework!r}")
-    if args.framework == "rllib" and (args.algo != "ppo" or args.eval_only or args.resume or args.num_env_runners < 0):
-        parser.error("--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0")
-    if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
-        parser.error('--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"')
-    if args.eval_only and args.model is None:
-        parser.error("--eval-only needs --model PATH")
-    if args.model is not None and not args.eval_only:
-        parser.error("--model is for --eval-only; use --resume PATH to continue training a model")
-    problem = output_path_problem(args.out, folder=True)
-    if problem:
-        parser.error(f"--out: {problem}")
-    if args.model is not None and not (Path(args.model).exists() or Path(args.model).with_suffix(".zip").exists()):
-        parser.error(f"--model: nothing saved at {args.model}")
+        _fail(problem)
     return args
 
 
-def _is_unfinished_run(path: Path) -> bool:
-    return path.is_dir() and (path / ARGS_FILE).exists() and not (path / "COMPLETE").exists()
-
-
-def _resume_args(parser: argparse.ArgumentParser, args: Args, given: set[str]) -> Args:
+def _resumed(args: Args, given: set[str]) -> Args:
     """``args`` completed from the run (or model) being resumed; contradicting flags are an error."""
     assert args.resume is not None
-    path = Path(args.resume)
-    if not (path.exists() or path.with_suffix(".zip").exists()):
-        parser.error(f"--resume: nothing saved at {path}")
-    if _is_unfinished_run(path):
-        try:
-            recorded = json.loads((path / ARGS_FILE).read_text())
-            if not isinstance(recorded, dict):
-                raise ValueError("not a JSON object")
-        except (OSError, ValueError) as exc:
-            parser.error(f"--resume: {path / ARGS_FILE} is unreadable ({exc})")
-        if recorded.get("eval_only"):
-            parser.error(
-                f"--resume: {path} was an --eval-only run; run it again: --eval-only --model {recorded.get('model')}"
-            )
-        recorded = _resolved(recorded)
-        saved = {name: recorded[name] for name in RUN_FIELDS if name in recorded}
-    else:  # a finished run or a model: a new run continuing the model, on its algorithm and env
-        from agents.rl import _resolve
-
-        try:
-            _, info = _resolve(path)
-        except (OSError, ValueError) as exc:
-            parser.error(f"--resume: {exc}")
-        saved = {k: v for k, v in (("algo", info.get("algo")), ("env", info.get("env_id"))) if v}
+    try:
+        saved = resume_settings(Path(args.resume))
+    except ValueError as exc:
+        _fail(str(exc))
     conflicts = [
         f"--{name.replace('_', '-')} {getattr(args, name)!r} (the run has {value!r})"
         for name, value in saved.items()
         if name in given and getattr(args, name) != value
     ]
     if conflicts:
-        parser.error(f"--resume {path}: {'; '.join(conflicts)} contradict the saved run; leave them out")
+        _fail(f"--resume {args.resume}: {'; '.join(conflicts)} contradict the saved run; leave them out")
     return dataclasses.replace(args, **saved)
 
 
-def _resolved(settings: dict[str, Any]) -> dict[str, Any]:
-    """Run settings with the algorithm's defaults filled in (older args.json files hold None)."""
-    from agents.hyperparams import hyperparams_for
+def _problem_with_numbers(args: Args) -> str | None:
+    """The first count or seed out of range (None if all are fine)."""
+    from agents.hyperparams import ALGORITHMS, hyperparams_for
+    from coop_gym.cli import seed_range_problem
 
-    out = dict(settings)
-    algo = out.get("algo", "ppo")
-    config = hyperparams_for(algo, out.get("env") or hyperparams_for(algo).env_id)
-    out["env"] = out.get("env") or config.env_id
-    out["timesteps"] = out.get("timesteps") or config.total_timesteps
-    out["n_envs"] = out.get("n_envs") or config.n_envs
-    if out.get("checkpoint_every") is None:
-        out["checkpoint_every"] = max(1, out["timesteps"] // 10)
-    return out
+    if args.algo not in ALGORITHMS:
+        return f"--algo must be one of {', '.join(ALGORITHMS)}, got {args.algo!r}"
+    for name in ("timesteps", "n_envs"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            return f"--{name.replace('_', '-')} must be >= 1, got {value}"
+    if args.eval_episodes < 1:
+        return f"--eval-episodes must be >= 1, got {args.eval_episodes}"
+    if args.seed < 0 or args.eval_seed < 0:
+        return "--seed and --eval-seed must be >= 0"
+    # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
+    n_envs = args.n_envs or hyperparams_for(args.algo).n_envs
+    problem = seed_range_problem("--seed", args.seed, n_envs)
+    problem = problem or seed_range_problem("--eval-seed", args.eval_seed, args.eval_episodes)
+    if problem:
+        return problem
+    if args.eval_points < 0 or args.threads < 1:
+        return "--eval-points must be >= 0 and --threads >= 1"
+    if args.checkpoint_every is not None and args.checkpoint_every < 0:
+        return f"--checkpoint-every must be >= 0, got {args.checkpoint_every}"
+    return None
 
 
-def _baselines(args: Args) -> list[str]:
-    return [b.strip() for b in args.baselines.split(",") if b.strip()]
+def _problem_with_names(args: Args) -> str | None:
+    """The first unknown env id, persona or baseline (None if all are known)."""
+    import coop_gym
+    from agents.run_report import baseline_names, personas_arg
+    from agents.scripted import SCRIPTED_AGENTS
+    from coop_gym.model.personas import resolve_personas
+
+    if args.env is not None and args.env not in coop_gym.ENV_IDS:
+        return f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+    try:
+        resolve_personas(personas_arg(args.eval_personas))
+    except ValueError as exc:
+        return f"--eval-personas: {exc}"
+    unknown = [b for b in baseline_names(args.baselines) if b not in SCRIPTED_AGENTS]
+    if unknown:
+        return f"--baselines: unknown agent(s) {unknown}; known: {', '.join(SCRIPTED_AGENTS)}"
+    return None
+
+
+def _problem_with_framework(args: Args) -> str | None:
+    """What ``--framework`` (and the flags that go with it) cannot do (None if it can)."""
+    if args.framework not in ("sb3", "rllib"):
+        return f"--framework must be sb3 or rllib, got {args.framework!r}"
+    if args.framework == "rllib" and (args.algo != "ppo" or args.eval_only or args.resume or args.num_env_runners < 0):
+        return "--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0"
+    if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
+        return '--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"'
+    return None
+
+
+def _problem_with_paths(args: Args) -> str | None:
+    """A missing --model, or an --out where no run folder can be made (None if both are fine)."""
+    from coop_gym.cli import output_path_problem
+
+    if args.eval_only and args.model is None:
+        return "--eval-only needs --model PATH"
+    if args.model is not None and not args.eval_only:
+        return "--model is for --eval-only; use --resume PATH to continue training a model"
+    problem = output_path_problem(args.out, folder=True)
+    if problem:
+        return f"--out: {problem}"
+    if args.model is not None and not (Path(args.model).exists() or Path(args.model).with_suffix(".zip").exists()):
+        return f"--model: nothing saved at {args.model}"
+    return None
 
 
 def _usage_error(message: str) -> int:
     """A problem found after parsing (e.g. a damaged model): one line on stderr, exit status 2."""
-    print(f"python train.py: error: {message}", file=sys.stderr)
+    print(f"{PROG}: error: {message}", file=sys.stderr)
     return 2
-
-
-# --- stopping cleanly ------------------------------------------------------------
-
-
-class Stopped(Exception):
-    """A second Ctrl-C/SIGTERM, or one outside training: stop now."""
-
-
-class _StopSignals:
-    """SIGINT and SIGTERM stop training at the next rollout boundary; a second one stops at once.
-
-    Outside training a signal stops at once. The previous handlers are restored on exit.
-    """
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-        self.in_training = False
-        self._previous: dict[int, Any] = {}
-
-    def requested(self) -> bool:
-        return self.signum is not None
-
-    def _handle(self, signum: int, _frame: Any) -> None:
-        first = self.signum is None
-        self.signum = signum
-        if first and self.in_training:
-            print(
-                f"\n{signal.Signals(signum).name}: saving a checkpoint at the next rollout boundary "
-                "(send it again to stop at once)",
-                file=sys.stderr,
-            )
-            return
-        raise Stopped(signal.Signals(signum).name)
-
-    def __enter__(self) -> _StopSignals:
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            self._previous[signum] = signal.signal(signum, self._handle)
-        return self
-
-    def __exit__(self, *_: Any) -> None:
-        for signum, handler in self._previous.items():
-            signal.signal(signum, handler)
 
 
 # --- the run --------------------------------------------------------------------
@@ -357,11 +264,10 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
 
     from agents.hyperparams import hyperparams_for
-    from agents.rl import load_agent
-    from coop_gym.io import make_unique_folder, write_json
+    from agents.rl import load_agent, saved_model_problem
 
     # The run's settings: the algorithm's defaults (agents/hyperparams.py), overridden by the flags.
-    in_place = args.resume is not None and _is_unfinished_run(Path(args.resume))
+    in_place = args.resume is not None and is_unfinished_run(args.resume)
     saved_agent = None
     if args.eval_only:
         assert args.model is not None  # parse_args requires --model with --eval-only
@@ -373,80 +279,29 @@ def main(argv: list[str] | None = None) -> int:
     env_id = args.env or (saved_agent.env_id if saved_agent else None) or hyperparams_for(algo).env_id
     config = hyperparams_for(algo, env_id)
     timesteps = args.timesteps or config.total_timesteps
-    n_envs = args.n_envs or config.n_envs
     checkpoint_every = args.checkpoint_every if args.checkpoint_every is not None else max(1, timesteps // 10)
     # A model must meet the observation it was trained on: checked before any folder is made.
-    problem = _observation_problem(args, env_id, saved_agent, in_place)
+    problem = None
+    if saved_agent is not None:
+        problem = saved_model_problem("--model", args.model, env_id, saved_agent)
+    elif args.resume is not None and not in_place:
+        problem = saved_model_problem("--resume", args.resume, env_id)
     if problem:
         return _usage_error(problem)
+    plan = _Plan(Path(), algo, env_id, config, timesteps, args.n_envs or config.n_envs, checkpoint_every, None)
+    try:
+        plan = _open_run_folder(args, plan, in_place)
+    except OSError as exc:
+        return _write_failed(exc, Path(args.out))
 
-    if in_place:
-        assert args.resume is not None
-        run_dir = Path(args.resume)
-        recorded = json.loads((run_dir / ARGS_FILE).read_text())
-        source_model = recorded.get("resume")  # the model this run itself continued, if any
-        _clean_leftovers(run_dir)
-        print(f"resuming run folder: {run_dir}")
-    else:
-        run_name = f"{env_id.replace('/', '-')}__{algo}__{args.seed}__{int(time.time())}"
-        run_dir = make_unique_folder(args.out, run_name)  # never shared, even when started in the same second
-        source_model = args.resume
-        settings = dataclasses.asdict(args) | {
-            "algo": algo,
-            "env": env_id,
-            "timesteps": timesteps,
-            "n_envs": n_envs,
-            "checkpoint_every": checkpoint_every,
-        }
-        try:
-            write_json(run_dir / ARGS_FILE, settings)
-        except OSError as exc:
-            run_dir.rmdir()  # still empty: no run to resume, so no folder left behind
-            return _write_failed(exc, run_dir)
-        print(f"run folder: {run_dir}")
-
-    stop = _StopSignals()
+    stop = StopSignals()
     try:
         with stop:
-            plan = _Plan(run_dir, algo, env_id, config, timesteps, n_envs, checkpoint_every, source_model)
             return _run(args, stop, plan)
     except Stopped:
-        return _interrupted(run_dir, stop)
+        return _interrupted(plan.run_dir, stop)
     except OSError as exc:
-        return _write_failed(exc, run_dir)
-
-
-def _observation_problem(args: Args, env_id: str, saved_agent: Any, in_place: bool) -> str | None:
-    """Why the model of ``--model``/``--resume`` cannot play ``env_id`` (None if it can)."""
-    from agents.rl import load_model, observation_features
-
-    flag = "--model" if args.eval_only else "--resume"
-    model_features = None
-    if saved_agent is not None:
-        model_features = saved_agent.features
-    elif args.resume is not None and not in_place:
-        try:
-            _, model_info = load_model(args.resume)
-        except (OSError, ValueError) as exc:
-            return f"--resume: {exc}"
-        model_features = model_info.get("features")
-    if model_features is not None:
-        from agents.base import feature_mismatch
-
-        problem = feature_mismatch(model_features, observation_features(env_id), env_id)
-        return f"{flag}: {problem}" if problem else None
-    if saved_agent is not None:  # an older model without feature names: compare the sizes at least
-        shape, width = saved_agent.observation_space.shape, len(observation_features(env_id))
-        if shape != (width,):
-            return f"{flag}: the model observes shape {shape} but {env_id} gives ({width},)"
-    return None
-
-
-def _write_failed(exc: OSError, run_dir: Path) -> int:
-    """A file could not be written (e.g. a full disk): it is not there, never half-written; exit status 1."""
-    print(f"python train.py: error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
-    print(f"{run_dir} keeps what was complete: free space, then python train.py --resume {run_dir}", file=sys.stderr)
-    return 1
+        return _write_failed(exc, plan.run_dir)
 
 
 @dataclass(frozen=True)
@@ -463,7 +318,51 @@ class _Plan:
     source_model: str | None
 
 
-def _run(args: Args, stop: _StopSignals, plan: _Plan) -> int:
+def _open_run_folder(args: Args, plan: _Plan, in_place: bool) -> _Plan:
+    """The run folder: the unfinished one being resumed, or a new one holding the run's settings."""
+    from agents.run_report import new_run_folder
+    from coop_gym.io import write_json
+
+    if in_place:
+        assert args.resume is not None
+        run_dir = Path(args.resume)
+        recorded = json.loads((run_dir / ARGS_FILE).read_text())
+        clean_leftovers(run_dir)
+        print(f"resuming run folder: {run_dir}")
+        # The model this run itself continued, if any.
+        return dataclasses.replace(plan, run_dir=run_dir, source_model=recorded.get("resume"))
+    run_dir = new_run_folder(args.out, plan.env_id, plan.algo, args.seed)
+    settings = dataclasses.asdict(args) | {
+        "algo": plan.algo,
+        "env": plan.env_id,
+        "timesteps": plan.timesteps,
+        "n_envs": plan.n_envs,
+        "checkpoint_every": plan.checkpoint_every,
+    }
+    try:
+        write_json(run_dir / ARGS_FILE, settings)
+    except OSError:
+        run_dir.rmdir()  # still empty: no run to resume, so no folder left behind
+        raise
+    print(f"run folder: {run_dir}")
+    return dataclasses.replace(plan, run_dir=run_dir, source_model=args.resume)
+
+
+def _write_failed(exc: OSError, run_dir: Path) -> int:
+    """A file could not be written (e.g. a full disk): it is not there, never half-written; exit status 1."""
+    print(f"{PROG}: error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+    print(f"{run_dir} keeps what was complete: free space, then python train.py --resume {run_dir}", file=sys.stderr)
+    return 1
+
+
+def _interrupted(run_dir: Path, stop: StopSignals) -> int:
+    """Write the INTERRUPTED marker and say how to resume; the exit status is 128 + the signal number."""
+    from agents.rl import latest_checkpoint
+
+    return write_interrupted(run_dir, stop, latest_checkpoint(run_dir))
+
+
+def _run(args: Args, stop: StopSignals, plan: _Plan) -> int:
     """Train (or finish training), evaluate, report; returns the exit status."""
     finished_file = plan.run_dir / TRAINING_FILE
     if finished_file.exists():  # an interrupted run that had finished training
@@ -478,6 +377,9 @@ def _run(args: Args, stop: _StopSignals, plan: _Plan) -> int:
     return _evaluate_and_report(args, plan, finished)
 
 
+# --- training -------------------------------------------------------------------
+
+
 def _model_to_train(args: Args, plan: _Plan, env: Any, checkpoint: Path | None) -> tuple[Any, Any, dict[str, Any], int]:
     """``(model, env, checkpoint state, start steps)``: restored, continued from a saved model, or new.
 
@@ -486,7 +388,7 @@ def _model_to_train(args: Args, plan: _Plan, env: Any, checkpoint: Path | None) 
     """
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.rl import MODEL_FILE, VECNORMALIZE_FILE, load_model, make_model, read_bundle, restore_checkpoint
+    from agents.rl import load_to_continue, make_model, restore_checkpoint
 
     if checkpoint is not None:
         try:
@@ -497,18 +399,8 @@ def _model_to_train(args: Args, plan: _Plan, env: Any, checkpoint: Path | None) 
         return model, env, state, state["start_steps"]
     if plan.source_model is not None:
         # A new run from a saved model: its own statistics come along and keep updating.
-        model_path = Path(plan.source_model)
-        model_path = model_path / MODEL_FILE if model_path.is_dir() else model_path
-        _, stats = read_bundle(model_path)
-        beside = model_path.parent / VECNORMALIZE_FILE
-        if stats is None and beside.exists():
-            stats = VecNormalize.load(str(beside), env)
-        if stats is not None:
-            stats.set_venv(env)
-            stats.training = True
-            env = stats
         try:
-            model, _ = load_model(model_path, env=env)
+            model, env = load_to_continue(plan.source_model, env)
         except (OSError, ValueError) as exc:
             raise ValueError(f"--resume: {exc}") from exc
         print(f"continuing {plan.algo} from {plan.source_model} at {model.num_timesteps} steps")
@@ -518,10 +410,10 @@ def _model_to_train(args: Args, plan: _Plan, env: Any, checkpoint: Path | None) 
     return make_model(plan.config, env, args.seed), env, {}, 0
 
 
-def _train(args: Args, stop: _StopSignals, plan: _Plan) -> dict[str, Any] | int:
+def _train(args: Args, stop: StopSignals, plan: _Plan) -> dict[str, Any] | int:
     """Train to the step budget, checkpointing on the way; the training summary, or an exit status."""
     from agents.rl import TrainingInterrupted, cleanrl_logger, latest_checkpoint, make_train_env, save_agent
-    from coop_gym.io import write_json as write_json_file
+    from coop_gym.io import write_json
 
     run_dir, config = plan.run_dir, plan.config
     checkpoint = latest_checkpoint(run_dir)
@@ -538,14 +430,12 @@ def _train(args: Args, stop: _StopSignals, plan: _Plan) -> dict[str, Any] | int:
         model, env, state, start_steps = _model_to_train(args, plan, env, checkpoint)
     except ValueError as exc:
         return _usage_error(str(exc))
-    target = start_steps + plan.timesteps
     model.set_logger(cleanrl_logger(run_dir / "tb"))
-
     callbacks, curve, elapsed = _callbacks(args, plan, stop, state, start_steps, int(model.num_timesteps))
     stop.in_training = True
     try:
         model.learn(
-            total_timesteps=target - int(model.num_timesteps),
+            total_timesteps=start_steps + plan.timesteps - int(model.num_timesteps),
             reset_num_timesteps=checkpoint is None and plan.source_model is None,
             progress_bar=args.progress,
             callback=callbacks,
@@ -554,35 +444,41 @@ def _train(args: Args, stop: _StopSignals, plan: _Plan) -> dict[str, Any] | int:
         return _interrupted(run_dir, stop)
     finally:
         stop.in_training = False
-    train_s = elapsed()
     save_agent(model, run_dir, algo=plan.algo, env_id=plan.env_id)
     env.close()
-    trained_steps = int(model.num_timesteps) - start_steps
-    training = {
-        "timesteps": trained_steps,
-        "total_timesteps": int(model.num_timesteps),
-        "resumed_from": plan.source_model,
-        "n_envs": plan.n_envs,
-        "wall_time_s": train_s,
-        "steps_per_s": trained_steps / train_s if train_s > 0 else None,
-        "hyperparams": {**config.model_kwargs(), "normalize": config.normalize, "policy": config.policy},
-        "personas": config.personas,
-    }
+    training = _training_summary(plan, model, start_steps, elapsed())
     # Training is over: the summary marks it, and the checkpoints have served their purpose.
     finished = {"training": training, "learning_curve": curve.history if curve else [], "start_steps": start_steps}
-    write_json_file(run_dir / TRAINING_FILE, finished)
-    _remove_checkpoints(run_dir)
-    print(f"trained {trained_steps} steps in {train_s:.0f} s ({training['steps_per_s']:.0f} steps/s)")
+    write_json(run_dir / TRAINING_FILE, finished)
+    remove_checkpoints(run_dir)
     if stop.requested():  # the signal came after the last rollout boundary
         raise Stopped(signal.Signals(stop.signum or signal.SIGINT).name)
     return finished
 
 
+def _training_summary(plan: _Plan, model: Any, start_steps: int, train_s: float) -> dict[str, Any]:
+    """The ``training`` entry of ``results.json`` (printed in one line too)."""
+    trained_steps = int(model.num_timesteps) - start_steps
+    steps_per_s = trained_steps / train_s if train_s > 0 else None
+    print(f"trained {trained_steps} steps in {train_s:.0f} s ({steps_per_s or 0:.0f} steps/s)")
+    return {
+        "timesteps": trained_steps,
+        "total_timesteps": int(model.num_timesteps),
+        "resumed_from": plan.source_model,
+        "n_envs": plan.n_envs,
+        "wall_time_s": train_s,
+        "steps_per_s": steps_per_s,
+        "hyperparams": {**plan.config.model_kwargs(), "normalize": plan.config.normalize, "policy": plan.config.policy},
+        "personas": plan.config.personas,
+    }
+
+
 def _callbacks(
-    args: Args, plan: _Plan, stop: _StopSignals, state: dict[str, Any], start_steps: int, model_steps: int
+    args: Args, plan: _Plan, stop: StopSignals, state: dict[str, Any], start_steps: int, model_steps: int
 ) -> tuple[list[Any], Any, Any]:
     """``(callbacks, learning-curve callback or None, training-seconds clock)`` of a training run."""
     from agents.rl import CheckpointCallback, OutcomeStatsCallback, PeriodicEvalCallback
+    from agents.run_report import personas_arg
 
     # Periodic scores on the evaluation personas (for the learning curve only; the
     # final model is the last one, never a selected one).
@@ -590,10 +486,9 @@ def _callbacks(
     curve = None
     if args.eval_points > 0:
         every = max(1, plan.timesteps // args.eval_points)
-        curve_episodes = min(200, args.eval_episodes)
-        curve = PeriodicEvalCallback(
-            plan.algo, plan.env_id, _eval_personas(args), curve_episodes, args.eval_seed, every, start_steps
-        )
+        episodes = min(200, args.eval_episodes)
+        personas = personas_arg(args.eval_personas)
+        curve = PeriodicEvalCallback(plan.algo, plan.env_id, personas, episodes, args.eval_seed, every, start_steps)
         if state:
             curve.history, curve._next = state["curve_history"], state["curve_next"]
         callbacks.append(curve)
@@ -625,40 +520,40 @@ def _callbacks(
     return callbacks, curve, elapsed
 
 
-def _eval_personas(args: Args) -> Any:
-    return args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas
+# --- evaluation and report --------------------------------------------------------
 
 
 def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> int:
     """Score the saved agent and the baselines on the same episodes; write the figures and results.json."""
-    from agents.evaluate import evaluate, headroom, print_table, write_csv, write_json
     from agents.plots import plot_learning_curve, plot_outcome_rates
     from agents.rl import MODEL_FILE, load_agent
-    from coop_gym.io import write_json as write_json_file
-    from coop_gym.io import write_text
+    from agents.run_report import (
+        baseline_names,
+        compare_with_baselines,
+        finish_run,
+        verdict_against_handbook,
+        versions,
+    )
 
     run_dir, env_id = plan.run_dir, plan.env_id
     model_path = Path(args.model) if args.eval_only and args.model else run_dir / MODEL_FILE
-    eval_personas = _eval_personas(args)
-    # Evaluate the saved agent (what a user loads) and the baselines on the same episodes.
-    agent = load_agent(model_path)
-    started = time.perf_counter()
+    # The saved agent (what a user loads) and the baselines, on the same episodes.
     label = f"{plan.algo} (learned)"
-    results = [evaluate(agent, env_id, eval_personas, args.eval_episodes, args.eval_seed, name=label)]
-    for name in _baselines(args):
-        results.append(evaluate(name, env_id, eval_personas, args.eval_episodes, args.eval_seed))
-    eval_s = time.perf_counter() - started
-    print_table(results)
-    room = headroom(results)
-    if room is not None:
-        print("\n".join(room.lines()))
-
-    write_json(results, run_dir / "eval.json", episodes=True)
-    write_csv(results, run_dir / "eval.csv")
+    comparison = compare_with_baselines(
+        load_agent(model_path),
+        label,
+        env_id,
+        args.eval_personas,
+        args.eval_episodes,
+        args.eval_seed,
+        baseline_names(args.baselines),
+        run_dir,
+    )
+    results = comparison.results
     plot_outcome_rates(results, run_dir / "outcome_rates.png")
     curve_points = finished["learning_curve"]
     if not args.eval_only:
-        steps, returns = _monitor_curve(run_dir / "monitor.csv", finished["start_steps"])
+        steps, returns = monitor_curve(run_dir / "monitor.csv", finished["start_steps"])
         plot_learning_curve(
             steps,
             returns,
@@ -675,114 +570,14 @@ def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> i
         "seed": args.seed,
         "model": str(model_path),
         "training": finished["training"],
-        "evaluation": {
-            "personas": args.eval_personas,
-            "episodes": args.eval_episodes,
-            "seed": args.eval_seed,
-            "wall_time_s": eval_s,
-            "results": [r.summary() for r in results],
-        },
+        **comparison.summary(args.eval_personas, args.eval_episodes, args.eval_seed),
         "learning_curve": curve_points,
-        "verdict": _verdict(label, results),
-        "headroom": None
-        if room is None
-        else {
-            **dataclasses.asdict(room),
-            "value_of_reading_the_mind": room.value_of_reading_the_mind,
-            "achieved_insight": room.achieved_insight,
-        },
-        **_versions(),
+        "verdict": verdict_against_handbook(label, results),
+        **versions(),
     }
     # Written last: a run folder with results.json and COMPLETE finished; one without did not.
-    write_json_file(run_dir / "results.json", summary)
-    (run_dir / INTERRUPTED_FILE).unlink(missing_ok=True)
-    write_text(run_dir / "COMPLETE", time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
-    print(f"saved: {run_dir}")
+    finish_run(run_dir, summary)
     return 0
-
-
-def _verdict(label: str, results: list[Any]) -> dict[str, Any] | None:
-    """The learned agent (``results[0]``) against the handbook caregiver, printed and returned."""
-    learned = results[0]
-    handbook = next((r for r in results if r.agent == "handbook"), None)
-    if handbook is None:
-        return None
-    print(
-        f"{label}: success {learned.success_rate:.3f} vs handbook {handbook.success_rate:.3f}, "
-        f"unsafe {learned.unsafe_rate:.3f} vs {handbook.unsafe_rate:.3f}"
-    )
-    return {
-        "higher_success_than_handbook": learned.success_rate > handbook.success_rate,
-        "no_more_unsafe_than_handbook": learned.unsafe_rate <= handbook.unsafe_rate,
-        "learned_success": learned.success_rate,
-        "handbook_success": handbook.success_rate,
-        "learned_unsafe": learned.unsafe_rate,
-        "handbook_unsafe": handbook.unsafe_rate,
-    }
-
-
-def _versions() -> dict[str, str]:
-    import numpy as np
-    import torch
-
-    return {"numpy": np.__version__, "torch": torch.__version__}
-
-
-def _interrupted(run_dir: Path, stop: _StopSignals) -> int:
-    """Write the INTERRUPTED marker, say how to resume; the exit status is 128 + the signal number."""
-    from agents.rl import latest_checkpoint
-    from coop_gym.io import write_text
-
-    name = signal.Signals(stop.signum).name if stop.signum else "interrupt"
-    checkpoint = latest_checkpoint(run_dir)
-    if (run_dir / TRAINING_FILE).exists():
-        state = "training had finished; resuming runs the evaluation"
-    else:
-        state = f"last checkpoint {checkpoint}" if checkpoint else "no checkpoint yet; resuming starts training over"
-    message = f"{name}: stopped, {state}\nresume with: python train.py --resume {run_dir}\n"
-    write_text(run_dir / INTERRUPTED_FILE, time.strftime("%Y-%m-%dT%H:%M:%S ") + message)
-    print(f"\n{message}", end="", file=sys.stderr)
-    return 128 + (stop.signum or signal.SIGINT)
-
-
-def _clean_leftovers(run_dir: Path) -> None:
-    """Before resuming: drop the marker and any temporary file a killed process left behind."""
-    import shutil
-
-    from coop_gym.io import TEMP_MARKER
-
-    (run_dir / INTERRUPTED_FILE).unlink(missing_ok=True)
-    for leftover in list(run_dir.rglob(f"*{TEMP_MARKER}*")):
-        if leftover.is_dir():
-            shutil.rmtree(leftover, ignore_errors=True)
-        else:
-            leftover.unlink(missing_ok=True)
-
-
-def _remove_checkpoints(run_dir: Path) -> None:
-    import shutil
-
-    from agents.rl import CHECKPOINTS_DIR
-
-    shutil.rmtree(run_dir / CHECKPOINTS_DIR, ignore_errors=True)
-
-
-def _monitor_curve(path: Path, start_steps: int) -> tuple[list[float], list[float]]:
-    """(env step at episode end, return) of every training episode in SB3's monitor.csv."""
-    import csv
-
-    import numpy as np
-
-    if not path.exists():
-        return [], []
-    with path.open() as handle:
-        handle.readline()  # the JSON header line
-        rows = list(csv.DictReader(handle))
-    lengths = [float(r["l"]) for r in rows]
-    returns = [float(r["r"]) for r in rows]
-    # Episodes from parallel envs interleave; their cumulative length approximates the step count.
-    steps = (start_steps + np.cumsum(lengths)).tolist()
-    return steps, returns
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ _LAZY = {
     "EvaluationResult": "agents.evaluate",
     "wilson_interval": "agents.evaluate",
     "SB3Agent": "agents.rl",
-    "ObsNormalizer": "agents.rl",
+    "ObsNormalizer": "agents.normalize",
     "load_agent": "agents.rl",
     "load_model": "agents.rl",
     "make_model": "agents.rl",

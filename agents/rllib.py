@@ -5,16 +5,17 @@
   the learning rate decaying linearly to 0, observations normalised by running mean/std,
   no KL penalty). Each env runner steps ``num_envs_per_env_runner`` envs through coop_gym's
   own batched vector env (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``).
-  RLlib's sampler costs ~5 ms per vector step (connectors, the module's forward pass, the
-  action distribution) plus ~0.2 ms per env in it (episode bookkeeping), against ~2 us per
-  env step for the env itself, so :data:`DEFAULT_NUM_ENVS` (64) envs share the fixed part,
-  not SB3's 8.
+  RLlib's sampler has a fixed cost per vector step (connectors, the module's forward pass,
+  the action distribution) far above the env's own cost per env step, so
+  :data:`DEFAULT_NUM_ENVS` envs share that fixed part, not SB3's 8.
   The env is named ``coop_gym:<id>``, so every Ray worker imports coop_gym (and so
   registers the ids) before it makes the env: bare ids fail in fresh workers.
 * :func:`train` -- ``algo.train()`` until the env-step budget is spent, then a checkpoint.
 * :class:`RLlibAgent` / :func:`load_rllib_agent` -- the trained RLModule behind SB3's
-  ``predict(obs, state, episode_start, deterministic) -> (actions, state)``, so
-  :func:`agents.evaluate.evaluate` scores it on the same seeded episodes as every agent.
+  ``predict(obs, state, episode_start, deterministic) -> (actions, state)``, behind the
+  observation normaliser it trained with (:class:`agents.normalize.ObsNormalizer`, shared
+  with the SB3 agents), so :func:`agents.evaluate.evaluate` scores it on the same seeded
+  episodes as every agent.
 * :func:`run` -- what ``python train.py --framework rllib`` does: the same run folder as
   the SB3 path (``args.json``, ``checkpoint/`` + ``agent.json``, ``eval.json``,
   ``eval.csv``, ``results.json``, ``COMPLETE``).
@@ -55,14 +56,17 @@ from ray.rllib.utils.numpy import SMALL_NUMBER
 
 import coop_gym
 from agents.hyperparams import hyperparams_for
+from agents.normalize import ObsNormalizer
+from agents.run_folder import AGENT_FILE, ARGS_FILE, RLLIB_CHECKPOINT_DIR, RLLIB_FRAMEWORK, is_rllib_run
+from coop_gym.io import write_json
 
 __all__ = [
     "CHECKPOINT_DIR",
     "DEFAULT_NUM_ENVS",
     "FRAMEWORK",
-    "ObservationNormalizer",
     "RLlibAgent",
     "envs_per_runner",
+    "filter_normalizer",
     "is_rllib_run",
     "load_rllib_agent",
     "ppo_config",
@@ -70,16 +74,17 @@ __all__ = [
     "train",
 ]
 
-FRAMEWORK = "rllib"
-CHECKPOINT_DIR = "checkpoint"
-AGENT_FILE = "agent.json"
+FRAMEWORK = RLLIB_FRAMEWORK
+CHECKPOINT_DIR = RLLIB_CHECKPOINT_DIR
 DEFAULT_NUM_ENVS = 64
 """Envs sampled in all (split over the env runners) when ``--n-envs`` is not given.
 
-Measured on the 2-core machine (load ~3.5, another job running), sampling alone in the
-driver's env runner: 8 envs ~1,050 env steps/s, 32 ~2,100, 64 ~4,100, 128 ~3,500.
-With the 4096-step batch, 64 envs sample 64-step fragments (SB3: 8 x 512); GAE
-bootstraps the cut episodes from the value function.
+Sampling throughput rises with the envs per runner while they share the sampler's fixed
+cost per vector step, then falls once one iteration's fragments grow too short; 64 was the
+best count measured. Measure it on a machine with ``python train.py --framework rllib
+--n-envs N --timesteps 40000`` (every iteration prints its env steps/s). With the
+4096-step batch, 64 envs sample 64-step fragments (SB3: 8 x 512); GAE bootstraps the cut
+episodes from the value function.
 """
 OBS_CLIP = 10.0
 """Normalised observations are clipped to +-this (SB3 ``VecNormalize``'s ``clip_obs``)."""
@@ -97,6 +102,38 @@ def envs_per_runner(n_envs: int | None, num_env_runners: int) -> int:
 def _module_prefixed(env_id: str) -> str:
     """``coop_gym:<id>``: gymnasium imports coop_gym (registering the ids) in each worker first."""
     return env_id if ":" in env_id else f"coop_gym:{env_id}"
+
+
+def _sb3_ppo_training(sb3: Any, timesteps: int | None) -> dict[str, Any]:
+    """``PPOConfig.training`` arguments equal to SB3 PPO's hyperparameters (``sb3``: its TrainingConfig)."""
+    kw = dict(sb3.algo_kwargs)
+    learning_rate = str(kw["learning_rate"])
+    lr_start = float(learning_rate.removeprefix("lin_"))
+    # SB3's "lin_3e-4" decays to 0 over the budget; RLlib's piecewise-linear schedule counts
+    # sampled env steps, so it needs the budget (without one the rate stays at its start).
+    lr: float | list[list[float]] = lr_start
+    if learning_rate.startswith("lin_") and timesteps is not None:
+        if timesteps < 1:
+            raise ValueError(f"timesteps must be a positive int, got {timesteps!r}")
+        lr = [[0, lr_start], [int(timesteps), 0.0]]
+    return {
+        # One SB3 rollout (n_envs x n_steps) is one RLlib train batch.
+        "train_batch_size_per_learner": int(kw["n_steps"]) * sb3.n_envs,
+        "minibatch_size": int(kw["batch_size"]),
+        "num_epochs": int(kw["n_epochs"]),
+        "lr": lr,
+        "gamma": float(kw["gamma"]),
+        "lambda_": float(kw["gae_lambda"]),
+        "clip_param": float(kw["clip_range"]),
+        "entropy_coeff": float(kw["ent_coef"]),
+        "vf_loss_coeff": float(kw["vf_coef"]),
+        "grad_clip": float(kw["max_grad_norm"]),
+        "grad_clip_by": "global_norm",
+        # SB3 does not clip the value loss; RLlib's default clip (10) would bind on returns of -2..1 rarely.
+        "vf_clip_param": float("inf"),
+        # SB3's PPO has only the clipped objective; RLlib adds a KL penalty (0.2) by default.
+        "use_kl_loss": False,
+    }
 
 
 def ppo_config(
@@ -127,18 +164,6 @@ def ppo_config(
     if env_id.removeprefix("coop_gym:") not in coop_gym.ENV_IDS:
         raise ValueError(f"env_id must be a coop_gym id ({', '.join(coop_gym.ENV_IDS)}), got {env_id!r}")
     sb3 = hyperparams_for("ppo")
-    kw = dict(sb3.algo_kwargs)
-    learning_rate = str(kw["learning_rate"])
-    lr_start = float(learning_rate.removeprefix("lin_"))
-    # SB3's "lin_3e-4" decays to 0 over the budget; RLlib's piecewise-linear schedule counts
-    # sampled env steps, so it needs the budget (without one the rate stays at its start).
-    lr: float | list[list[float]] = lr_start
-    if learning_rate.startswith("lin_") and timesteps is not None:
-        if timesteps < 1:
-            raise ValueError(f"timesteps must be a positive int, got {timesteps!r}")
-        lr = [[0, lr_start], [int(timesteps), 0.0]]
-    # One SB3 rollout (n_envs x n_steps) is one RLlib train batch.
-    train_batch = int(kw["n_steps"]) * sb3.n_envs
     return (
         PPOConfig()
         .environment(_module_prefixed(env_id), env_config={"personas": personas, **(env_kwargs or {})})
@@ -147,8 +172,8 @@ def ppo_config(
             num_envs_per_env_runner=num_envs_per_env_runner,
             gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT,
             num_cpus_per_env_runner=1,
-            # RLlib's default 60 s sampling timeout drops whole batches on a loaded machine
-            # (measured: iterations of 0 env steps, forever); wait for the samples instead.
+            # RLlib's default 60 s sampling timeout drops whole batches when the machine is busy
+            # (iterations of 0 env steps, forever); wait for the samples instead.
             sample_timeout_s=None,
             # SB3's VecNormalize (normalize=True in agents.hyperparams): running mean/std of
             # the observations, clipped to +-10; the runners' statistics are merged after every
@@ -158,23 +183,7 @@ def ppo_config(
             ),
         )
         .learners(num_learners=0)  # the learner runs in the driver process, on CPU
-        .training(
-            train_batch_size_per_learner=train_batch,
-            minibatch_size=int(kw["batch_size"]),
-            num_epochs=int(kw["n_epochs"]),
-            lr=lr,
-            gamma=float(kw["gamma"]),
-            lambda_=float(kw["gae_lambda"]),
-            clip_param=float(kw["clip_range"]),
-            entropy_coeff=float(kw["ent_coef"]),
-            vf_loss_coeff=float(kw["vf_coef"]),
-            grad_clip=float(kw["max_grad_norm"]),
-            grad_clip_by="global_norm",
-            # SB3 does not clip the value loss; RLlib's default clip (10) would bind on returns of -2..1 rarely.
-            vf_clip_param=float("inf"),
-            # SB3's PPO has only the clipped objective; RLlib adds a KL penalty (0.2) by default.
-            use_kl_loss=False,
-        )
+        .training(**_sb3_ppo_training(sb3, timesteps))
         .rl_module(
             model_config=DefaultModelConfig(
                 fcnet_hiddens=list(sb3.policy_kwargs.get("net_arch", [64, 64])),
@@ -228,36 +237,16 @@ def train(config: PPOConfig, timesteps: int, checkpoint_dir: str | Path, *, verb
     }
 
 
-@dataclasses.dataclass(frozen=True)
-class ObservationNormalizer:
-    """The MeanStdFilter of a training run, frozen: ``clip((obs - mean) / (std + 1e-6), +-clip)``.
+def filter_normalizer(state: dict[Any, Any]) -> ObsNormalizer:
+    """The normaliser of ``MeanStdFilter.get_state()`` of a single-agent pipeline, frozen (no update).
 
-    Attributes:
-        mean: Running mean of the training observations, shape ``(n_features,)``.
-        std: Their running (unbiased) standard deviation, same shape.
-        clip: Bound of the normalised values.
+    The same arithmetic as ``ray.rllib.utils.filter.MeanStdFilter`` with ``update=False``:
+    ``clip((obs - mean) / (std + SMALL_NUMBER), +-clip)``.
     """
-
-    mean: NDArray[np.float64]
-    std: NDArray[np.float64]
-    clip: float | None = OBS_CLIP
-
-    def __call__(self, observation: NDArray[np.float32]) -> NDArray[np.float32]:
-        """Normalise a batch (or one) observation as the filter did during training (no update)."""
-        # The same arithmetic as ray.rllib.utils.filter.MeanStdFilter with update=False.
-        normalized = (observation - self.mean) / (self.std + SMALL_NUMBER)
-        if self.clip:
-            normalized = np.clip(normalized, -self.clip, self.clip)
-        return normalized.astype(observation.dtype)
-
-    @classmethod
-    def from_filter_state(cls, state: dict[Any, Any]) -> ObservationNormalizer:
-        """From ``MeanStdFilter.get_state()`` of a single-agent pipeline."""
-        (agent_state,) = state.values()
-        (stats,) = agent_state["running_stats"]
-        running = RunningStat.from_state(stats)
-        mean, std = np.asarray(running.mean, np.float64), np.asarray(running.std, np.float64)
-        return cls(mean, std, agent_state["clip_by_value"])
+    (agent_state,) = state.values()
+    (stats,) = agent_state["running_stats"]
+    running = RunningStat.from_state(stats)
+    return ObsNormalizer.from_mean_std(running.mean, running.std, agent_state["clip_by_value"], SMALL_NUMBER)
 
 
 class RLlibAgent:
@@ -269,9 +258,7 @@ class RLlibAgent:
         normalizer: The observation filter it was trained behind (None: raw observations).
     """
 
-    def __init__(
-        self, module: RLModule, env_id: str | None = None, normalizer: ObservationNormalizer | None = None
-    ) -> None:
+    def __init__(self, module: RLModule, env_id: str | None = None, normalizer: ObsNormalizer | None = None) -> None:
         """Wrap the module; actions are drawn from its inference distribution."""
         self.module = module
         self.env_id = env_id
@@ -317,14 +304,6 @@ def _filter_path(checkpoint: Path) -> Path:
     return checkpoint / COMPONENT_ENV_RUNNER / COMPONENT_ENV_TO_MODULE_CONNECTOR / MeanStdFilter.__name__
 
 
-def is_rllib_run(path: str | Path) -> bool:
-    """True for a run folder (or its ``checkpoint/``) written by :func:`run`."""
-    path = Path(path)
-    folder = path.parent if path.name == CHECKPOINT_DIR else path
-    info = folder / AGENT_FILE
-    return info.exists() and json.loads(info.read_text()).get("framework") == FRAMEWORK
-
-
 def load_rllib_agent(path: str | Path) -> RLlibAgent:
     """Load the agent of an RLlib run folder, its ``checkpoint/``, or any RLlib algorithm checkpoint."""
     path = Path(path)
@@ -345,7 +324,7 @@ def load_rllib_agent(path: str | Path) -> RLlibAgent:
         trained_filter = MeanStdFilter()
         trained_filter.input_observation_space = module.observation_space
         trained_filter.restore_from_path(str(filter_path.resolve()))
-        normalizer = ObservationNormalizer.from_filter_state(trained_filter.get_state())
+        normalizer = filter_normalizer(trained_filter.get_state())
     return RLlibAgent(module, info.get("env_id"), normalizer)
 
 
@@ -360,58 +339,37 @@ def run(args: Any) -> int:
     """
     import ray
 
-    from agents.evaluate import evaluate, print_table, write_csv, write_json
+    from agents.run_report import baseline_names, compare_with_baselines, finish_run, new_run_folder
 
     torch.set_num_threads(args.threads)
     env_id = args.env or hyperparams_for("ppo").env_id
-    sb3 = hyperparams_for("ppo", env_id)
-    timesteps = args.timesteps or sb3.total_timesteps
-    runners = args.num_env_runners
-    per_runner = envs_per_runner(args.n_envs, runners)
-
-    run_name = f"{env_id.replace('/', '-')}__rllib_ppo__{args.seed}__{int(time.time())}"
-    run_dir = Path(args.out) / run_name
-    for k in range(1, 100):  # two runs started in the same second never share a folder
-        try:
-            run_dir.mkdir(parents=True, exist_ok=False)
-            break
-        except FileExistsError:
-            run_dir = Path(args.out) / f"{run_name}_{k}"
+    run_dir = new_run_folder(args.out, env_id, "rllib_ppo", args.seed)
     print(f"run folder: {run_dir}")
-    (run_dir / "args.json").write_text(json.dumps(dataclasses.asdict(args), indent=2) + "\n")
-    eval_personas: Any = args.eval_personas.split(",") if "," in args.eval_personas else args.eval_personas
-
+    write_json(run_dir / ARGS_FILE, dataclasses.asdict(args))
     # A local instance sized to the runners (plus the driver's learner), or the given cluster.
     if args.address:
         ray.init(address=args.address, log_to_driver=False)
     else:
-        ray.init(num_cpus=runners + 1, include_dashboard=False, log_to_driver=False)
+        ray.init(num_cpus=args.num_env_runners + 1, include_dashboard=False, log_to_driver=False)
     try:
-        config = ppo_config(
-            env_id,
-            seed=args.seed,
-            num_env_runners=runners,
-            num_envs_per_env_runner=per_runner,
-            personas=sb3.personas,
-            timesteps=timesteps,
-        )
-        training = train(config, timesteps, run_dir / CHECKPOINT_DIR, verbose=args.progress)
+        training = _train_run(args, env_id, run_dir)
     finally:
         ray.shutdown()
-    training |= {"num_env_runners": runners, "num_envs_per_env_runner": per_runner, "address": args.address}
     info = {"framework": FRAMEWORK, "algo": "ppo", "env_id": env_id, "checkpoint": CHECKPOINT_DIR}
-    (run_dir / AGENT_FILE).write_text(json.dumps(info | {"num_timesteps": training["timesteps"]}, indent=2) + "\n")
+    write_json(run_dir / AGENT_FILE, info | {"num_timesteps": training["timesteps"]})
     print(f"trained {training['timesteps']} steps in {training['wall_time_s']:.0f} s")
 
     # The same evaluation path, the same seeded episodes as every other agent.
-    agent = load_rllib_agent(run_dir)
-    label = "rllib ppo (learned)"
-    results = [evaluate(agent, env_id, eval_personas, args.eval_episodes, args.eval_seed, name=label)]
-    for name in [b.strip() for b in args.baselines.split(",") if b.strip()]:
-        results.append(evaluate(name, env_id, eval_personas, args.eval_episodes, args.eval_seed))
-    print_table(results)
-    write_json(results, run_dir / "eval.json", episodes=True)
-    write_csv(results, run_dir / "eval.csv")
+    comparison = compare_with_baselines(
+        load_rllib_agent(run_dir),
+        "rllib ppo (learned)",
+        env_id,
+        args.eval_personas,
+        args.eval_episodes,
+        args.eval_seed,
+        baseline_names(args.baselines),
+        run_dir,
+    )
     summary = {
         "run": run_dir.name,
         "framework": FRAMEWORK,
@@ -420,17 +378,31 @@ def run(args: Any) -> int:
         "seed": args.seed,
         "model": str(run_dir / CHECKPOINT_DIR),
         "training": training,
-        "evaluation": {
-            "personas": args.eval_personas,
-            "episodes": args.eval_episodes,
-            "seed": args.eval_seed,
-            "results": [r.summary() for r in results],
-        },
+        **comparison.summary(args.eval_personas, args.eval_episodes, args.eval_seed),
         "ray": ray.__version__,
         "torch": torch.__version__,
     }
     # Written last: results.json and COMPLETE mark a finished run, as on the SB3 path.
-    (run_dir / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (run_dir / "COMPLETE").write_text(time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
-    print(f"saved: {run_dir}")
+    finish_run(run_dir, summary)
     return 0
+
+
+def _train_run(args: Any, env_id: str, run_dir: Path) -> dict[str, Any]:
+    """Train PPO on ``env_id`` with ``train.Args``'s settings (Ray initialised); the training summary."""
+    sb3 = hyperparams_for("ppo", env_id)
+    timesteps = args.timesteps or sb3.total_timesteps
+    per_runner = envs_per_runner(args.n_envs, args.num_env_runners)
+    config = ppo_config(
+        env_id,
+        seed=args.seed,
+        num_env_runners=args.num_env_runners,
+        num_envs_per_env_runner=per_runner,
+        personas=sb3.personas,
+        timesteps=timesteps,
+    )
+    training = train(config, timesteps, run_dir / CHECKPOINT_DIR, verbose=args.progress)
+    return training | {
+        "num_env_runners": args.num_env_runners,
+        "num_envs_per_env_runner": per_runner,
+        "address": args.address,
+    }

@@ -81,7 +81,7 @@ def test_an_old_run_folder_still_loads(saved, tmp_path):
     (old / AGENT_FILE).write_text(json.dumps(old_info))
     agent, current = load_agent(old), load_agent(saved)
     assert agent.algo == "ppo" and agent.features is None and agent.obs_normalizer is not None
-    np.testing.assert_array_equal(agent.obs_normalizer.var, current.obs_normalizer.var)
+    np.testing.assert_array_equal(agent.obs_normalizer.scale, current.obs_normalizer.scale)
 
 
 def test_another_env_is_refused_naming_the_features(saved):

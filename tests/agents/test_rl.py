@@ -25,12 +25,12 @@ from agents.rl import (
     MODEL_FILE,
     VECNORMALIZE_FILE,
     SB3Agent,
-    _renamed,
     load_agent,
     make_model,
     make_train_env,
     save_agent,
 )
+from agents.rl.callbacks import _renamed
 
 torch.set_num_threads(1)
 

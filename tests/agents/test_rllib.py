@@ -30,11 +30,11 @@ from agents.rllib import (
     CHECKPOINT_DIR,
     DEFAULT_NUM_ENVS,
     OBS_CLIP,
-    ObservationNormalizer,
     RLlibAgent,
     _filter_path,
     _module_path,
     envs_per_runner,
+    filter_normalizer,
     is_rllib_run,
     load_rllib_agent,
     ppo_config,
@@ -140,7 +140,7 @@ def test_the_agent_normalises_observations_as_the_training_filter_did(tmp_path):
     module = _module()
     space = gym.spaces.Box(-np.inf, np.inf, (11,), np.float32)
     obs_filter = _trained_filter(rng, space)
-    normalizer = ObservationNormalizer.from_filter_state(obs_filter.get_state())
+    normalizer = filter_normalizer(obs_filter.get_state())
 
     # The frozen filter (update_stats=False) is what the policy saw; the agent must match it.
     frozen = MeanStdFilter(clip_by_value=OBS_CLIP, update_stats=False)
@@ -162,7 +162,7 @@ def test_the_agent_normalises_observations_as_the_training_filter_did(tmp_path):
     loaded = load_rllib_agent(run_dir)
     assert loaded.normalizer is not None
     np.testing.assert_array_equal(loaded.normalizer.mean, normalizer.mean)
-    np.testing.assert_array_equal(loaded.normalizer.std, normalizer.std)
+    np.testing.assert_array_equal(loaded.normalizer.scale, normalizer.scale)
     expected, _ = RLlibAgent(module).predict(normalizer(probes))
     assert np.array_equal(loaded.predict(probes)[0], expected)
 

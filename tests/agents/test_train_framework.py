@@ -33,8 +33,8 @@ def test_rllib_flags_parse():
 
 
 def test_rllib_samples_in_the_driver_by_default():
-    # Measured on the 2-core machine: 64 envs in the driver ~1,500 env steps/s, in 1 or 2 Ray
-    # actors ~900 (the episodes cross processes every iteration); a cluster passes its own count.
+    # On one machine the driver samples fastest (no episodes crossing processes every iteration;
+    # measure with train.py --framework rllib --num-env-runners N); a cluster passes its own count.
     if importlib.util.find_spec("ray") is None:
         pytest.skip("needs the [rllib] extra")
     assert train.parse_args(["--framework", "rllib"]).num_env_runners == 0

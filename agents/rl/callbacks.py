@@ -1,0 +1,147 @@
+"""What SB3 training reports while it runs: TensorBoard under CleanRL's names, outcome rates, evaluations.
+
+* :class:`CleanRLTensorBoard` / :func:`cleanrl_logger` -- SB3's scalars filed under
+  ``charts/`` and ``losses/`` (the house style, as CleanRL names them).
+* :class:`OutcomeStatsCallback` -- outcome rates of recent training episodes.
+* :class:`PeriodicEvalCallback` -- the current policy scored through the one evaluation
+  path every so many env steps (the learning curve; it never selects a model).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import KVWriter, Logger, TensorBoardOutputFormat
+
+from agents.normalize import ObsNormalizer
+from agents.rl.bundle import SB3Agent
+from agents.rl.training import find_vec_normalize
+from coop_gym.envs.config import Outcome
+
+__all__ = ["CleanRLTensorBoard", "OutcomeStatsCallback", "PeriodicEvalCallback", "cleanrl_logger"]
+
+
+# SB3 logs under rollout/, train/, time/; the house style (CleanRL) puts scalars under
+# charts/ and losses/. Keys not listed are kept as they are (e.g. eval/...).
+_RENAMES = {
+    "rollout/ep_rew_mean": "charts/episodic_return",
+    "rollout/ep_len_mean": "charts/episodic_length",
+    "rollout/exploration_rate": "charts/exploration_rate",
+    "time/fps": "charts/SPS",
+    "train/learning_rate": "charts/learning_rate",
+}
+_DROPPED = {"time/iterations", "time/time_elapsed", "time/total_timesteps", "time/episodes"}
+
+
+def _renamed(key: str) -> str | None:
+    if key in _DROPPED:
+        return None
+    if key in _RENAMES:
+        return _RENAMES[key]
+    if key.startswith("train/"):
+        return "losses/" + key.removeprefix("train/")
+    if key.startswith("rollout/"):
+        return "charts/" + key.removeprefix("rollout/")
+    return key
+
+
+class CleanRLTensorBoard(TensorBoardOutputFormat):
+    """TensorBoard writer that files SB3's scalars under ``charts/`` and ``losses/`` (CleanRL names)."""
+
+    def write(self, key_values: dict[str, Any], key_excluded: dict[str, tuple[str, ...]], step: int = 0) -> None:
+        """Rename the keys, then write as SB3 does."""
+        values: dict[str, Any] = {}
+        excluded: dict[str, tuple[str, ...]] = {}
+        for key, value in key_values.items():
+            new = _renamed(key)
+            if new is not None:
+                values[new] = value
+                excluded[new] = key_excluded.get(key, ())
+        super().write(values, excluded, step)
+
+
+def cleanrl_logger(folder: str | Path, extra: list[KVWriter] | None = None) -> Logger:
+    """An SB3 ``Logger`` writing TensorBoard events (CleanRL key names) into ``folder``."""
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    return Logger(str(folder), [CleanRLTensorBoard(str(folder)), *(extra or [])])
+
+
+class OutcomeStatsCallback(BaseCallback):
+    """Logs the outcome rates of recent training episodes (``charts/success_rate`` ...).
+
+    Args:
+        window: Number of most recent finished episodes the rates are computed over.
+    """
+
+    def __init__(self, window: int = 200) -> None:
+        """Keep a window of recent outcomes."""
+        super().__init__()
+        self.window = window
+        self.outcomes: list[str] = []
+
+    def _on_step(self) -> bool:
+        dones = self.locals.get("dones")
+        infos = self.locals.get("infos", [])
+        if dones is None:
+            return True
+        for done, info in zip(dones, infos, strict=False):
+            if done and "outcome" in info:
+                self.outcomes.append(str(info["outcome"]))
+        del self.outcomes[: -self.window]
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if not self.outcomes:
+            return
+        for outcome in (o.label for o in Outcome if o is not Outcome.NONE):
+            self.logger.record(f"charts/{outcome}_rate", self.outcomes.count(outcome) / len(self.outcomes))
+
+
+class PeriodicEvalCallback(BaseCallback):
+    """Scores the current policy with :func:`agents.evaluate.evaluate` every ``every`` env steps.
+
+    The scores feed the learning curve and TensorBoard (``eval/...``); they never select
+    a model, so evaluating on held-out personas here does not leak into training.
+
+    Args:
+        algo: Algorithm name (for the agent wrapper).
+        env_id: Env id to evaluate on.
+        personas: Persona set.
+        episodes: Episodes per evaluation.
+        seed: Seed of episode 0 of every evaluation (the same episodes each time).
+        every: Evaluate whenever this many env steps have passed.
+        start_steps: Step count training starts from (a resumed model's).
+    """
+
+    def __init__(
+        self, algo: str, env_id: str, personas: Any, episodes: int, seed: int, every: int, start_steps: int = 0
+    ) -> None:
+        """Store the settings; evaluations happen during ``learn``."""
+        super().__init__()
+        self.algo, self.env_id, self.personas = algo, env_id, personas
+        self.episodes, self.seed, self.every = episodes, seed, max(1, every)
+        self.history: list[dict[str, Any]] = []
+        self._next = start_steps + self.every
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            self._next = (self.num_timesteps // self.every + 1) * self.every
+            self.evaluate_now()
+        return True
+
+    def evaluate_now(self) -> dict[str, Any]:
+        """Run one evaluation and log it."""
+        from agents.evaluate import evaluate
+
+        normalizer = ObsNormalizer.from_vec_normalize(find_vec_normalize(self.model.get_env()))
+        agent = SB3Agent(self.model, self.algo, self.env_id, normalizer)
+        result = evaluate(agent, self.env_id, self.personas, self.episodes, self.seed, n_envs=min(64, self.episodes))
+        point = {"timesteps": int(self.num_timesteps), **result.summary()}
+        self.history.append(point)
+        for key in ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate", "mean_return"):
+            self.logger.record(f"eval/{key}", point[key])
+        if point["mean_time_to_lift_s"] is not None:
+            self.logger.record("eval/mean_time_to_lift_s", point["mean_time_to_lift_s"])
+        return point

@@ -1,0 +1,186 @@
+"""Building what SB3 trains: the training ``VecEnv`` and the algorithm with the project's defaults.
+
+* :func:`make_train_env` -- ``n_envs`` envs seeded ``seed, seed + 1, ...`` through the
+  batched env's SB3 adapter (:mod:`agents.sb3_vec`) or SB3's ``DummyVecEnv`` of single envs
+  (the same episodes), with episode statistics (``VecMonitor``) and optional observation
+  normalisation (``VecNormalize``).
+* :func:`make_model` -- PPO, RecurrentPPO or DQN with the hyperparameters of
+  :mod:`agents.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+from stable_baselines3 import DQN, PPO
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
+
+import coop_gym  # noqa: F401 -- registers the env ids
+from agents.hyperparams import ALGORITHMS, TrainingConfig
+from agents.sb3_vec import make_sb3_vec_env
+
+__all__ = [
+    "LinearDecay",
+    "algorithm_class",
+    "find_vec_normalize",
+    "make_model",
+    "make_train_env",
+    "observation_features",
+]
+
+
+def algorithm_class(algo: str) -> type[BaseAlgorithm]:
+    """The SB3 class of an algorithm name (:data:`agents.hyperparams.ALGORITHMS`)."""
+    if algo == "ppo":
+        return PPO
+    if algo == "dqn":
+        return DQN
+    if algo == "recurrent_ppo":
+        from sb3_contrib import RecurrentPPO
+
+        return RecurrentPPO  # type: ignore[no-any-return]
+    raise ValueError(f"unknown algorithm {algo!r}; known: {', '.join(ALGORITHMS)}")
+
+
+def make_train_env(
+    env_id: str,
+    n_envs: int,
+    seed: int,
+    *,
+    personas: str = "train",
+    normalize: bool = False,
+    monitor_file: str | Path | None = None,
+    monitor_append: bool = False,
+    env_kwargs: dict[str, Any] | None = None,
+    backend: str = "auto",
+) -> VecEnv:
+    """The training ``VecEnv``: ``n_envs`` envs seeded ``seed, seed + 1, ...``.
+
+    Args:
+        env_id: Registered env id.
+        n_envs: Parallel envs.
+        seed: Seed of env 0.
+        personas: Persona set (``"train"`` by default; never train on ``"test"``).
+        normalize: Wrap in ``VecNormalize`` (observations only).
+        monitor_file: Write SB3's ``monitor.csv`` episode log here (for learning curves).
+        monitor_append: Append to an existing ``monitor_file`` (a resumed run) instead of replacing it.
+        env_kwargs: Extra env kwargs.
+        backend: ``"batched"`` or ``"auto"`` (the native vector env through
+            :mod:`agents.sb3_vec`), ``"dummy"`` (SB3 ``DummyVecEnv`` of single envs).
+
+    Returns:
+        The ``VecEnv`` (``VecMonitor``-wrapped; ``VecNormalize`` outermost if asked).
+    """
+    if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
+        raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
+    if backend not in ("auto", "batched", "dummy"):
+        raise ValueError(f"backend must be 'auto', 'batched' or 'dummy', got {backend!r}")
+    kwargs = {"personas": personas, **(env_kwargs or {})}
+    venv: VecEnv
+    if backend == "dummy":
+        venv = DummyVecEnv([_env_factory(env_id, kwargs) for _ in range(n_envs)])
+        venv.seed(seed)
+    else:
+        venv = make_sb3_vec_env(env_id, n_envs, seed, kwargs)
+    filename = None
+    if monitor_file is not None:
+        Path(monitor_file).parent.mkdir(parents=True, exist_ok=True)
+        filename = str(monitor_file)
+    append = monitor_append and filename is not None and Path(str(filename)).exists()
+    venv = VecMonitor(venv, filename=None if append else filename, info_keywords=("outcome",))
+    if append:
+        from stable_baselines3.common.monitor import ResultsWriter
+
+        # VecMonitor always starts a new file; a resumed run keeps its episodes and adds rows.
+        venv.results_writer = ResultsWriter(str(filename), extra_keys=("outcome",), override_existing=False)
+    if normalize:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
+    return venv
+
+
+def _env_factory(env_id: str, kwargs: dict[str, Any]) -> Callable[[], gym.Env[Any, Any]]:
+    return lambda: gym.make(env_id, **kwargs)
+
+
+class LinearDecay:
+    """A value falling linearly from ``initial`` to 0 over training (RL Zoo's ``lin_<value>``).
+
+    A class rather than a lambda so saved models pickle and load cleanly.
+    """
+
+    def __init__(self, initial: float) -> None:
+        """Start at ``initial``."""
+        self.initial = float(initial)
+
+    def __call__(self, progress_remaining: float) -> float:
+        """SB3 passes the fraction of training left (1 -> 0)."""
+        return progress_remaining * self.initial
+
+    def __repr__(self) -> str:
+        """As RL Zoo writes it."""
+        return f"lin_{self.initial:g}"
+
+
+def _schedules(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Turn RL Zoo schedule strings (``"lin_3e-4"``) into :class:`LinearDecay` objects."""
+    out = dict(kwargs)
+    for key in ("learning_rate", "clip_range", "clip_range_vf"):
+        value = out.get(key)
+        if isinstance(value, str):
+            kind, _, number = value.partition("_")
+            if kind != "lin":
+                raise ValueError(f"{key}={value!r}: only linear schedules 'lin_<value>' are supported")
+            out[key] = LinearDecay(float(number))
+    return out
+
+
+def make_model(
+    config: TrainingConfig,
+    env: VecEnv,
+    seed: int,
+    *,
+    tensorboard_log: str | Path | None = None,
+    verbose: int = 0,
+    overrides: dict[str, Any] | None = None,
+) -> BaseAlgorithm:
+    """Build ``config.algo`` on ``env`` with the config's hyperparameters (plus ``overrides``)."""
+    cls = algorithm_class(config.algo)
+    kwargs = _schedules(config.model_kwargs() | dict(overrides or {}))
+    return cls(
+        config.policy,
+        env,
+        seed=seed,
+        verbose=verbose,
+        device="cpu",
+        tensorboard_log=str(tensorboard_log) if tensorboard_log is not None else None,
+        **kwargs,
+    )
+
+
+def find_vec_normalize(env: VecEnv | None) -> VecNormalize | None:
+    """The ``VecNormalize`` layer of a wrapped ``VecEnv`` (None if there is none)."""
+    while env is not None:
+        if isinstance(env, VecNormalize):
+            return env
+        env = getattr(env, "venv", None)
+    return None
+
+
+def observation_features(env_id: str, env: VecEnv | None = None) -> list[str]:
+    """The observation feature names of ``env`` (a training ``VecEnv``) or of a fresh ``env_id`` env."""
+    from agents.base import features_of
+
+    if env is not None:
+        try:
+            return [str(f) for f in env.get_attr("features", indices=[0])[0]]
+        except (AttributeError, IndexError):
+            pass
+    single = gym.make(env_id)
+    try:
+        return list(features_of(single))
+    finally:
+        single.close()

@@ -1,0 +1,144 @@
+"""How every training run ends: the learned agent and the baselines on the same episodes, then the files.
+
+Both trainers (``train.py`` with SB3, :func:`agents.rllib.run` with RLlib) finish the same
+way: the saved agent and each scripted baseline are scored by :func:`agents.evaluate.evaluate`
+on the same seeded episodes of the held-out personas; the comparison table is printed with
+the value of reading the mind, the achieved insight and each agent's mind-reading score;
+``eval.json`` / ``eval.csv`` hold it; ``results.json`` and the ``COMPLETE`` marker are
+written last, so a run folder without them did not finish.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from agents.evaluate import (
+    EvaluationResult,
+    Headroom,
+    evaluate,
+    headroom,
+    print_table,
+    summaries,
+    write_csv,
+    write_json,
+)
+from agents.run_folder import COMPLETE_FILE, INTERRUPTED_FILE
+from coop_gym.io import make_unique_folder, write_text
+from coop_gym.io import write_json as write_json_file
+
+__all__ = [
+    "Comparison",
+    "baseline_names",
+    "compare_with_baselines",
+    "finish_run",
+    "new_run_folder",
+    "personas_arg",
+    "verdict_against_handbook",
+    "versions",
+]
+
+
+def personas_arg(text: str) -> str | list[str]:
+    """A persona set name (``"test"``) as it is, names joined by ``,`` as a list."""
+    return [p.strip() for p in text.split(",") if p.strip()] if "," in text else text
+
+
+def baseline_names(text: str) -> list[str]:
+    """Scripted agent names joined by ``,`` (empty: none)."""
+    return [b.strip() for b in text.split(",") if b.strip()]
+
+
+def new_run_folder(out: str | Path, env_id: str, algo: str, seed: int) -> Path:
+    """A new run folder ``out/{env}__{algo}__{seed}__{time}`` (CleanRL's naming), never shared with another run."""
+    return make_unique_folder(out, f"{env_id.replace('/', '-')}__{algo}__{seed}__{int(time.time())}")
+
+
+class Comparison:
+    """The learned agent (first) and the baselines, scored on the same episodes, with their headroom.
+
+    Attributes:
+        results: One :class:`~agents.evaluate.EvaluationResult` per agent, the learned one first.
+        room: Headroom and mind-reading scores (None without an oracle and a blind baseline).
+        wall_time_s: Time the evaluations took [s].
+    """
+
+    def __init__(self, results: list[EvaluationResult], wall_time_s: float) -> None:
+        """Hold the results; the headroom is computed once, here."""
+        self.results = results
+        self.room: Headroom | None = headroom(results)
+        self.wall_time_s = wall_time_s
+
+    def summary(self, personas: str, episodes: int, seed: int) -> dict[str, Any]:
+        """The ``evaluation`` and ``headroom`` entries of ``results.json``."""
+        room = self.room
+        return {
+            "evaluation": {
+                "personas": personas,
+                "episodes": episodes,
+                "seed": seed,
+                "wall_time_s": self.wall_time_s,
+                "results": summaries(self.results, room),
+            },
+            "headroom": None if room is None else room.as_json(),
+        }
+
+
+def compare_with_baselines(
+    agent: Any,
+    label: str,
+    env_id: str,
+    personas: str,
+    episodes: int,
+    seed: int,
+    baselines: Sequence[str],
+    run_dir: Path,
+) -> Comparison:
+    """Score ``agent`` and the baselines on the same episodes; print the table, write ``eval.json`` and ``eval.csv``."""
+    started = time.perf_counter()
+    results = [evaluate(agent, env_id, personas_arg(personas), episodes, seed, name=label)]
+    for name in baselines:
+        results.append(evaluate(name, env_id, personas_arg(personas), episodes, seed))
+    comparison = Comparison(results, time.perf_counter() - started)
+    print_table(results, room=comparison.room)
+    write_json(results, run_dir / "eval.json", episodes=True)
+    write_csv(results, run_dir / "eval.csv", room=comparison.room)
+    return comparison
+
+
+def finish_run(run_dir: Path, summary: dict[str, Any]) -> None:
+    """Write ``results.json``, then the ``COMPLETE`` marker (and drop ``INTERRUPTED``): the run finished."""
+    write_json_file(run_dir / "results.json", summary)
+    (run_dir / INTERRUPTED_FILE).unlink(missing_ok=True)
+    write_text(run_dir / COMPLETE_FILE, time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
+    print(f"saved: {run_dir}")
+
+
+def verdict_against_handbook(label: str, results: list[Any]) -> dict[str, Any] | None:
+    """The learned agent (``results[0]``) against the handbook caregiver, printed and returned."""
+    learned = results[0]
+    handbook = next((r for r in results if r.agent == "handbook"), None)
+    if handbook is None:
+        return None
+    print(
+        f"{label}: success {learned.success_rate:.3f} vs handbook {handbook.success_rate:.3f}, "
+        f"unsafe {learned.unsafe_rate:.3f} vs {handbook.unsafe_rate:.3f}"
+    )
+    return {
+        "higher_success_than_handbook": learned.success_rate > handbook.success_rate,
+        "no_more_unsafe_than_handbook": learned.unsafe_rate <= handbook.unsafe_rate,
+        "learned_success": learned.success_rate,
+        "handbook_success": handbook.success_rate,
+        "learned_unsafe": learned.unsafe_rate,
+        "handbook_unsafe": handbook.unsafe_rate,
+    }
+
+
+def versions() -> dict[str, str]:
+    """The numpy and torch versions a run used (for ``results.json``)."""
+    import numpy as np
+    import torch
+
+    return {"numpy": np.__version__, "torch": torch.__version__}
