@@ -6,7 +6,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from coop_gym.envs.contract import EnvArguments
+from coop_gym.envs.arguments import EnvArguments
 from coop_gym.model.params import Timing
 
 __all__ = ["ENV_IDS", "register_envs"]

@@ -13,6 +13,7 @@ from compiled.checks import is_number, python_scalar
 __all__ = [
     "ACTION_TYPES",
     "ESTIMATORS",
+    "INFO_MODES",
     "OBSERVATION_MODES",
     "LiftCriteria",
     "Outcome",
@@ -26,8 +27,14 @@ OBSERVATION_MODES = ("belief", "raw", "oracle")
 ACTION_TYPES = ("multidiscrete", "discrete", "continuous")
 """``MultiDiscrete([3, 3, 2])``, flat ``Discrete(18)`` (for DQN), or ``Box(-1, 1, (3,))``."""
 
-ESTIMATORS = ("kalman", "multiple_model", "imm")
-"""The paper's thresholded KF alone, or with a multiple-model (MMAE / IMM) estimator beside it."""
+ESTIMATORS = ("kalman", "multiple_model", "imm", "switching")
+"""The paper's thresholded KF alone, or with a multiple-model (MMAE / IMM) estimator or the switching
+particle filter of the level's person (:mod:`coop_gym.envs.switching`) beside it."""
+
+INFO_MODES: tuple[str, ...] = ("default", "numeric")
+"""``default``: the info of :func:`~coop_gym.envs.info.report_info` (labels, nested
+``reward_terms``); ``numeric``: numbers only, under flat keys
+(:data:`~coop_gym.envs.info.NUMERIC_INFO_KEYS`), for TensorDict-based clients (TorchRL)."""
 
 
 class Outcome(IntEnum):

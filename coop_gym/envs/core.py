@@ -29,16 +29,8 @@ from numpy.typing import NDArray
 
 from compiled.checks import is_integer
 from compiled.rng import G_STATE, bit_generator_row
+from coop_gym.envs.actions import CMD, CMD_COLUMNS
 from coop_gym.envs.config import LiftCriteria, RewardWeights
-from coop_gym.envs.contract import (
-    CMD,
-    CMD_COLUMNS,
-    FEATURES,
-    REPORT,
-    REPORT_COLUMNS,
-    REWARD_TERMS,
-    TERMINATES,
-)
 from coop_gym.envs.layout import (
     BLOCKS,
     CONSTS,
@@ -50,6 +42,8 @@ from coop_gym.envs.layout import (
     pack_consts,
     pack_personas,
 )
+from coop_gym.envs.observation import FEATURES
+from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS, TERMINATES
 from coop_gym.envs.reset import draw_reset, start_episodes
 from coop_gym.envs.step import first_unready, observe, step_all
 from coop_gym.envs.threads import available_threads, check_threads, plan_threads, step_threaded
@@ -209,6 +203,10 @@ class SitToStandCore:
         self._draws = np.zeros((n, DRAWS.normals + n_varied))
 
     def _make_multiple_model(self, options: dict[str, Any]) -> Any:
+        if self.estimator == "switching":
+            from coop_gym.envs.switching import SwitchingEstimator
+
+            return SwitchingEstimator(self.n_envs, self.timing, self.realism, self.params, self.rngs, options)
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
 
         cls = IMMEstimator if self.estimator == "imm" else MultipleModelEstimator

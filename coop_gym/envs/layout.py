@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from compiled.schema import field_values, index_table, offset_table
 from coop_gym.envs.config import LiftCriteria, RewardWeights
-from coop_gym.envs.contract import REPORT_COLUMNS
+from coop_gym.envs.report import REPORT_COLUMNS
 from coop_gym.model.dynamics import DELAY_LINE_LENGTH, PARAM_COLUMNS, STATE_COLUMNS, pack_person
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import VARIED_PARAMETERS, Persona

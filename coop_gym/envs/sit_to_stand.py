@@ -8,19 +8,13 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from coop_gym.envs.actions import ActionDecoder
+from coop_gym.envs.arguments import EnvArguments, SitToStandConfig, parse_reset_options
 from coop_gym.envs.config import Outcome
-from coop_gym.envs.contract import (
-    EPISODE_END,
-    FEATURES,
-    REPORT,
-    ActionDecoder,
-    EnvArguments,
-    InfoBuilder,
-    SitToStandConfig,
-    observation_features,
-    parse_reset_options,
-)
 from coop_gym.envs.core import SitToStandCore
+from coop_gym.envs.info import InfoBuilder
+from coop_gym.envs.observation import FEATURES, observation_features
+from coop_gym.envs.report import EPISODE_END, REPORT
 
 __all__ = [
     "SitToStandEnv",

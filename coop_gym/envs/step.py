@@ -14,9 +14,10 @@ from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
 from compiled.rng import G_STATE, standard_normal
+from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import Outcome
-from coop_gym.envs.contract import CMD, REPORT, REPORT_COLUMNS
 from coop_gym.envs.layout import BLOCKS, CONSTS, CUE_COLUMNS, CUES
+from coop_gym.envs.report import REPORT, REPORT_COLUMNS
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,

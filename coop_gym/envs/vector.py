@@ -12,16 +12,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
-from coop_gym.envs.contract import (
-    CMD,
-    REPORT,
-    ActionDecoder,
-    EnvArguments,
-    InfoBuilder,
-    count_steps_and_end_episodes,
-    parse_reset_options,
-)
+from coop_gym.envs.actions import CMD, ActionDecoder
+from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import check_threads
+from coop_gym.envs.info import InfoBuilder
+from coop_gym.envs.report import REPORT, count_steps_and_end_episodes
 from coop_gym.envs.sit_to_stand import make_core, render_state_for
 
 __all__ = ["SitToStandVectorEnv"]
@@ -242,7 +237,7 @@ class SitToStandVectorEnv(VectorEnv):
         terminated = np.empty(n, dtype=bool)
         truncated = np.empty(n, dtype=bool)
         # Truncated by the step limit or by the episode clock of ``timing``, whichever comes first
-        # (the rule of contract.episode_ends, with the step count, in one compiled pass).
+        # (report.count_steps_and_end_episodes, with the step count, in one compiled pass).
         count_steps_and_end_episodes(
             report, cmd, self._episode_steps, self.max_episode_steps, rewards, terminated, truncated
         )

@@ -19,13 +19,14 @@ from coop_gym.envs.contract import (
     FEATURES,
     REPORT,
     REPORT_COLUMNS,
+    TERMINATES,
+    TRUNCATES,
     ActionDecoder,
     EnvArguments,
     batched_infos,
     count_steps_and_end_episodes,
     decode_actions,
     encode_actions,
-    episode_ends,
     report_info,
 )
 from coop_gym.envs.vector import SitToStandVectorEnv
@@ -64,15 +65,28 @@ def test_the_fast_paths_decode_as_decode_actions(action_type: str) -> None:
         assert np.array_equal(got[0, : CMD.active], want[k])
 
 
+def _episode_ends(outcome: np.ndarray, stepped: np.ndarray, out_of_steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(terminated, truncated) of count_steps_and_end_episodes for envs at (or not at) their step limit."""
+    n, limit = len(outcome), 2
+    report = np.zeros((n, len(REPORT_COLUMNS)))
+    report[:, REPORT.outcome] = outcome
+    cmd = np.zeros((n, len(CMD)))
+    cmd[:, CMD.active] = stepped
+    steps = np.where(out_of_steps, limit - 1, 0).astype(np.int64)
+    rewards, terminated, truncated = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+    count_steps_and_end_episodes(report, cmd, steps, limit, rewards, terminated, truncated)
+    return terminated, truncated
+
+
 def test_episode_end_comes_from_the_outcome() -> None:
     assert EPISODE_END == tuple((o.terminates, o.truncates) for o in Outcome)
     outcome = np.array([float(o) for o in Outcome] * 2)
     stepped = np.array([True] * len(Outcome) + [False] * len(Outcome))
-    terminated, truncated = episode_ends(outcome, stepped, np.zeros(len(outcome), dtype=bool))
+    terminated, truncated = _episode_ends(outcome, stepped, np.zeros(len(outcome), dtype=bool))
     assert terminated.tolist() == [o.terminates for o in Outcome] + [False] * len(Outcome)
     assert truncated.tolist() == [o.truncates for o in Outcome] + [False] * len(Outcome)
     # A step limit truncates every stepped env, a terminated one too (as Gymnasium's TimeLimit).
-    terminated, truncated = episode_ends(outcome, stepped, np.ones(len(outcome), dtype=bool))
+    terminated, truncated = _episode_ends(outcome, stepped, np.ones(len(outcome), dtype=bool))
     assert terminated.tolist() == [o.terminates for o in Outcome] + [False] * len(Outcome)
     assert truncated.tolist() == [True] * len(Outcome) + [False] * len(Outcome)
 
@@ -115,7 +129,7 @@ def test_the_compiled_multidiscrete_decoding_takes_any_integer_dtype_and_refuses
         decoder.batch(np.array([[0, 0, 0], [-1, 0, 0]]), np.zeros((2, len(CMD))))
 
 
-def test_the_compiled_episode_end_and_step_count_follow_episode_ends() -> None:
+def test_the_compiled_episode_end_and_step_count_follow_the_outcome_tables() -> None:
     rng = np.random.default_rng(5)
     n, limit = 400, 3
     report = np.zeros((n, len(REPORT_COLUMNS)))
@@ -127,7 +141,8 @@ def test_the_compiled_episode_end_and_step_count_follow_episode_ends() -> None:
         cmd[:, CMD.active] = rng.random(n) < 0.7
         stepped = cmd[:, CMD.active] > 0.5
         want_steps = steps + stepped
-        want = episode_ends(report[:, REPORT.outcome], stepped, want_steps >= limit)
+        codes = report[:, REPORT.outcome].astype(np.int64)
+        want = (stepped & TERMINATES[codes], stepped & ((want_steps >= limit) | TRUNCATES[codes]))
         rewards, terminated, truncated = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         count_steps_and_end_episodes(report, cmd, steps, limit, rewards, terminated, truncated)
         assert np.array_equal(steps, want_steps)

@@ -295,8 +295,8 @@ def test_core_step_library_api_matches_the_env_step() -> None:
 
 def test_report_layout_check_is_not_an_assert(monkeypatch: pytest.MonkeyPatch) -> None:
     # report_info unpacks by position; the import-time check must also run under ``python -O``.
-    from coop_gym.envs import contract
+    from coop_gym.envs import info
 
-    monkeypatch.setattr(contract, "REPORT_COLUMNS", contract.REPORT_COLUMNS[:-1])
+    monkeypatch.setattr(info, "REPORT_COLUMNS", info.REPORT_COLUMNS[:-1])
     with pytest.raises(RuntimeError, match="update report_info"):
-        contract._check_report_layout()
+        info._check_report_layout()

@@ -1,0 +1,252 @@
+"""Actions both ways: an action of each action type to the command row the step kernel reads, and back."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from numba import njit
+from numpy.typing import NDArray
+
+from compiled.cache import guard_kernel_cache
+from compiled.schema import index_table
+from coop_gym.envs.config import (
+    ACTION_TYPES,
+)
+from coop_gym.model.params import Cues
+
+__all__ = [
+    "ACTION_SHAPE",
+    "CMD",
+    "CMD_COLUMNS",
+    "LIFT",
+    "N_FLAT_ACTIONS",
+    "PUSH_FIRM",
+    "PUSH_NONE",
+    "PUSH_SOFT",
+    "VERBAL_BACK",
+    "VERBAL_FORWARD",
+    "VERBAL_NONE",
+    "WAIT",
+    "ActionDecoder",
+    "action_space_for",
+    "command_table",
+    "decode_actions",
+    "encode_actions",
+]
+
+
+# --- actions ----------------------------------------------------------------------
+
+ACTION_SHAPE = (3, 3, 2)
+"""Choices per component of the MultiDiscrete action: push, verbal cue, lift."""
+N_FLAT_ACTIONS = math.prod(ACTION_SHAPE)
+"""Size of the flat ``Discrete`` action space: 3 pushes x 3 verbal cues x 2 lift choices."""
+
+# Component values of the default MultiDiscrete([3, 3, 2]) action (docs/ARCHITECTURE.md).
+PUSH_NONE, PUSH_SOFT, PUSH_FIRM = 0, 1, 2
+VERBAL_NONE, VERBAL_BACK, VERBAL_FORWARD = 0, 1, 2
+WAIT, LIFT = 0, 1
+_VERBAL_FROM_INDEX = np.array([0.0, -1.0, 1.0])  # none, lean back, lean forward
+
+CMD_COLUMNS: tuple[str, ...] = ("push_force_n", "verbal_cue", "lift", "active")
+"""Columns of a decoded action, the core's command row: push [N], verbal request {-1, 0, 1},
+lift {0, 1}, active {0, 1} (an inactive env is not stepped)."""
+CMD = index_table("CommandColumns", CMD_COLUMNS)
+
+
+def action_space_for(action_type: str) -> spaces.Space[Any]:
+    """The action space of an action type (see :data:`~coop_gym.envs.config.ACTION_TYPES`)."""
+    if action_type == "multidiscrete":
+        return spaces.MultiDiscrete(list(ACTION_SHAPE))
+    if action_type == "discrete":
+        return spaces.Discrete(N_FLAT_ACTIONS)
+    return spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+
+
+def decode_actions(
+    actions: Any, action_type: str, cues: Cues, n_envs: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Validate a batch of ``n_envs`` actions and turn them into cues.
+
+    Returns:
+        ``(push_force_n, verbal_cue, lift)``, each of shape (n_envs,).
+
+    Raises:
+        ValueError: naming what is wrong (shape, bool, NaN, non-integer, out of range).
+    """
+    try:
+        a = np.asarray(actions)
+    except Exception as exc:  # e.g. ragged lists
+        raise ValueError(f"action could not be read as an array: {exc}") from None
+    if a.dtype == object or a.dtype.kind not in "biuf":
+        raise ValueError(f"action must be numeric, got dtype {a.dtype}")
+    if a.dtype.kind == "b":
+        # True is not the action 1: a bool is a mistake (a flag passed for an action).
+        raise ValueError(f"{action_type} action must be numbers, not bools, got {actions!r}")
+    expected = (n_envs,) if action_type == "discrete" else (n_envs, 3)
+    if a.shape != expected:
+        raise ValueError(
+            f"action has shape {a.shape}; the {action_type} action space needs {expected[1:] or '()'}"
+            + (f" per env, {expected} for {n_envs} envs" if n_envs > 1 else "")
+        )
+    a = a.astype(np.float64)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action contains NaN or inf: {actions!r}")
+    soft, firm = cues.soft_push_n, cues.firm_push_n
+    if action_type == "continuous":
+        if np.any(a < -1.0 - 1e-6) or np.any(a > 1.0 + 1e-6):
+            raise ValueError(f"continuous action must lie in [-1, 1], got {actions!r}")
+        push = (np.clip(a[:, 0], -1.0, 1.0) + 1.0) * 0.5 * firm
+        verbal = np.where(a[:, 1] < -1.0 / 3.0, -1.0, np.where(a[:, 1] > 1.0 / 3.0, 1.0, 0.0))
+        return push, verbal, a[:, 2] > 0.0
+    if np.any(a != np.round(a)):
+        raise ValueError(f"{action_type} action must be integers, got {actions!r}")
+    # Range checked on the floats, before the int cast (1e300 would overflow it).
+    if action_type == "discrete":
+        if np.any(a < 0) or np.any(a >= N_FLAT_ACTIONS):
+            raise ValueError(f"discrete action must be in [0, {N_FLAT_ACTIONS - 1}], got {actions!r}")
+        idx = np.stack(np.unravel_index(a.astype(np.int64), ACTION_SHAPE), axis=1)
+    elif np.any(a < 0) or np.any(a >= np.array(ACTION_SHAPE)):
+        raise ValueError(
+            f"multidiscrete action must be [push 0..2, verbal 0..2, lift 0..1], got {np.asarray(actions).tolist()!r}"
+        )
+    else:
+        idx = a.astype(np.int64)
+    push = np.array([0.0, soft, firm])[idx[:, 0]]
+    return push, _VERBAL_FROM_INDEX[idx[:, 1]], idx[:, 2] == LIFT
+
+
+def command_table(cues: Cues) -> NDArray[np.float64]:
+    """(18, 1, 4) command rows (:data:`CMD`) of each flat discrete action, ``active = 1``."""
+    push, verbal, lift = decode_actions(np.arange(N_FLAT_ACTIONS), "discrete", cues, N_FLAT_ACTIONS)
+    table = np.stack([push, verbal, lift.astype(np.float64), np.ones(N_FLAT_ACTIONS)], axis=1)
+    return np.ascontiguousarray(table[:, None, :])
+
+
+@njit(cache=True, error_model="numpy")
+def _decode_multidiscrete(actions: NDArray[np.int64], flat: NDArray[np.float64], cmd: NDArray[np.float64]) -> bool:
+    # cmd[i, :3] = flat[ravel_multi_index(actions[i], ACTION_SHAPE)] for every row, or False (and
+    # nothing written) when any component is out of range.
+    for i in range(actions.shape[0]):
+        push, verbal, lift = actions[i, 0], actions[i, 1], actions[i, 2]
+        if not (0 <= push < ACTION_SHAPE[0] and 0 <= verbal < ACTION_SHAPE[1] and 0 <= lift < ACTION_SHAPE[2]):
+            return False
+    for i in range(actions.shape[0]):
+        k = (actions[i, 0] * ACTION_SHAPE[1] + actions[i, 1]) * ACTION_SHAPE[2] + actions[i, 2]
+        for j in range(CMD.active):
+            cmd[i, j] = flat[k, j]
+    return True
+
+
+class ActionDecoder:
+    """Actions of one action type -> the core's command rows, for the envs' hot paths.
+
+    The common cases (what ``action_space.sample()`` and SB3's ``predict`` give) take a
+    table look-up or plain Python; anything else goes through :func:`decode_actions`,
+    which accepts the same actions and names what is wrong.
+
+    Args:
+        action_type: One of :data:`~coop_gym.envs.config.ACTION_TYPES`.
+        cues: The push forces.
+    """
+
+    def __init__(self, action_type: str, cues: Cues) -> None:
+        """Build the command table of the flat actions."""
+        self.action_type = action_type
+        self.cues = cues
+        self._table = command_table(cues)
+        self._flat = self._table[:, 0, : CMD.active].copy()  # [push, verbal, lift] of each flat action
+        self._firm_push_n = float(cues.firm_push_n)
+
+    def single(self, action: Any, cmd: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The (1, 4) command of one env's action: a row of the table, or ``cmd`` filled in."""
+        kind = self.action_type
+        if kind == "multidiscrete":
+            if type(action) is np.ndarray and action.shape == (3,) and action.dtype.kind in "iu":
+                push, verbal, lift = action.tolist()
+                if 0 <= push <= 2 and 0 <= verbal <= 2 and 0 <= lift <= 1:
+                    return self._table[(push * 3 + verbal) * 2 + lift]  # type: ignore[no-any-return]
+        elif kind == "discrete":
+            if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and 0 <= action < N_FLAT_ACTIONS:
+                return self._table[int(action)]  # type: ignore[no-any-return]
+        elif type(action) is np.ndarray and action.shape == (3,) and action.dtype.kind == "f":
+            a_push, a_verbal, a_lift = action.tolist()
+            if all(math.isfinite(a) and -1.0 - 1e-6 <= a <= 1.0 + 1e-6 for a in (a_push, a_verbal, a_lift)):
+                row = cmd[0]
+                # As decode_actions: push (a0 + 1) / 2 * firm, verbal in thirds, lift when a2 > 0.
+                row[CMD.push_force_n] = (min(max(a_push, -1.0), 1.0) + 1.0) * 0.5 * self._firm_push_n
+                row[CMD.verbal_cue] = -1.0 if a_verbal < -1.0 / 3.0 else (1.0 if a_verbal > 1.0 / 3.0 else 0.0)
+                row[CMD.lift] = 1.0 if a_lift > 0.0 else 0.0
+                return cmd
+        # A list, not np.asarray(action)[None]: decode_actions names what is wrong with a ragged one.
+        push_n, verbal_cue, lift_flag = decode_actions([action], kind, self.cues, 1)
+        cmd[0, CMD.push_force_n] = push_n[0]
+        cmd[0, CMD.verbal_cue] = verbal_cue[0]
+        cmd[0, CMD.lift] = 1.0 if lift_flag[0] else 0.0
+        return cmd
+
+    def batch(self, actions: Any, cmd: NDArray[np.float64]) -> None:
+        """Write the commands of a batch of ``len(cmd)`` actions into ``cmd`` (its ``active`` column untouched)."""
+        n = cmd.shape[0]
+        kind = self.action_type
+        a = actions
+        if type(a) is np.ndarray and a.dtype.kind in "iu" and kind != "continuous":
+            try:
+                if kind == "multidiscrete" and a.shape == (n, 3):
+                    # One compiled call checks every range and looks the rows up (int64: one
+                    # compiled version; a uint64 too large wraps negative and is refused).
+                    if _decode_multidiscrete(a.astype(np.int64, copy=False), self._flat, cmd):
+                        return
+                if kind == "discrete" and a.shape == (n,):
+                    cmd[:, : CMD.active] = self._flat[np.ravel_multi_index((a,), (N_FLAT_ACTIONS,))]
+                    return
+            except (ValueError, TypeError):
+                pass  # out of range or an unusual integer type: decode_actions decides and names the problem
+        push, verbal, lift = decode_actions(actions, kind, self.cues, n)
+        cmd[:, CMD.push_force_n] = push
+        cmd[:, CMD.verbal_cue] = verbal
+        cmd[:, CMD.lift] = lift
+
+
+def encode_actions(
+    push: NDArray[np.integer[Any]],
+    verbal: NDArray[np.integer[Any]],
+    lift: NDArray[np.integer[Any]],
+    action_type: str,
+    cues: Cues | None = None,
+) -> NDArray[Any]:
+    """Turn per-env component choices into actions of ``action_type`` (the inverse of :func:`decode_actions`).
+
+    Args:
+        push: (N,) push level 0 none, 1 soft, 2 firm.
+        verbal: (N,) verbal cue 0 none, 1 "lean back", 2 "lean forward".
+        lift: (N,) 0 wait, 1 lift.
+        action_type: ``"multidiscrete"`` -> (N, 3) int64; ``"discrete"`` -> (N,) int64
+            flat index; ``"continuous"`` -> (N, 3) float32 in [-1, 1].
+        cues: Push forces of the continuous variant (default :class:`Cues`).
+
+    Returns:
+        The batch of actions.
+    """
+    push = np.asarray(push, dtype=np.int64)
+    verbal = np.asarray(verbal, dtype=np.int64)
+    lift = np.asarray(lift, dtype=np.int64)
+    if action_type == "multidiscrete":
+        return np.stack([push, verbal, lift], axis=-1)
+    if action_type == "discrete":
+        return np.asarray(np.ravel_multi_index((push, verbal, lift), ACTION_SHAPE), dtype=np.int64)
+    if action_type == "continuous":
+        cues = cues or Cues()
+        # Inverse of decode_actions' push = (a0 + 1) / 2 * firm_push_n.
+        force = np.array([0.0, cues.soft_push_n, cues.firm_push_n])[push]
+        a0 = 2.0 * force / cues.firm_push_n - 1.0
+        a1 = _VERBAL_FROM_INDEX[verbal]
+        a2 = np.where(lift == LIFT, 1.0, -1.0)
+        return np.clip(np.stack([a0, a1, a2], axis=-1), -1.0, 1.0).astype(np.float32)
+    raise ValueError(f"action_type must be one of {list(ACTION_TYPES)}, got {action_type!r}")
+
+
+guard_kernel_cache(__name__)

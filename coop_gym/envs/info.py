@@ -1,0 +1,384 @@
+"""The ``info`` of a step, single or batched, built from the report rows the step kernel writes."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from compiled.cache import guard_kernel_cache
+from coop_gym.envs.arguments import SitToStandConfig
+from coop_gym.envs.config import (
+    Outcome,
+)
+from coop_gym.envs.observation import FEATURES, PROBABILITY_FEATURES, observation_space_for
+from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
+
+__all__ = [
+    "NUMERIC_INFO_KEYS",
+    "InfoBuilder",
+    "batched_infos",
+    "report_info",
+]
+
+
+# --- info -------------------------------------------------------------------------
+
+_OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)
+_OUTCOME_LABEL_ARRAY = np.array(_OUTCOME_LABELS, dtype=object)
+
+# report_info unpacks report rows by position: fail at import if the layout moved (an explicit
+# check, not an assert: it must hold under python -O too).
+_REPORT_LAYOUT = (
+    *FEATURES,
+    *("reward_success", "reward_unsafe", "reward_premature", "reward_time", "reward_force", "reward", "outcome"),
+    *("push_force_n", "true_x_m", "true_xdot_m_per_s", "true_eta_m", "info_true_xi", "persona_index"),
+)
+
+
+def _check_report_layout() -> None:
+    if REPORT_COLUMNS != _REPORT_LAYOUT:
+        raise RuntimeError("REPORT_COLUMNS changed: update report_info")
+
+
+_check_report_layout()
+
+
+def report_info(r: list[float], persona_names: Sequence[str], probabilities: bool) -> dict[str, Any]:
+    """The single env's ``info`` dict from one row of ``SitToStandCore.report`` (as a list).
+
+    Args:
+        r: ``core.report[i].tolist()`` (one ``tolist()`` reads every value at once).
+        persona_names: Names of the env's personas, by index.
+        probabilities: Add ``xi_probabilities`` (a multiple-model estimator runs).
+    """
+    # Unpacked by position (checked against REPORT_COLUMNS at import): one bytecode
+    # instead of ~25 indexed look-ups on the hot path.
+    (
+        _pos,
+        _force,
+        verbal,
+        _since,
+        _x_hat,
+        _xdot_hat,
+        _eta_hat,
+        xi_hat,
+        _xi_std,
+        judgment,
+        elapsed,
+        p_uncoop,
+        p_unresp,
+        p_coop,
+        _true_xi_feature,
+        success,
+        unsafe,
+        premature,
+        time_term,
+        force_term,
+        _reward,
+        outcome,
+        push,
+        true_x,
+        true_xdot,
+        true_eta,
+        true_xi,
+        persona,
+    ) = r
+    info: dict[str, Any] = {
+        "true_x_m": true_x,
+        "true_xdot_m_per_s": true_xdot,
+        "true_eta_m": true_eta,
+        "true_xi": int(true_xi),
+        "persona": persona_names[int(persona)],
+        "outcome": _OUTCOME_LABELS[int(outcome)],
+        "judgment": int(judgment),
+        "xi_estimate": xi_hat,
+        "push_force_n": push,
+        "verbal_cue": int(verbal),
+        "elapsed_s": elapsed,
+    }
+    if probabilities:
+        info["xi_probabilities"] = np.array([p_uncoop, p_unresp, p_coop])
+    info["reward_terms"] = {
+        "success": success,
+        "unsafe": unsafe,
+        "premature": premature,
+        "time": time_term,
+        "force": force_term,
+    }
+    return info
+
+
+# The vector info's keys in order: (key, report column, as int) or a derived entry (None); report_info
+# gives the same keys (bar persona_index and outcome_code), one row at a time.
+_INFO_COLUMNS: tuple[tuple[str, int | None, bool], ...] = (
+    ("true_x_m", REPORT.true_x_m, False),
+    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
+    ("true_eta_m", REPORT.true_eta_m, False),
+    ("true_xi", REPORT.info_true_xi, True),
+    ("persona", None, False),
+    ("persona_index", None, False),
+    ("outcome", None, False),
+    ("outcome_code", None, False),
+    ("judgment", REPORT.judgment, True),
+    ("xi_estimate", REPORT.xi_hat, False),
+    ("push_force_n", REPORT.push_force_n, False),
+    ("verbal_cue", REPORT.verbal_cue, True),
+    ("elapsed_s", REPORT.elapsed_s, False),
+)
+
+
+def batched_infos(
+    report: NDArray[np.float64],
+    mask: NDArray[np.bool_] | None,
+    persona_names: NDArray[Any],
+    probabilities: bool,
+) -> dict[str, Any]:
+    """The vector env's infos (a dict of arrays with ``_key`` masks, Gymnasium style) from report rows.
+
+    The single env's keys (:func:`report_info`) plus ``persona_index`` and ``outcome_code``
+    (:class:`~coop_gym.envs.config.Outcome` ints). Entries of envs outside ``mask`` (default
+    all) are zero (``None`` for labels), as Gymnasium's ``_add_info`` leaves them.
+    """
+    n = report.shape[0]
+    r = report
+    outcome = r[:, REPORT.outcome].astype(np.int64)
+    persona = r[:, REPORT.persona_index].astype(np.int64)
+    derived = {"persona": persona_names[persona], "persona_index": persona}
+    derived |= {"outcome": _OUTCOME_LABEL_ARRAY[outcome], "outcome_code": outcome}
+    values: dict[str, NDArray[Any]] = {
+        key: derived[key] if column is None else (r[:, column].astype(np.int64) if as_int else r[:, column].copy())
+        for key, column, as_int in _INFO_COLUMNS
+    }
+    if probabilities:
+        values["xi_probabilities"] = r[:, REPORT.p_uncooperative : REPORT.p_cooperative + 1].copy()
+    terms = {name: r[:, REPORT.reward_success + k].copy() for k, name in enumerate(REWARD_TERMS)}
+    if mask is None:
+        mask = np.ones(n, dtype=bool)
+    elif not mask.all():
+        outside = ~mask
+        for array in (*values.values(), *terms.values()):
+            array[outside] = None if array.dtype == object else 0
+    infos: dict[str, Any] = {}
+    for key, array in values.items():
+        infos[key] = array
+        infos[f"_{key}"] = mask.copy()
+    reward_terms: dict[str, Any] = {}
+    for key, array in terms.items():
+        reward_terms[key] = array
+        reward_terms[f"_{key}"] = mask.copy()
+    infos["reward_terms"] = reward_terms
+    infos["_reward_terms"] = mask.copy()
+    return infos
+
+
+# (key, report column, as int): the numeric info, one entry per key, scalars in the single env.
+_NUMERIC_INFO: tuple[tuple[str, int, bool], ...] = (
+    ("true_x_m", REPORT.true_x_m, False),
+    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
+    ("true_eta_m", REPORT.true_eta_m, False),
+    ("true_xi", REPORT.info_true_xi, True),
+    ("persona_index", REPORT.persona_index, True),
+    ("outcome_code", REPORT.outcome, True),
+    ("judgment", REPORT.judgment, True),
+    ("xi_estimate", REPORT.xi_hat, False),
+    ("push_force_n", REPORT.push_force_n, False),
+    ("verbal_cue", REPORT.verbal_cue, True),
+    ("elapsed_s", REPORT.elapsed_s, False),
+    *((f"reward_{name}", REPORT.reward_success + k, False) for k, name in enumerate(REWARD_TERMS)),
+)
+_NUMERIC_PROBABILITIES: tuple[tuple[str, int, bool], ...] = tuple(
+    (name, REPORT.p_uncooperative + k, False) for k, name in enumerate(PROBABILITY_FEATURES)
+)
+if [column for _, column, _ in _NUMERIC_PROBABILITIES] != [REPORT.p_uncooperative, REPORT.p_unresponsive,
+                                                           REPORT.p_cooperative]:  # fmt: skip
+    raise RuntimeError("the multiple-model probabilities must be consecutive report columns")
+
+NUMERIC_INFO_KEYS: tuple[str, ...] = tuple(key for key, _, _ in _NUMERIC_INFO)
+"""Keys of every ``info_mode="numeric"`` info, in order: the default info's numbers with the
+persona as ``persona_index`` (into the env's ``personas``), the outcome as ``outcome_code`` (an
+:class:`~coop_gym.envs.config.Outcome` value) and the reward terms as ``reward_<term>``. A
+multiple-model estimator adds ``p_uncooperative``, ``p_unresponsive``, ``p_cooperative`` (the
+default info's ``xi_probabilities``); ``observation_scale="unit"`` adds ``unscaled_obs``."""
+
+
+@njit(cache=True, error_model="numpy")
+def _gather_info_columns(
+    report: NDArray[np.float64],
+    float_columns: NDArray[np.int64],
+    floats: NDArray[np.float64],
+    int_columns: NDArray[np.int64],
+    ints: NDArray[np.int64],
+) -> None:
+    # floats[k, i] = report[i, float_columns[k]] and ints[k, i] = int(report[i, int_columns[k]])
+    # (truncation, as astype(np.int64)), in one call. Column by column: filling the blocks row by
+    # row writes to addresses 8 KiB apart (4K aliasing with the loads), 3x slower.
+    for k in range(float_columns.shape[0]):
+        column = float_columns[k]
+        for i in range(report.shape[0]):
+            floats[k, i] = report[i, column]
+    for k in range(int_columns.shape[0]):
+        column = int_columns[k]
+        for i in range(report.shape[0]):
+            ints[k, i] = int(report[i, column])
+
+
+class InfoBuilder:
+    """The info of an env of ``config``, single (:meth:`single`) or batched (:meth:`batched`), from report rows.
+
+    ``info_mode="default"`` gives :func:`report_info` / :func:`batched_infos`;
+    ``"numeric"`` gives :data:`NUMERIC_INFO_KEYS` (NumPy int64 and float64 scalars in the single
+    env, arrays of them with Gymnasium's ``_key`` masks in the vector env). Under
+    ``observation_scale="unit"`` either adds ``unscaled_obs``: the observation in its units,
+    float32, as the ``"none"`` scale gives it (the unit observation is it over the scales, clipped).
+
+    Args:
+        config: The env's settings.
+    """
+
+    def __init__(self, config: SitToStandConfig) -> None:
+        """Tables of the info's keys and of the physical observation's columns and bounds."""
+        self.persona_names = tuple(p.name for p in config.personas)
+        self._persona_array = np.array(self.persona_names, dtype=object)
+        self.probabilities = config.estimator != "kalman"
+        self.numeric = config.info_mode == "numeric"
+        self.unscaled = config.observation_scale == "unit"
+        self._entries = _NUMERIC_INFO + (_NUMERIC_PROBABILITIES if self.probabilities else ())
+        # The physical observation rebuilt from a report row exactly as the kernel builds it:
+        # the features clipped in float64, then rounded to float32.
+        features = config.physical_features
+        self._obs_columns = np.array([REPORT_COLUMNS.index(f) for f in features], dtype=np.int64)
+        physical = observation_space_for(features, config.timing.episode_s)
+        self._obs_low = physical.low.astype(np.float64)
+        self._obs_high = physical.high.astype(np.float64)
+        self._plan_all_envs()
+
+    def _plan_all_envs(self) -> None:
+        """Where each key of an all-envs info comes from: a row of the float or the int block the kernel fills.
+
+        ``_top``: (key, source, block row) in the info's key order, source ``"f"`` / ``"i"`` (that block),
+        ``"persona"`` / ``"outcome"`` (the label of the int block's row); ``_terms``: the reward terms'.
+        """
+        float_columns: list[int] = []
+        int_columns: list[int] = []
+
+        def slot(column: int, as_int: bool) -> tuple[str, int]:
+            # A row of its own per key: no two info arrays share memory.
+            columns = int_columns if as_int else float_columns
+            columns.append(column)
+            return ("i" if as_int else "f"), len(columns) - 1
+
+        def label_of(key: str) -> int:  # the int row a label is looked up from (its key comes next)
+            column = REPORT.persona_index if key == "persona" else REPORT.outcome
+            return len(int_columns) if column not in int_columns else int_columns.index(column)
+
+        top: list[tuple[str, str, int]] = []
+        terms: list[tuple[str, str, int]] = []
+        if self.numeric:
+            top = [(key, *slot(column, as_int)) for key, column, as_int in self._entries]
+        else:
+            # The keys of batched_infos, in its order.
+            for key, column, as_int in _INFO_COLUMNS:
+                if key in ("persona", "outcome"):
+                    top.append((key, key, label_of(key)))
+                elif key == "persona_index":
+                    top.append((key, *slot(REPORT.persona_index, True)))
+                elif key == "outcome_code":
+                    top.append((key, *slot(REPORT.outcome, True)))
+                elif column is not None:
+                    top.append((key, *slot(column, as_int)))
+                else:
+                    raise RuntimeError(f"the info's {key!r} has no report column: update _plan_all_envs")
+            terms = [(name, *slot(REPORT.reward_success + k, False)) for k, name in enumerate(REWARD_TERMS)]
+        for key, source, at in top:
+            if source in ("persona", "outcome") and int_columns[at] != (
+                REPORT.persona_index if source == "persona" else REPORT.outcome
+            ):
+                raise RuntimeError(f"the info's {key!r} must come right before its int key: update _INFO_COLUMNS")
+        self._top = tuple(top)
+        self._terms = tuple(terms)
+        self._float_columns = np.array(float_columns, dtype=np.int64)
+        self._int_columns = np.array(int_columns, dtype=np.int64)
+        self._mask_count = len(top) + len(terms) + (0 if self.numeric else 1 + self.probabilities) + self.unscaled
+
+    def unscaled_observation(self, rows: NDArray[np.float64]) -> NDArray[np.float32]:
+        """The physical observation of report rows (one row or a batch)."""
+        values = np.take(rows, self._obs_columns, axis=-1)
+        return np.clip(values, self._obs_low, self._obs_high).astype(np.float32)  # type: ignore[no-any-return]
+
+    def single(self, r: list[float]) -> dict[str, Any]:
+        """The single env's info from one report row (``core.report[i].tolist()``)."""
+        if self.numeric:
+            # NumPy scalars, not Python numbers: TorchRL's info reader asks each value for its dtype.
+            info: dict[str, Any] = {
+                key: np.int64(r[column]) if as_int else np.float64(r[column]) for key, column, as_int in self._entries
+            }
+        else:
+            info = report_info(r, self.persona_names, self.probabilities)
+        if self.unscaled:
+            info["unscaled_obs"] = self.unscaled_observation(np.array(r))
+        return info
+
+    def batched(self, report: NDArray[np.float64], mask: NDArray[np.bool_] | None) -> dict[str, Any]:
+        """The vector env's infos from its report rows; entries outside ``mask`` (default all) are zero."""
+        if mask is None:
+            return self._all_envs(report)
+        outside = ~mask
+        infos: dict[str, Any] = {}
+        if self.numeric:
+            for key, column, as_int in self._entries:
+                values = report[:, column].astype(np.int64) if as_int else report[:, column].copy()
+                values[outside] = 0
+                infos[key] = values
+                infos[f"_{key}"] = mask.copy()
+        else:
+            infos = batched_infos(report, mask, self._persona_array, self.probabilities)
+        if self.unscaled:
+            unscaled = self.unscaled_observation(report)
+            unscaled[outside] = 0
+            infos["unscaled_obs"] = unscaled
+            infos["_unscaled_obs"] = mask.copy()
+        return infos
+
+    def _all_envs(self, report: NDArray[np.float64]) -> dict[str, Any]:
+        """:meth:`batched` of every env (each step's infos), the same keys, values and dtypes, built faster.
+
+        One compiled pass copies the report's info columns into two fresh blocks (float64 and
+        int64) whose rows are the info's arrays, and the ``_key`` masks are the rows of one fresh
+        all-True block: every array is new on every call and owns no memory another one uses.
+        """
+        n = report.shape[0]
+        floats = np.empty((self._float_columns.shape[0], n))
+        ints = np.empty((self._int_columns.shape[0], n), dtype=np.int64)
+        _gather_info_columns(report, self._float_columns, floats, self._int_columns, ints)
+        masks = iter(np.ones((self._mask_count, n), dtype=bool))
+        infos: dict[str, Any] = {}
+        for key, source, at in self._top:
+            if source == "f":
+                infos[key] = floats[at]
+            elif source == "i":
+                infos[key] = ints[at]
+            else:
+                labels = self._persona_array if source == "persona" else _OUTCOME_LABEL_ARRAY
+                infos[key] = labels[ints[at]]
+            infos[f"_{key}"] = next(masks)
+        if self.probabilities and not self.numeric:
+            infos["xi_probabilities"] = report[:, REPORT.p_uncooperative : REPORT.p_cooperative + 1].copy()
+            infos["_xi_probabilities"] = next(masks)
+        if not self.numeric:
+            reward_terms: dict[str, Any] = {}
+            for key, _, at in self._terms:
+                reward_terms[key] = floats[at]
+                reward_terms[f"_{key}"] = next(masks)
+            infos["reward_terms"] = reward_terms
+            infos["_reward_terms"] = next(masks)
+        if self.unscaled:
+            infos["unscaled_obs"] = self.unscaled_observation(report)
+            infos["_unscaled_obs"] = next(masks)
+        return infos
+
+
+guard_kernel_cache(__name__)

@@ -1,0 +1,112 @@
+"""The report row the step kernel writes for each env, and the episode end read from its outcome code."""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from compiled.cache import guard_kernel_cache
+from compiled.schema import index_table
+from coop_gym.envs.actions import CMD
+from coop_gym.envs.config import (
+    Outcome,
+)
+from coop_gym.envs.observation import FEATURES
+
+__all__ = [
+    "EPISODE_END",
+    "REPORT",
+    "REPORT_COLUMNS",
+    "REWARD_TERMS",
+    "TERMINATES",
+    "TRUNCATES",
+    "check_outcome_codes",
+    "count_steps_and_end_episodes",
+]
+
+
+# --- the report row: everything an observation and an info need ------------------
+
+REWARD_TERMS: tuple[str, ...] = ("success", "unsafe", "premature", "time", "force")
+"""Names of the reward terms (``info["reward_terms"]``), in report-column order."""
+
+REPORT_COLUMNS: tuple[str, ...] = (
+    *FEATURES,
+    *(f"reward_{name}" for name in REWARD_TERMS),
+    "reward",
+    "outcome",
+    "push_force_n",
+    "true_x_m",
+    "true_xdot_m_per_s",
+    "true_eta_m",
+    "info_true_xi",  # the info's true xi; the oracle's feature "true_xi" is its own column
+    "persona_index",
+)
+"""Columns of ``SitToStandCore.report``: one float row per env with everything ``info`` needs.
+
+Kept in one row so an env reads it with a single ``tolist()``.
+"""
+REPORT = index_table("ReportColumns", REPORT_COLUMNS)
+"""Column of each quantity in a report row: ``report[REPORT.x_hat_m]``, ``report[REPORT.outcome]``."""
+
+# --- episode end ------------------------------------------------------------------
+
+
+def check_outcome_codes(outcome: type[IntEnum]) -> None:
+    """Raise ``ValueError`` unless the enum's values are ``0 .. n-1`` in order.
+
+    The kernel writes outcome codes into a float report column and the envs index tables
+    (labels, episode end) with them, so they must be small consecutive integers. An
+    explicit check, not an ``assert``: it must hold under ``python -O`` too.
+    """
+    codes = [int(member) for member in outcome]
+    if codes != list(range(len(codes))):
+        raise ValueError(f"{outcome.__name__} values must be 0 .. {len(codes) - 1} in order, got {codes}")
+
+
+check_outcome_codes(Outcome)
+
+EPISODE_END: tuple[tuple[bool, bool], ...] = tuple((o.terminates, o.truncates) for o in Outcome)
+"""``(terminated, truncated)`` of each outcome code (the single env's step looks it up)."""
+TERMINATES = np.array([o.terminates for o in Outcome])
+"""Indexed by outcome code: does the episode terminate (the robot lifted)?"""
+TRUNCATES = np.array([o.truncates for o in Outcome])
+"""Indexed by outcome code: does the episode clock truncate it?"""
+
+
+@njit(cache=True, error_model="numpy")
+def count_steps_and_end_episodes(
+    report: NDArray[np.float64],
+    cmd: NDArray[np.float64],
+    episode_steps: NDArray[np.int64],
+    max_episode_steps: int,
+    rewards: NDArray[np.float64],
+    terminated: NDArray[np.bool_],
+    truncated: NDArray[np.bool_],
+) -> None:
+    """The episode end of a batch of envs after a step, with the step count, in one pass.
+
+    Each env stepped (``cmd`` active) counts a step in ``episode_steps`` and is out of steps at
+    ``max_episode_steps``; ``rewards`` gets the report's reward of stepped envs, 0 elsewhere. A
+    stepped env terminates by its outcome (:data:`TERMINATES`) and truncates by its outcome
+    (:data:`TRUNCATES`) or when out of steps -- also when the step terminated it: a lift on
+    the last allowed step is ``terminated`` and ``truncated``, exactly as Gymnasium's
+    ``TimeLimit`` reports it for the single env. Envs not stepped neither terminate nor truncate.
+    """
+    for i in range(report.shape[0]):
+        if cmd[i, CMD.active] > 0.5:
+            episode_steps[i] += 1
+            code = int(report[i, REPORT.outcome])
+            rewards[i] = report[i, REPORT.reward]
+            terminated[i] = TERMINATES[code]
+            truncated[i] = episode_steps[i] >= max_episode_steps or TRUNCATES[code]
+        else:
+            rewards[i] = 0.0
+            terminated[i] = False
+            truncated[i] = False
+
+
+guard_kernel_cache(__name__)
