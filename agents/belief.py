@@ -1,0 +1,120 @@
+"""The belief caregiver: probes with cues and lifts on the estimator's ``P(xi = +1)``.
+
+It reads the mind through the switching particle filter (``estimator="switching"``,
+:mod:`estimator.particle`), which models the hard level's person -- a push bends an
+unresponsive person, an idle one leans on their own, willingness lapses and wears down
+under pushing -- so a lean is evidence of cooperation only as far as the person model says.
+The caregiver has no displacement rule of its own (unlike :class:`agents.scripted.ProbingCaregiver`,
+which lifts on a forward answer of ``answer_m``); it only chooses which cue to give:
+
+1. **recruit**: a gentle push with "lean forward" for ``burst_s`` (a guided push is what turns
+   a person cooperative, and pushing too long wears the willingness down);
+2. **settle**: silence for ``settle_s`` (the push's own motion dies out);
+3. **probe**: "lean forward" with no push -- a cooperative person answers, a passive one does not
+   move, a resisting one leans back -- watched for ``window_s``; then probe again while
+   ``P(xi = +1) >= reprobe_p``, else recruit again.
+
+It lifts, in any phase, once ``P(xi = +1) >= lift_p`` and the shoulder estimate is at least
+``lean_m`` (what a safe lift needs of the posture: the success criterion of
+:class:`coop_gym.envs.config.LiftCriteria`, 0.15 m, plus a margin for the reading).
+
+The settings were chosen on the TRAINING personas (``python -m agents.belief --tune``) and are
+scored on the held-out ones by :mod:`agents.evaluate`.
+
+Example:
+    >>> import gymnasium as gym
+    >>> import coop_gym
+    >>> env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching")
+    >>> agent = BeliefCaregiver.for_env(env)
+    >>> obs, _ = env.reset(seed=0)
+    >>> action, _ = agent.predict(obs)
+    >>> action.tolist()  # first step: recruit (soft push, "lean forward")
+    [1, 2, 0]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE, WAIT
+from agents.scripted import PhaseState, ScriptedAgent
+from compiled.checks import check_number
+
+__all__ = ["BeliefCaregiver", "BeliefSettings"]
+
+_EPS_S = 1e-6  # slack on clock comparisons: elapsed time is a float sum of 0.1 s steps
+
+
+@dataclass(frozen=True)
+class BeliefSettings:
+    """Settings of :class:`BeliefCaregiver` (see the module docstring for the cycle).
+
+    Attributes:
+        lift_p: Lift once ``P(xi = +1)`` is at least this (and the lean is ``lean_m``).
+        lean_m: The shoulder estimate a lift needs [m].
+        burst_s: Length of a recruiting burst (soft push + "lean forward") [s].
+        settle_s: Silence between the burst and the probe [s].
+        window_s: How long a probe is watched before the next cue [s].
+        reprobe_p: After a probe window, probe again (no push) while ``P(xi = +1)`` is at least this.
+    """
+
+    lift_p: float = 0.9
+    lean_m: float = 0.16
+    burst_s: float = 0.5
+    settle_s: float = 0.3
+    window_s: float = 1.5
+    reprobe_p: float = 0.5
+
+    def __post_init__(self) -> None:
+        """Validate ranges."""
+        for name in ("lift_p", "reprobe_p"):
+            check_number(f"BeliefSettings.{name}", getattr(self, name), 0.0, 1.0)
+        check_number("BeliefSettings.lean_m", self.lean_m, 0.0, 1.0)
+        for name in ("burst_s", "settle_s", "window_s"):
+            check_number(f"BeliefSettings.{name}", getattr(self, name), 0.0, 60.0)
+
+
+class BeliefCaregiver(ScriptedAgent):
+    """Recruit, settle, probe with words alone; lift on ``P(xi = +1)`` (module docstring)."""
+
+    name = "belief"
+    needs = ("elapsed_s", "x_hat_m", "p_cooperative")
+    RECRUIT, SETTLE, PROBE = 0, 1, 2
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+        settings: BeliefSettings | None = None,
+    ) -> None:
+        """See :class:`ScriptedAgent`; ``settings`` default to :class:`BeliefSettings`."""
+        super().__init__(features, action_type, seed)
+        self.settings = settings or BeliefSettings()
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        s = self.settings
+        p_cooperative = self._column(obs, "p_cooperative")
+        lift = (p_cooperative >= s.lift_p) & (self._column(obs, "x_hat_m") >= s.lean_m)
+        age = now - memory.phase_start_s
+        phase = memory.phase.copy()  # transitions are decided on the phase at the start of the step
+        # Recruit -> settle after one burst; settle -> probe (ask "lean forward" without a push).
+        memory.enter((phase == self.RECRUIT) & (age >= s.burst_s - _EPS_S), self.SETTLE, now)
+        asking = (phase == self.SETTLE) & (age >= s.settle_s - _EPS_S)
+        # A probe's window is over: ask again while cooperation is likely, else recruit again.
+        over = (phase == self.PROBE) & (age >= s.window_s - _EPS_S) & ~lift
+        again = over & (p_cooperative >= s.reprobe_p)
+        memory.enter(asking | again, self.PROBE, now)
+        memory.enter(over & ~again, self.RECRUIT, now)
+        asking |= again
+
+        recruiting = (memory.phase == self.RECRUIT) & ~lift
+        push = np.where(recruiting, PUSH_SOFT, PUSH_NONE)
+        verbal = np.where((recruiting | asking) & ~lift, VERBAL_FORWARD, VERBAL_NONE)
+        return push, verbal, np.where(lift, LIFT, WAIT)

@@ -1,0 +1,119 @@
+import math
+
+import numpy as np
+import pytest
+
+from coop_gym.envs.switching import SwitchingOptions, nominal_rows, switching_filter
+from coop_gym.model.difficulty import get_difficulty
+from coop_gym.model.dynamics import person_substep, simulate
+from coop_gym.model.params import Realism, Timing
+from coop_gym.model.personas import PERSONAS
+from estimator.particle import reference_run
+
+TIMING = Timing()
+HARD = get_difficulty("hard")
+
+
+def _filter(n_envs=2, seed=0, **options):
+    opts = SwitchingOptions(difficulty="hard", **options)
+    rows = nominal_rows(n_envs, HARD, Realism(), TIMING, opts)
+    rngs = [np.random.default_rng(seed + i) for i in range(n_envs)]
+    return switching_filter(rows, TIMING, rngs, opts)
+
+
+def _trial(xi, steps=150, seed=3, push=10.0, words_from=40):
+    # A guided push, then "lean forward" alone: the simulated person with the mode held.
+    cp = np.zeros(steps)
+    cp[:25] = push
+    cv = np.zeros(steps)
+    cv[:25] = 1.0
+    cv[words_from : words_from + 50] = 1.0
+    person = HARD.apply(PERSONAS["typical"].params)
+    traj = simulate(person, cp, cv, np.random.default_rng(seed), initial_xi=xi, hold_xi=True)
+    return cp, cv, traj
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.5])
+def test_kernel_equals_the_numpy_reference(jitter):
+    cp, cv, traj = _trial(1, steps=60)
+    y = np.stack([traj.measured_position_m, traj.measured_position_m + 0.01])
+    a = _filter(n_particles=64, hypotheses=8, mode_jitter_per_s=jitter)
+    b = _filter(n_particles=64, hypotheses=8, mode_jitter_per_s=jitter)
+    a.reset(np.arange(2), y[:, 0])
+    b.reset(np.arange(2), y[:, 0])
+    probs = a.run(np.stack([cp[:60]] * 2), np.stack([cv[:60]] * 2), y)
+    ref = reference_run(b, person_substep.py_func, np.stack([cp[:60]] * 2), np.stack([cv[:60]] * 2), y)
+    np.testing.assert_allclose(probs, ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.particles, b.particles, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.log_w, b.log_w, rtol=0, atol=1e-9)
+    # Both drew the same numbers from their generators.
+    assert a.rngs[0].random() == b.rngs[0].random()
+
+
+@pytest.mark.parametrize("xi", [-1, 0, 1])
+def test_reads_the_answer_to_words_alone(xi):
+    # The person's mode held through a guided push and a words-only probe: the filter's MAP
+    # mode after the probe is the true one (typical person, nominal model).
+    cp, cv, traj = _trial(xi)
+    pf = _filter(n_envs=1, n_particles=512, hypotheses=1)
+    pf.reset([0], traj.measured_position_m[0])
+    probs = pf.run(cp[None], cv[None], traj.measured_position_m[None])
+    assert int(np.argmax(probs[0, -1])) - 1 == xi
+    assert probs[0, -1, xi + 1] > 0.6
+
+
+def test_probabilities_are_distributions_and_deterministic():
+    cp, cv, traj = _trial(0, steps=80)
+    runs = []
+    for _ in range(2):
+        pf = _filter(n_envs=1)
+        pf.reset([0], 0.0)
+        runs.append(pf.run(cp[None], cv[None], traj.measured_position_m[None]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    np.testing.assert_allclose(runs[0].sum(axis=2), 1.0, atol=1e-12)
+    assert np.all(runs[0] >= 0)
+
+
+def test_reset_reseeds_in_place_and_takes_true_people():
+    pf = _filter(n_envs=2)
+    generators = pf.generators.copy()
+    people = np.stack([pf.params[0, 0]] * 2) * 1.0
+    pf.reset([1], 0.05, params=people[:1], seeds=[7])
+    np.testing.assert_array_equal(pf.generators, generators)  # the kernel's generators stay the same objects
+    assert np.all(pf.params[1] == people[0])
+    np.testing.assert_allclose(pf.particles[1, :, 0].mean(), 0.05, atol=0.005)
+    # The same seed gives the same particles; another seed others.
+    twin = _filter(n_envs=2)
+    twin.reset([1], 0.05, params=people[:1], seeds=[7])
+    np.testing.assert_array_equal(twin.particles[1], pf.particles[1])
+    twin.reset([1], 0.05, params=people[:1], seeds=[8])
+    assert not np.array_equal(twin.particles[1], pf.particles[1])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"n_particles": 0}, "n_particles"),
+        ({"reading_std_m": 0.0}, "reading_std_m"),
+        ({"hypotheses": 0}, "hypotheses"),
+        ({"mode_jitter_per_s": math.nan}, "mode_jitter_per_s"),
+    ],
+)
+def test_bad_options_name_the_field(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        SwitchingOptions(**kwargs)
+
+
+def test_bad_inputs_raise_and_change_nothing():
+    pf = _filter(n_envs=2)
+    pf.reset(np.arange(2), 0.0)
+    before = pf.particles.copy()
+    with pytest.raises(ValueError, match="must be finite"):
+        pf.run(np.zeros((2, 3)), np.zeros((2, 3)), np.array([[0.0, np.nan, 0.0], [0.0, 0.0, 0.0]]))
+    np.testing.assert_array_equal(pf.particles, before)
+    with pytest.raises(ValueError, match="shape"):
+        pf.run(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="seeds"):
+        pf.reset([0], 0.0, seeds=[-1])
+    with pytest.raises(ValueError, match="estimator_options for 'switching'"):
+        switching_filter(nominal_rows(1, HARD, Realism(), TIMING), TIMING, [np.random.default_rng(0)], {"bogus": 1})
