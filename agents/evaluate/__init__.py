@@ -104,6 +104,9 @@ def env_kwargs_for(agent_name: str, env_id: str, env_kwargs: dict[str, Any] | No
         kwargs["observation_mode"] = "oracle"
         return kwargs
     spec_kwargs = dict(gym.spec(env_id).kwargs)
+    if "p_cooperative" in needs and kwargs.get("estimator", spec_kwargs.get("estimator", "kalman")) == "kalman":
+        # The belief caregiver reads the switching particle filter's P(xi = +1).
+        kwargs["estimator"] = "switching"
     mode = kwargs.get("observation_mode", spec_kwargs.get("observation_mode", "belief"))
     if mode == "raw" and any(f not in ("measured_position_m", "verbal_cue", "elapsed_s") for f in needs):
         kwargs["observation_mode"] = "belief"
