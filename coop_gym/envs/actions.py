@@ -11,6 +11,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
+from compiled.checks import is_integer
 from compiled.schema import index_table
 from coop_gym.envs.config import (
     ACTION_TYPES,
@@ -66,13 +67,10 @@ def action_space_for(action_type: str) -> spaces.Space[Any]:
     return spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
 
 
-def decode_actions(
-    actions: Any, action_type: str, cues: Cues, n_envs: int
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-    """Validate a batch of ``n_envs`` actions and turn them into cues.
+def _validated(actions: Any, action_type: str, n_envs: int) -> NDArray[np.float64]:
+    """A batch of ``n_envs`` actions as float64, checked: the right shape, finite, in range.
 
-    Returns:
-        ``(push_force_n, verbal_cue, lift)``, each of shape (n_envs,).
+    The discrete types must be integers: the flat index of ``discrete``, the components of ``multidiscrete``.
 
     Raises:
         ValueError: naming what is wrong (shape, bool, NaN, non-integer, out of range).
@@ -95,39 +93,65 @@ def decode_actions(
     a = a.astype(np.float64)
     if not np.all(np.isfinite(a)):
         raise ValueError(f"action contains NaN or inf: {actions!r}")
-    soft, firm = cues.soft_push_n, cues.firm_push_n
     if action_type == "continuous":
         if np.any(a < -1.0 - 1e-6) or np.any(a > 1.0 + 1e-6):
             raise ValueError(f"continuous action must lie in [-1, 1], got {actions!r}")
-        push = (np.clip(a[:, 0], -1.0, 1.0) + 1.0) * 0.5 * firm
-        verbal = np.where(a[:, 1] < -1.0 / 3.0, -1.0, np.where(a[:, 1] > 1.0 / 3.0, 1.0, 0.0))
-        return push, verbal, a[:, 2] > 0.0
+        return a
     if np.any(a != np.round(a)):
         raise ValueError(f"{action_type} action must be integers, got {actions!r}")
     # Range checked on the floats, before the int cast (1e300 would overflow it).
     if action_type == "discrete":
         if np.any(a < 0) or np.any(a >= N_FLAT_ACTIONS):
             raise ValueError(f"discrete action must be in [0, {N_FLAT_ACTIONS - 1}], got {actions!r}")
-        idx = np.stack(np.unravel_index(a.astype(np.int64), ACTION_SHAPE), axis=1)
     elif np.any(a < 0) or np.any(a >= np.array(ACTION_SHAPE)):
         raise ValueError(
             f"multidiscrete action must be [push 0..2, verbal 0..2, lift 0..1], got {np.asarray(actions).tolist()!r}"
         )
-    else:
-        idx = a.astype(np.int64)
-    push = np.array([0.0, soft, firm])[idx[:, 0]]
-    return push, _VERBAL_FROM_INDEX[idx[:, 1]], idx[:, 2] == LIFT
+    return a
 
 
 def command_table(cues: Cues) -> NDArray[np.float64]:
-    """(18, 1, 4) command rows (:data:`CMD`) of each flat discrete action, ``active = 1``."""
-    push, verbal, lift = decode_actions(np.arange(N_FLAT_ACTIONS), "discrete", cues, N_FLAT_ACTIONS)
-    table = np.stack([push, verbal, lift.astype(np.float64), np.ones(N_FLAT_ACTIONS)], axis=1)
+    """(18, 1, 4) command rows (:data:`CMD`) of each flat discrete action, ``active = 1``.
+
+    The one decoding of the discrete choices: push none / soft / firm [N], verbal cue none /
+    "lean back" (-1) / "lean forward" (+1), wait / lift; flat index ``(push * 3 + verbal) * 2 + lift``.
+    """
+    push, verbal, lift = np.unravel_index(np.arange(N_FLAT_ACTIONS), ACTION_SHAPE)
+    table = np.stack(
+        [
+            np.array([0.0, cues.soft_push_n, cues.firm_push_n])[push],
+            _VERBAL_FROM_INDEX[verbal],
+            (lift == LIFT).astype(np.float64),
+            np.ones(N_FLAT_ACTIONS),
+        ],
+        axis=1,
+    )
     return np.ascontiguousarray(table[:, None, :])
 
 
 @njit(cache=True, error_model="numpy")
-def _decode_multidiscrete(actions: NDArray[np.int64], flat: NDArray[np.float64], cmd: NDArray[np.float64]) -> bool:
+def continuous_command(a_push: float, a_verbal: float, a_lift: float, firm_push_n: float) -> tuple[float, float, float]:
+    """``(push_force_n, verbal_cue, lift)`` of a continuous action in [-1, 1]^3 (the one decoding of it).
+
+    Push ``(a0 + 1) / 2 * firm_push_n``; the verbal cue by thirds (-1 below -1/3, +1 above 1/3,
+    else none); lift when ``a2 > 0``.
+    """
+    push = (min(max(a_push, -1.0), 1.0) + 1.0) * 0.5 * firm_push_n
+    verbal = -1.0 if a_verbal < -1.0 / 3.0 else (1.0 if a_verbal > 1.0 / 3.0 else 0.0)
+    return push, verbal, 1.0 if a_lift > 0.0 else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _continuous_commands(actions: NDArray[np.float64], firm_push_n: float, cmd: NDArray[np.float64]) -> None:
+    for i in range(actions.shape[0]):
+        push, verbal, lift = continuous_command(actions[i, 0], actions[i, 1], actions[i, 2], firm_push_n)
+        cmd[i, CMD.push_force_n] = push
+        cmd[i, CMD.verbal_cue] = verbal
+        cmd[i, CMD.lift] = lift
+
+
+@njit(cache=True, error_model="numpy")
+def _multidiscrete_commands(actions: NDArray[np.int64], flat: NDArray[np.float64], cmd: NDArray[np.float64]) -> bool:
     # cmd[i, :3] = flat[ravel_multi_index(actions[i], ACTION_SHAPE)] for every row, or False (and
     # nothing written) when any component is out of range.
     for i in range(actions.shape[0]):
@@ -142,11 +166,12 @@ def _decode_multidiscrete(actions: NDArray[np.int64], flat: NDArray[np.float64],
 
 
 class ActionDecoder:
-    """Actions of one action type -> the core's command rows, for the envs' hot paths.
+    """Actions of one action type -> the core's command rows: the one decoder of actions.
 
-    The common cases (what ``action_space.sample()`` and SB3's ``predict`` give) take a
-    table look-up or plain Python; anything else goes through :func:`decode_actions`,
-    which accepts the same actions and names what is wrong.
+    The discrete types are rows of :func:`command_table`, the continuous type
+    :func:`continuous_command`. The common cases (what ``action_space.sample()`` and SB3's
+    ``predict`` give) take a short path; anything else is checked first and refused with a
+    ``ValueError`` that names what is wrong.
 
     Args:
         action_type: One of :data:`~coop_gym.envs.config.ACTION_TYPES`.
@@ -170,22 +195,15 @@ class ActionDecoder:
                 if 0 <= push <= 2 and 0 <= verbal <= 2 and 0 <= lift <= 1:
                     return self._table[(push * 3 + verbal) * 2 + lift]  # type: ignore[no-any-return]
         elif kind == "discrete":
-            if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and 0 <= action < N_FLAT_ACTIONS:
+            if is_integer(action) and 0 <= action < N_FLAT_ACTIONS:
                 return self._table[int(action)]  # type: ignore[no-any-return]
         elif type(action) is np.ndarray and action.shape == (3,) and action.dtype.kind == "f":
             a_push, a_verbal, a_lift = action.tolist()
             if all(math.isfinite(a) and -1.0 - 1e-6 <= a <= 1.0 + 1e-6 for a in (a_push, a_verbal, a_lift)):
-                row = cmd[0]
-                # As decode_actions: push (a0 + 1) / 2 * firm, verbal in thirds, lift when a2 > 0.
-                row[CMD.push_force_n] = (min(max(a_push, -1.0), 1.0) + 1.0) * 0.5 * self._firm_push_n
-                row[CMD.verbal_cue] = -1.0 if a_verbal < -1.0 / 3.0 else (1.0 if a_verbal > 1.0 / 3.0 else 0.0)
-                row[CMD.lift] = 1.0 if a_lift > 0.0 else 0.0
+                cmd[0, : CMD.active] = continuous_command(a_push, a_verbal, a_lift, self._firm_push_n)
                 return cmd
-        # A list, not np.asarray(action)[None]: decode_actions names what is wrong with a ragged one.
-        push_n, verbal_cue, lift_flag = decode_actions([action], kind, self.cues, 1)
-        cmd[0, CMD.push_force_n] = push_n[0]
-        cmd[0, CMD.verbal_cue] = verbal_cue[0]
-        cmd[0, CMD.lift] = 1.0 if lift_flag[0] else 0.0
+        # A list, not np.asarray(action)[None]: the check names what is wrong with a ragged one.
+        self._decode(_validated([action], kind, 1), cmd)
         return cmd
 
     def batch(self, actions: Any, cmd: NDArray[np.float64]) -> None:
@@ -198,17 +216,38 @@ class ActionDecoder:
                 if kind == "multidiscrete" and a.shape == (n, 3):
                     # One compiled call checks every range and looks the rows up (int64: one
                     # compiled version; a uint64 too large wraps negative and is refused).
-                    if _decode_multidiscrete(a.astype(np.int64, copy=False), self._flat, cmd):
+                    if _multidiscrete_commands(a.astype(np.int64, copy=False), self._flat, cmd):
                         return
                 if kind == "discrete" and a.shape == (n,):
                     cmd[:, : CMD.active] = self._flat[np.ravel_multi_index((a,), (N_FLAT_ACTIONS,))]
                     return
             except (ValueError, TypeError):
-                pass  # out of range or an unusual integer type: decode_actions decides and names the problem
-        push, verbal, lift = decode_actions(actions, kind, self.cues, n)
-        cmd[:, CMD.push_force_n] = push
-        cmd[:, CMD.verbal_cue] = verbal
-        cmd[:, CMD.lift] = lift
+                pass  # out of range or an unusual integer type: the check decides and names the problem
+        self._decode(_validated(actions, kind, n), cmd)
+
+    def _decode(self, a: NDArray[np.float64], cmd: NDArray[np.float64]) -> None:
+        # The commands of checked actions (see _validated).
+        if self.action_type == "continuous":
+            _continuous_commands(a, self._firm_push_n, cmd)
+            return
+        flat = a if self.action_type == "discrete" else np.ravel_multi_index(a.astype(np.int64).T, ACTION_SHAPE)
+        cmd[:, : CMD.active] = self._flat[np.asarray(flat, dtype=np.int64)]
+
+
+def decode_actions(
+    actions: Any, action_type: str, cues: Cues, n_envs: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Check a batch of ``n_envs`` actions and turn them into cues (:class:`ActionDecoder`'s decoding).
+
+    Returns:
+        ``(push_force_n, verbal_cue, lift)``, each of shape (n_envs,).
+
+    Raises:
+        ValueError: naming what is wrong (shape, bool, NaN, non-integer, out of range).
+    """
+    cmd = np.zeros((n_envs, len(CMD_COLUMNS)))
+    ActionDecoder(action_type, cues).batch(actions, cmd)
+    return cmd[:, CMD.push_force_n].copy(), cmd[:, CMD.verbal_cue].copy(), cmd[:, CMD.lift] > 0.5
 
 
 def encode_actions(
