@@ -35,7 +35,6 @@ from coop_gym.envs.config import INFO_MODES
 from coop_gym.envs.info import (
     NUMERIC_INFO_KEYS,
     InfoBuilder,
-    batched_infos,
     report_info,
 )
 from coop_gym.envs.observation import (
@@ -91,7 +90,6 @@ __all__ = [
     "InfoBuilder",
     "SitToStandConfig",
     "action_space_for",
-    "batched_infos",
     "check_outcome_codes",
     "command_table",
     "count_steps_and_end_episodes",

@@ -20,7 +20,6 @@ from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
 __all__ = [
     "NUMERIC_INFO_KEYS",
     "InfoBuilder",
-    "batched_infos",
     "report_info",
 ]
 
@@ -113,7 +112,8 @@ def report_info(r: list[float], persona_names: Sequence[str], probabilities: boo
 
 
 # The vector info's keys in order: (key, report column, as int) or a derived entry (None); report_info
-# gives the same keys (bar persona_index and outcome_code), one row at a time.
+# gives the same keys (bar persona_index and outcome_code), one row at a time, unpacked by position
+# for speed (tests/coop_gym/test_contract.py holds the two equal).
 _INFO_COLUMNS: tuple[tuple[str, int | None, bool], ...] = (
     ("true_x_m", REPORT.true_x_m, False),
     ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
@@ -129,50 +129,6 @@ _INFO_COLUMNS: tuple[tuple[str, int | None, bool], ...] = (
     ("verbal_cue", REPORT.verbal_cue, True),
     ("elapsed_s", REPORT.elapsed_s, False),
 )
-
-
-def batched_infos(
-    report: NDArray[np.float64],
-    mask: NDArray[np.bool_] | None,
-    persona_names: NDArray[Any],
-    probabilities: bool,
-) -> dict[str, Any]:
-    """The vector env's infos (a dict of arrays with ``_key`` masks, Gymnasium style) from report rows.
-
-    The single env's keys (:func:`report_info`) plus ``persona_index`` and ``outcome_code``
-    (:class:`~coop_gym.envs.config.Outcome` ints). Entries of envs outside ``mask`` (default
-    all) are zero (``None`` for labels), as Gymnasium's ``_add_info`` leaves them.
-    """
-    n = report.shape[0]
-    r = report
-    outcome = r[:, REPORT.outcome].astype(np.int64)
-    persona = r[:, REPORT.persona_index].astype(np.int64)
-    derived = {"persona": persona_names[persona], "persona_index": persona}
-    derived |= {"outcome": _OUTCOME_LABEL_ARRAY[outcome], "outcome_code": outcome}
-    values: dict[str, NDArray[Any]] = {
-        key: derived[key] if column is None else (r[:, column].astype(np.int64) if as_int else r[:, column].copy())
-        for key, column, as_int in _INFO_COLUMNS
-    }
-    if probabilities:
-        values["xi_probabilities"] = r[:, REPORT.p_uncooperative : REPORT.p_cooperative + 1].copy()
-    terms = {name: r[:, REPORT.reward_success + k].copy() for k, name in enumerate(REWARD_TERMS)}
-    if mask is None:
-        mask = np.ones(n, dtype=bool)
-    elif not mask.all():
-        outside = ~mask
-        for array in (*values.values(), *terms.values()):
-            array[outside] = None if array.dtype == object else 0
-    infos: dict[str, Any] = {}
-    for key, array in values.items():
-        infos[key] = array
-        infos[f"_{key}"] = mask.copy()
-    reward_terms: dict[str, Any] = {}
-    for key, array in terms.items():
-        reward_terms[key] = array
-        reward_terms[f"_{key}"] = mask.copy()
-    infos["reward_terms"] = reward_terms
-    infos["_reward_terms"] = mask.copy()
-    return infos
 
 
 # (key, report column, as int): the numeric info, one entry per key, scalars in the single env.
@@ -229,7 +185,7 @@ def _gather_info_columns(
 class InfoBuilder:
     """The info of an env of ``config``, single (:meth:`single`) or batched (:meth:`batched`), from report rows.
 
-    ``info_mode="default"`` gives :func:`report_info` / :func:`batched_infos`;
+    ``info_mode="default"`` gives :func:`report_info` (single) and the same keys as arrays (batched);
     ``"numeric"`` gives :data:`NUMERIC_INFO_KEYS` (NumPy int64 and float64 scalars in the single
     env, arrays of them with Gymnasium's ``_key`` masks in the vector env). Under
     ``observation_scale="unit"`` either adds ``unscaled_obs``: the observation in its units,
@@ -280,7 +236,7 @@ class InfoBuilder:
         if self.numeric:
             top = [(key, *slot(column, as_int)) for key, column, as_int in self._entries]
         else:
-            # The keys of batched_infos, in its order.
+            # The keys of _INFO_COLUMNS, in its order.
             for key, column, as_int in _INFO_COLUMNS:
                 if key in ("persona", "outcome"):
                     top.append((key, key, label_of(key)))
@@ -323,24 +279,15 @@ class InfoBuilder:
         return info
 
     def batched(self, report: NDArray[np.float64], mask: NDArray[np.bool_] | None) -> dict[str, Any]:
-        """The vector env's infos from its report rows; entries outside ``mask`` (default all) are zero."""
-        if mask is None:
-            return self._all_envs(report)
-        outside = ~mask
-        infos: dict[str, Any] = {}
-        if self.numeric:
-            for key, column, as_int in self._entries:
-                values = report[:, column].astype(np.int64) if as_int else report[:, column].copy()
-                values[outside] = 0
-                infos[key] = values
-                infos[f"_{key}"] = mask.copy()
-        else:
-            infos = batched_infos(report, mask, self._persona_array, self.probabilities)
-        if self.unscaled:
-            unscaled = self.unscaled_observation(report)
-            unscaled[outside] = 0
-            infos["unscaled_obs"] = unscaled
-            infos["_unscaled_obs"] = mask.copy()
+        """The vector env's infos (arrays with Gymnasium's ``_key`` masks) from its report rows.
+
+        The single env's keys plus ``persona_index`` and ``outcome_code`` (:class:`~coop_gym.envs.config.Outcome`
+        ints) under ``info_mode="default"``. Entries of envs outside ``mask`` (default all) are
+        zero (``None`` for labels), as Gymnasium's ``_add_info`` leaves them.
+        """
+        infos = self._all_envs(report)
+        if mask is not None:
+            _apply_mask(infos, mask, ~mask if not mask.all() else None)
         return infos
 
     def _all_envs(self, report: NDArray[np.float64]) -> dict[str, Any]:
@@ -379,6 +326,17 @@ class InfoBuilder:
             infos["unscaled_obs"] = self.unscaled_observation(report)
             infos["_unscaled_obs"] = next(masks)
         return infos
+
+
+def _apply_mask(infos: dict[str, Any], mask: NDArray[np.bool_], outside: NDArray[np.bool_] | None) -> None:
+    # Every ``_key`` becomes a copy of the mask; values of envs ``outside`` it are zeroed (None for labels).
+    for key, value in infos.items():
+        if key.startswith("_"):
+            infos[key] = mask.copy()
+        elif isinstance(value, dict):
+            _apply_mask(value, mask, outside)
+        elif outside is not None:
+            value[outside] = None if value.dtype == object else 0
 
 
 guard_kernel_cache(__name__)

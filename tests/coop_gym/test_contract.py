@@ -23,7 +23,6 @@ from coop_gym.envs.contract import (
     TRUNCATES,
     ActionDecoder,
     EnvArguments,
-    batched_infos,
     count_steps_and_end_episodes,
     decode_actions,
     encode_actions,
@@ -156,7 +155,7 @@ def test_the_vector_infos_hold_the_single_env_info_of_each_env() -> None:
     envs.step(np.array([[1, 2, 0], [0, 0, 1], [2, 1, 0]]))
     core = envs.unwrapped.core
     names = np.array([p.name for p in envs.unwrapped.personas], dtype=object)
-    batched = batched_infos(core.report, None, names, True)
+    batched = envs.unwrapped._info.batched(core.report, None)
     for i, row in enumerate(core.report.tolist()):
         single = report_info(row, list(names), True)
         for key, value in single.items():
