@@ -232,7 +232,8 @@ def play(
     keys = keys or pygame_keys
     env = gym.make(env_id, personas=names, render_mode="rgb_array")
     action_type = action_type_of(env)
-    episode_s = float(env.unwrapped.timing.episode_s)  # type: ignore[attr-defined]
+    timing = getattr(env.unwrapped, "timing", None)  # the env's clock sets the summary's time axis
+    episode_s = float(timing.episode_s) if timing is not None else 30.0
     from agents.play_view import PlayView, Summary
 
     view: PlayView | None = None
