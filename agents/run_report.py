@@ -25,6 +25,7 @@ from agents.evaluate import (
     write_csv,
     write_json,
 )
+from agents.evaluate.runs import aggregate_runs, run_score_of, runs_in
 from agents.run_folder import COMPLETE_FILE, INTERRUPTED_FILE
 from coop_gym.io import make_unique_folder, write_text
 from coop_gym.io import write_json as write_json_file
@@ -109,11 +110,29 @@ def compare_with_baselines(
 
 
 def finish_run(run_dir: Path, summary: dict[str, Any]) -> None:
-    """Write ``results.json``, then the ``COMPLETE`` marker (and drop ``INTERRUPTED``): the run finished."""
+    """Write ``results.json``, then the ``COMPLETE`` marker (and drop ``INTERRUPTED``): the run finished.
+
+    With finished runs of the same algorithm on the same evaluation episodes beside it (other
+    training seeds in the same ``--out``), the IQM of their mind-reading scores and this run's
+    is printed and stored as ``mind_reading_across_runs``.
+    """
+    summary = summary | {"mind_reading_across_runs": _across_runs(run_dir, summary)}
     write_json_file(run_dir / "results.json", summary)
     (run_dir / INTERRUPTED_FILE).unlink(missing_ok=True)
     write_text(run_dir / COMPLETE_FILE, time.strftime("%Y-%m-%dT%H:%M:%S") + "\n")
     print(f"saved: {run_dir}")
+
+
+def _across_runs(run_dir: Path, summary: dict[str, Any]) -> dict[str, Any] | None:
+    """IQM of the mind-reading score over this run and the comparable finished runs beside it, printed."""
+    own = run_score_of(summary)
+    if own is None:
+        return None
+    aggregate = aggregate_runs([own, *runs_in(run_dir.parent, exclude=run_dir)], like=own)
+    if aggregate is None:
+        return None
+    print(f"mind-reading score of {own[1]} across training runs in {run_dir.parent}: {aggregate.text()}")
+    return aggregate.as_json()
 
 
 def verdict_against_handbook(label: str, results: list[Any]) -> dict[str, Any] | None:

@@ -33,6 +33,7 @@ from agents.evaluate import (
     write_csv,
     write_json,
 )
+from agents.evaluate.runs import aggregate_runs, read_run_score, runs_in
 from agents.run_folder import is_rllib_run
 from agents.scripted import SCRIPTED_AGENTS
 from coop_gym.cli import output_path_problem, seed_range_problem
@@ -46,7 +47,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="python -m agents.evaluate",
         description="Score agents on the same seeded sit-to-stand episodes (episode k uses seed + k).",
     )
-    who = parser.add_argument_group("agent (one of --agent, --model, --compare)")
+    who = parser.add_argument_group("agent (one of --agent, --model, --compare; or --runs)")
     who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
     who.add_argument(
         "--model",
@@ -56,6 +57,13 @@ def _parser() -> argparse.ArgumentParser:
         "--compare",
         help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
         "(--agent/--model, if given, are added first)",
+    )
+    who.add_argument(
+        "--runs",
+        nargs="+",
+        metavar="RUN",
+        help="train.py run folders (or folders of them): the IQM of the learned agents' mind-reading scores "
+        "across the runs (training seeds), stratified bootstrap 95%% CI, per algorithm; nothing is played",
     )
     parser.add_argument(
         "--env", default=None, help=f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
@@ -86,6 +94,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (usage errors exit 2)."""
     parser = _parser()
     args = parser.parse_args(argv)
+    if args.runs:
+        return _report_runs(parser, args.runs, args.json)
     entries = _checked_entries(parser, args)
     # Every model is loaded and matched to its env before any episode is played.
     planned = [_planned(parser, args, entry) for entry in entries]
@@ -214,6 +224,32 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
     except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
         print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
         return 1
+    return 0
+
+
+def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: bool) -> int:
+    """``--runs``: the IQM of the mind-reading score per algorithm across the runs' ``results.json``."""
+    runs = []
+    for folder in folders:
+        if not Path(folder).is_dir():
+            parser.error(f"--runs: {folder} is not a folder")
+        own = read_run_score(folder)
+        runs.extend([own] if own is not None else runs_in(folder))
+    if not runs:
+        parser.error(
+            "--runs: no finished run with a mind-reading score (results.json of train.py with blind and oracle)"
+        )
+    report = {}
+    for algo in sorted({r[1] for r in runs}):
+        like = next(r for r in runs if r[1] == algo)
+        aggregate = aggregate_runs(runs, like=like)
+        assert aggregate is not None
+        report[algo] = aggregate.as_json()
+        if not as_json:
+            levels = ", ".join(f"{env_id}: {n}" for env_id, n in aggregate.runs.items())
+            print(f"{algo}: mind-reading score {aggregate.text()} ({levels})")
+    if as_json:
+        print(json.dumps(report))
     return 0
 
 

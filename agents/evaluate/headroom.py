@@ -273,6 +273,10 @@ class AggregateScore:
     ci95: Interval
     runs: dict[str, int]
 
+    def as_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (NaN becomes None)."""
+        return _finite({"iqm": self.iqm, "ci95": list(self.ci95), "runs": dict(self.runs)})
+
     def text(self) -> str:
         """``IQM 0.81 [0.77, 0.85] over 3 runs``."""
         ci = "" if not math.isfinite(self.ci95[0]) else f" [{self.ci95[0]:.2f}, {self.ci95[1]:.2f}]"

@@ -13,10 +13,15 @@ import pytest
 import coop_gym  # noqa: F401
 from agents.evaluate import (
     OUTCOMES,
+    TABLE_COLUMNS,
     EpisodeRecord,
     EvaluationResult,
     env_kwargs_for,
     evaluate,
+    headroom,
+    iqm_across_runs,
+    results_json,
+    table_rows,
     wilson_interval,
     write_csv,
 )
@@ -209,3 +214,78 @@ def test_cli_unwritable_output_exits_2_before_the_work(tmp_path, capsys):
             main(["--agent", "handbook", flag, str(blocker / "sub" / "out.x")])
         assert exc.value.code == 2
         assert "a_file is not a folder" in capsys.readouterr().err
+
+
+# --- the mind-reading score ----------------------------------------------------------
+
+
+def _result(name: str, successes: int, n: int = 40, first_seed: int = 0) -> EvaluationResult:
+    records = tuple(
+        EpisodeRecord(
+            k, first_seed + k, "typical", "success" if k < successes else "premature", 0.0, 1, 1.0, 0, 0, 0, 0, 0
+        )
+        for k in range(n)
+    )
+    return EvaluationResult(name, "CoopGym/SitToStandHard-v1", ("typical",), first_seed, records)
+
+
+def test_mind_reading_score_is_0_for_blind_1_for_the_oracle_and_between_for_a_reader():
+    room = headroom([_result("oracle", 40), _result("blind", 20), _result("prober", 30), _result("handbook", 16)])
+    assert room is not None
+    scores = {s.agent: s for s in room.scores}
+    assert scores["oracle"].score == pytest.approx(1.0) and scores["blind"].score == pytest.approx(0.0)
+    assert scores["prober"].score == pytest.approx(0.5)  # (0.75 - 0.5) / (1.0 - 0.5)
+    assert scores["handbook"].score == pytest.approx(-0.2)  # worse than ignoring the mind
+    low, high = scores["prober"].ci95
+    assert low < 0.5 < high and 0.0 <= low and high <= 1.0  # a paired bootstrap interval around the point
+    assert room.value_ci95[0] <= room.value_of_reading_the_mind <= room.value_ci95[1]
+    assert any("mind-reading score" in line and "prober 0.50" in line for line in room.lines())
+
+
+def test_no_score_without_the_same_episodes_or_without_anchors():
+    assert headroom([_result("oracle", 40), _result("blind", 20, first_seed=1000)]) is None  # different seeds
+    assert headroom([_result("prober", 30), _result("blind", 20)]) is None  # no oracle
+    room = headroom([_result("oracle", 20), _result("blind", 20), _result("prober", 10)])
+    assert room is not None and np.isnan(room.score_of("prober").score)  # nothing to read: undefined
+
+
+def test_table_csv_and_json_carry_the_score(tmp_path):
+    results = [_result("prober", 30), _result("blind", 20), _result("oracle", 40)]
+    assert TABLE_COLUMNS[6] == "mind-reading [95% CI]"
+    assert table_rows(results, headroom(results))[0][6].startswith("0.50 [")
+    header, first, *_ = write_csv(results, tmp_path / "c.csv").read_text().splitlines()
+    column = header.split(",").index("mind_reading_score")
+    assert float(first.split(",")[column]) == pytest.approx(0.5)
+    payload = results_json(results)
+    assert payload["results"][0]["mind_reading_score"] == pytest.approx(0.5)
+    assert payload["headroom"]["mind_reading_score"]["prober"]["score"] == pytest.approx(0.5)
+    json.dumps(payload)
+
+
+def test_iqm_across_seeds_is_rliables_stratified_bootstrap():
+    scores = {"hard": [0.2, 0.8, 0.85, 0.9, 1.5], "medium": [0.6, 0.7, 0.75]}
+    agg = iqm_across_runs(scores)
+    pooled = np.sort(np.concatenate([np.array(v) for v in scores.values()]))
+    assert agg.iqm == pytest.approx(np.mean(pooled[2:6]))  # the middle half of the 8 pooled scores
+    assert agg.ci95[0] <= agg.iqm <= agg.ci95[1] and agg.runs == {"hard": 5, "medium": 3}
+    one = iqm_across_runs({"hard": [0.8]})
+    assert one.iqm == pytest.approx(0.8) and np.isnan(one.ci95[0])  # nothing to resample
+    with pytest.raises(ValueError, match="no finite"):
+        iqm_across_runs({"hard": [float("nan")]})
+
+
+def test_cli_runs_reports_the_iqm_across_training_runs(tmp_path, capsys):
+    for seed, score in enumerate([0.7, 0.8, 0.9]):
+        run = tmp_path / f"CoopGym-SitToStandHard-v1__ppo__{seed}__0"
+        run.mkdir()
+        results = {
+            "algo": "ppo",
+            "env_id": "CoopGym/SitToStandHard-v1",
+            "evaluation": {"personas": "test", "episodes": 1000, "seed": 0, "results": [{"mind_reading_score": score}]},
+        }
+        (run / "results.json").write_text(json.dumps(results))
+    assert main(["--runs", str(tmp_path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)["sb3:ppo"]
+    assert report["iqm"] == pytest.approx(0.8) and report["runs"] == {"CoopGym/SitToStandHard-v1": 3}
+    with pytest.raises(SystemExit):
+        main(["--runs", str(tmp_path / "nothing")])

@@ -56,6 +56,10 @@ def test_run_folder_is_complete_and_the_model_loads(first_run):
     room = results["headroom"]
     assert room["value_of_reading_the_mind"] == pytest.approx(room["oracle"] - room["best_blind"])
     assert room["achieved_insight"] == pytest.approx(room["best_reader"] - room["best_blind"])
+    # ... and the mind-reading score of every agent, the learned one first, beside its rates.
+    learned = results["evaluation"]["results"][0]
+    assert "mind_reading_score" in learned and set(room["mind_reading_score"]) >= {"ppo (learned)", "blind", "oracle"}
+    assert room["mind_reading_score"]["oracle"]["score"] == pytest.approx(1.0)
     assert all(r["episodes"] == 8 and r["personas"] == ["frail", "forgetful"] for r in results["evaluation"]["results"])
     assert set(results["verdict"]) >= {"higher_success_than_handbook", "no_more_unsafe_than_handbook"}
     assert results["training"]["timesteps"] >= 256
