@@ -229,56 +229,20 @@ def record_episode(
         deterministic: Passed to ``predict``.
         env_kwargs: Extra keyword arguments of ``gymnasium.make``.
 
-    Returns:
-        A :class:`RecordResult`.
+    Returns: A :class:`RecordResult`.
 
     Raises:
         IncompatibleAgentError: If the agent cannot act in the env.
         ValueError: For a bad ``seed``, ``persona``, ``fps`` or ``max_steps``.
     """
-    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, int) or fps < 1):
-        raise ValueError(f"fps must be a positive int, got {fps!r}")
-    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1):
-        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < SEED_LIMIT):
-        raise ValueError(f"seed must be None or an int with 0 <= seed < 2**32, got {seed!r}")
-    kwargs = dict(env_kwargs or {})
-    if isinstance(agent, str):
-        from agents.evaluate import env_kwargs_for
-
-        kwargs = env_kwargs_for(agent, env_id, kwargs)  # e.g. the oracle needs the oracle observation
-    if persona is not None:
-        if persona not in coop_gym.PERSONAS:
-            raise ValueError(f"unknown persona {persona!r}; known: {', '.join(coop_gym.PERSONAS)}")
-        kwargs["personas"] = persona
+    _check_recording(fps, max_steps, seed)
+    kwargs = _env_kwargs(agent, env_id, persona, env_kwargs)
     out = Path(out_dir).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+    recorder, agent, agent_name, stem = _open_recorder(agent, env_id, kwargs, seed, out, name, fps)
     try:
-        if isinstance(agent, str):
-            agent_name = agent
-            try:
-                agent = make_scripted(agent, features_of(env), action_type_of(env), seed=seed)
-            except ValueError as exc:
-                raise IncompatibleAgentError(f"{exc} (env {env_id})") from None
-        else:
-            agent_name = getattr(agent, "name", None) or type(agent).__name__
-        stem = f"{name or agent_name}" + (f"-seed{seed}" if seed is not None else "")
-        _check_observation_space(agent, env)
-        recorder = _RecordVideoOrGif(env, str(out), name_prefix=stem, fps=fps)
-    except BaseException:
-        env.close()
-        raise
-    try:
-        trace = play_episode(
-            recorder,
-            agent,
-            seed,
-            max_steps=max_steps,
-            deterministic=deterministic,
-            agent_name=agent_name,
-            env_id=env_id,
-        )
+        kw = {"max_steps": max_steps, "deterministic": deterministic, "agent_name": agent_name, "env_id": env_id}
+        trace = play_episode(recorder, agent, seed, **kw)
     finally:
         recorder.close()  # writes the video
     timeline = plot_timeline(trace, out / f"{stem}-timeline.png")
@@ -295,6 +259,57 @@ def record_episode(
         fallback_reason=recorder.fallback_reason,
         trace=trace,
     )
+
+
+def _open_recorder(
+    agent: Agent | str, env_id: str, kwargs: dict[str, Any], seed: int | None, out: Path, name: str | None, fps: Any
+) -> tuple[_RecordVideoOrGif, Agent, str, str]:
+    """``(recorder, agent, agent name, file stem)``: the env made, wrapped to record, the agent checked to fit it."""
+    env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+    try:
+        agent, agent_name = _agent_for(agent, env, env_id, seed)
+        stem = f"{name or agent_name}" + (f"-seed{seed}" if seed is not None else "")
+        _check_observation_space(agent, env)
+        return _RecordVideoOrGif(env, str(out), name_prefix=stem, fps=fps), agent, agent_name, stem
+    except BaseException:
+        env.close()
+        raise
+
+
+def _check_recording(fps: Any, max_steps: Any, seed: Any) -> None:
+    """ValueError naming a bad ``fps``, ``max_steps`` or ``seed`` of :func:`record_episode`."""
+    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, int) or fps < 1):
+        raise ValueError(f"fps must be a positive int, got {fps!r}")
+    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1):
+        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < SEED_LIMIT):
+        raise ValueError(f"seed must be None or an int with 0 <= seed < 2**32, got {seed!r}")
+
+
+def _env_kwargs(
+    agent: Agent | str, env_id: str, persona: str | None, env_kwargs: dict[str, Any] | None
+) -> dict[str, Any]:
+    """The env kwargs of a recording: the observation a scripted agent reads, the persona asked for."""
+    kwargs = dict(env_kwargs or {})
+    if isinstance(agent, str):
+        from agents.evaluate import env_kwargs_for
+
+        kwargs = env_kwargs_for(agent, env_id, kwargs)  # e.g. the oracle needs the oracle observation
+    if persona is not None:
+        if persona not in coop_gym.PERSONAS:
+            raise ValueError(f"unknown persona {persona!r}; known: {', '.join(coop_gym.PERSONAS)}")
+        kwargs["personas"] = persona
+    return kwargs
+
+
+def _agent_for(agent: Agent | str, env: gym.Env[Any, Any], env_id: str, seed: int | None) -> tuple[Agent, str]:
+    """``(agent, its name)``: a scripted agent built for ``env`` by name, or ``agent`` as given."""
+    if not isinstance(agent, str):
+        return agent, getattr(agent, "name", None) or type(agent).__name__
+    try:
+        return make_scripted(agent, features_of(env), action_type_of(env), seed=seed), agent
+    except ValueError as exc:
+        raise IncompatibleAgentError(f"{exc} (env {env_id})") from None
 
 
 def play_episode(
