@@ -212,7 +212,7 @@ class TraceBuilder:
 
             # The core computes every feature whatever the observation mode selects.
             def fallback() -> dict[str, float]:
-                row = core.out.features[0]
+                row = core.report[0, : len(FEATURES)]  # the report row starts with the features
                 return {name: float(row[k]) for k, name in enumerate(FEATURES)}
 
         features = getattr(base, "features", None)

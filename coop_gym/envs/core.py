@@ -21,7 +21,6 @@ single source of truth. A batch of at least 2 x
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,7 +42,7 @@ from coop_gym.envs.layout import (
     pack_personas,
 )
 from coop_gym.envs.observation import FEATURES
-from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS, TERMINATES
+from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
 from coop_gym.envs.reset import draw_reset, start_episodes
 from coop_gym.envs.step import first_unready, observe, step_all
 from coop_gym.envs.threads import available_threads, check_threads, plan_threads, step_threaded
@@ -60,7 +59,6 @@ __all__ = [
     "REPORT_COLUMNS",
     "REWARD_TERMS",
     "SitToStandCore",
-    "StepArrays",
     "available_threads",  # the threaded step's (coop_gym.envs.threads), for the importers of this module
     "check_threads",
     "nominal_model_for",  # the packing's (coop_gym.envs.layout), for the importers of this module
@@ -69,29 +67,6 @@ __all__ = [
 
 def _no_generator_message(i: int) -> str:
     return f"env {i} has no random generator; call reset_env(i, rng) or set_rng first"
-
-
-@dataclass
-class StepArrays:
-    """What one core step produced, for ``N`` envs (views into the core's arrays, reused between steps).
-
-    Attributes:
-        features: (N, len(FEATURES)) float64, see :data:`FEATURES`.
-        reward_terms: (N, len(REWARD_TERMS)) signed contributions to the reward.
-        reward: (N,) sum of the terms.
-        outcome: (N,) int, an :class:`Outcome` (``NONE`` while the episode runs).
-        terminated: (N,) bool, True when the robot lifted.
-        push_force_n: (N,) the push commanded this step [N].
-        verbal_cue: (N,) the utterance playing at the end of the step.
-    """
-
-    features: NDArray[np.float64]
-    reward_terms: NDArray[np.float64]
-    reward: NDArray[np.float64]
-    outcome: NDArray[np.int64]
-    terminated: NDArray[np.bool_]
-    push_force_n: NDArray[np.float64]
-    verbal_cue: NDArray[np.float64]
 
 
 class SitToStandCore:
@@ -188,17 +163,6 @@ class SitToStandCore:
         self.cmd = np.zeros((n, len(CMD_COLUMNS)))
         self.cmd[:, CMD.active] = 1.0
         self.obs = np.zeros((n, n_obs), dtype=np.float32)
-        self._outcome = np.zeros(n, dtype=np.int64)
-        self._terminated = np.zeros(n, dtype=bool)
-        self._out = StepArrays(
-            features=self.report[:, : len(FEATURES)],
-            reward_terms=self.report[:, REPORT.reward_success : REPORT.reward],
-            reward=self.report[:, REPORT.reward],
-            outcome=self._outcome,
-            terminated=self._terminated,
-            push_force_n=self.report[:, REPORT.push_force_n],
-            verbal_cue=self.report[:, REPORT.verbal_cue],
-        )
         self._all = np.arange(n, dtype=np.int64)
         self._draws = np.zeros((n, DRAWS.normals + n_varied))
 
@@ -214,13 +178,6 @@ class SitToStandCore:
             return cls(np.tile(self._persona_nominal[0], (self.n_envs, 1)), np.zeros(self.n_envs), **options)
         except TypeError as exc:  # an unknown option name
             raise ValueError(f"estimator_options for {self.estimator!r}: {exc}") from None
-
-    @property
-    def out(self) -> StepArrays:
-        """What the last step or reset produced, as :class:`StepArrays` (views; outcome and terminated refreshed)."""
-        np.copyto(self._outcome, self.report[:, REPORT.outcome], casting="unsafe")
-        np.take(TERMINATES, self._outcome, out=self._terminated)
-        return self._out
 
     @property
     def persona_index(self) -> NDArray[np.int64]:
@@ -302,18 +259,6 @@ class SitToStandCore:
 
     # --- stepping -------------------------------------------------------------
 
-    def step(
-        self, push_force_n: NDArray[np.float64], verbal_cue: NDArray[np.float64], lift: NDArray[np.bool_]
-    ) -> StepArrays:
-        """Advance every env by one agent action (already decoded and validated)."""
-        cmd = self.cmd
-        cmd[:, CMD.push_force_n] = push_force_n
-        cmd[:, CMD.verbal_cue] = verbal_cue
-        cmd[:, CMD.lift] = lift
-        cmd[:, CMD.active] = 1.0
-        self.step_commands(cmd)
-        return self.out
-
     def step_commands(self, cmd: NDArray[np.float64], reset: NDArray[np.int64] | None = None) -> None:
         """Advance the active envs by one agent action; results land in ``report`` and ``obs``.
 
@@ -376,7 +321,7 @@ class SitToStandCore:
             if isinstance(value, np.ndarray) and isinstance(current, np.ndarray) and current.shape == value.shape:
                 np.copyto(current, value)
             elif not (dataclasses.is_dataclass(current) and not isinstance(current, type)):
-                self.__dict__[name] = value  # keep rebuilt holders of views (e.g. ``out``)
+                self.__dict__[name] = value  # dataclasses (the settings) are rebuilt equal by __init__
         for i, rng in enumerate(self.rngs):
             if rng is not None:
                 self.generators[i] = bit_generator_row(rng)

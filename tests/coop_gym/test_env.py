@@ -14,6 +14,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import coop_gym
 from coop_gym.envs.core import FEATURES, REWARD_TERMS
+from coop_gym.envs.report import REPORT, TERMINATES
 
 ALL_IDS = sorted(coop_gym.ENV_IDS)
 
@@ -277,8 +278,8 @@ def test_a_custom_episode_length_truncates_on_the_envs_own_clock() -> None:
     assert truncated_v.all() and steps == 100
 
 
-def test_core_step_library_api_matches_the_env_step() -> None:
-    # SitToStandCore.step (decoded cues) is the library entry point beside the env's step.
+def test_core_step_commands_library_api_matches_the_env_step() -> None:
+    # SitToStandCore.step_commands (decoded cues) is the library entry point beside the env's step.
     env = gym.make("CoopGym/SitToStand-v0")
     twin = gym.make("CoopGym/SitToStand-v0")
     env.reset(seed=7)
@@ -288,9 +289,12 @@ def test_core_step_library_api_matches_the_env_step() -> None:
         obs, reward, terminated, _, _ = env.step(action)
         push = np.array([(0.0, cues.soft_push_n, cues.firm_push_n)[action[0]]])
         verbal = np.array([(0.0, -1.0, 1.0)[action[1]]])
-        out = twin.unwrapped.core.step(push, verbal, np.array([action[2] == 1]))
-        assert np.array_equal(twin.unwrapped.core.obs[0], obs)
-        assert out.reward[0] == reward and bool(out.terminated[0]) == terminated
+        core = twin.unwrapped.core
+        core.cmd[0, :3] = push[0], verbal[0], float(action[2] == 1)
+        core.step_commands(core.cmd)
+        assert np.array_equal(core.obs[0], obs)
+        outcome = int(core.report[0, REPORT.outcome])
+        assert core.report[0, REPORT.reward] == reward and bool(TERMINATES[outcome]) == terminated
 
 
 def test_report_layout_check_is_not_an_assert(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -59,7 +59,7 @@ def test_outcome_codes_that_are_not_consecutive_are_refused() -> None:
 
 def test_the_package_imports_and_checks_under_python_optimize() -> None:
     code = (
-        "import coop_gym.envs.step as c, coop_gym.envs.contract as k; k.check_outcome_codes(k.Outcome); "
+        "import coop_gym.envs.step as c, coop_gym.envs.report as k; k.check_outcome_codes(k.Outcome); "
         "print(c._SUCCESS)"
     )
     out = subprocess.run([sys.executable, "-O", "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
@@ -77,8 +77,11 @@ def test_a_lift_ends_with_the_enums_outcome(xi: int, lean_m: float, expected: Ou
     c = core.SitToStandCore(1, person, Timing(), Cues(), Realism(), lift, RewardWeights(), ThresholdJudgment())
     c.reset_env(0, np.random.default_rng(0), initial_xi=xi)
     c.person[0, STATE.x_m] = lean_m  # place the shoulder
-    out = c.step(np.zeros(1), np.zeros(1), np.ones(1, dtype=bool))
-    assert Outcome(int(out.outcome[0])) is expected
-    assert bool(out.terminated[0])
-    terms = dict(zip(core.REWARD_TERMS, out.reward_terms[0].tolist(), strict=True))
+    c.cmd[0, contract.CMD.lift] = 1.0
+    c.step_commands(c.cmd)
+    outcome = int(c.report[0, contract.REPORT.outcome])
+    assert Outcome(outcome) is expected
+    assert bool(contract.TERMINATES[outcome])
+    rewards = c.report[0, contract.REPORT.reward_success : contract.REPORT.reward].tolist()
+    terms = dict(zip(core.REWARD_TERMS, rewards, strict=True))
     assert terms[expected.label] != 0.0

@@ -150,7 +150,7 @@ def test_stepping_an_env_never_reset_raises_before_any_env_moves() -> None:
         core.reset_env(i, np.random.default_rng(i))
     before = core.state.copy()
     with pytest.raises(RuntimeError, match="env 3 was stepped before it was reset"):
-        core.step(np.zeros(6), np.zeros(6), np.zeros(6, dtype=bool))
+        core.step_commands(core.cmd)  # no push, no cue, no lift, every env active
     np.testing.assert_array_equal(core.state, before)
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -14,6 +13,7 @@ from gymnasium.vector import AutoresetMode
 
 import coop_gym
 from coop_gym.envs.config import Outcome
+from coop_gym.envs.report import REPORT, TERMINATES
 from coop_gym.envs.vector import SitToStandVectorEnv
 from coop_gym.model.dynamics import (
     PARAM_COLUMNS,
@@ -382,7 +382,7 @@ def test_step_before_reset_and_unknown_generator_raise_in_the_core() -> None:
     env = coop_gym.SitToStandEnv()
     core = env.core
     with pytest.raises(RuntimeError, match="stepped before it was reset"):
-        core.step(np.zeros(1), np.zeros(1), np.zeros(1, dtype=bool))
+        core.step_commands(core.cmd)
     with pytest.raises(RuntimeError, match="no random generator"):
         core.reset_envs(np.array([0]))
 
@@ -391,8 +391,7 @@ def test_core_step_arrays_stay_consistent_with_the_info() -> None:
     env = coop_gym.SitToStandEnv()
     env.reset(seed=2)
     _, reward, terminated, _, info = env.step(np.array([0, 0, 1]))
-    out = env.core.out
-    assert out.outcome[0] == Outcome.UNSAFE and out.terminated[0] and terminated
-    assert out.reward[0] == reward and out.push_force_n[0] == 0.0
-    assert dataclasses.asdict(out).keys() >= {"features", "reward_terms", "reward"}
+    report = env.core.report[0]
+    assert report[REPORT.outcome] == Outcome.UNSAFE and TERMINATES[int(report[REPORT.outcome])] and terminated
+    assert report[REPORT.reward] == reward and report[REPORT.push_force_n] == 0.0
     assert info["outcome"] == "unsafe"
