@@ -282,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
     checkpoint_every = args.checkpoint_every if args.checkpoint_every is not None else max(1, timesteps // 10)
     # A model must meet the observation it was trained on: checked before any folder is made.
     problem = None
-    if saved_agent is not None:
+    if saved_agent is not None and args.model is not None:
         problem = saved_model_problem("--model", args.model, env_id, saved_agent)
     elif args.resume is not None and not in_place:
         problem = saved_model_problem("--resume", args.resume, env_id)

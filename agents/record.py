@@ -241,8 +241,8 @@ def record_episode(
     out.mkdir(parents=True, exist_ok=True)
     recorder, agent, agent_name, stem = _open_recorder(agent, env_id, kwargs, seed, out, name, fps)
     try:
-        kw = {"max_steps": max_steps, "deterministic": deterministic, "agent_name": agent_name, "env_id": env_id}
-        trace = play_episode(recorder, agent, seed, **kw)
+        settings: dict[str, Any] = {"deterministic": deterministic, "agent_name": agent_name, "env_id": env_id}
+        trace = play_episode(recorder, agent, seed, max_steps=max_steps, **settings)
     finally:
         recorder.close()  # writes the video
     timeline = plot_timeline(trace, out / f"{stem}-timeline.png")

@@ -292,8 +292,9 @@ def main(argv: list[str] | None = None) -> None:
 
     envs = make_envs(args)
     space = envs.single_action_space
+    assert isinstance(space, gym.spaces.MultiDiscrete | gym.spaces.Discrete), "MultiDiscrete or Discrete actions"
     nvec = [int(n) for n in space.nvec] if isinstance(space, gym.spaces.MultiDiscrete) else [int(space.n)]
-    obs_dim = int(np.prod(envs.single_observation_space.shape))
+    obs_dim = int(np.prod(envs.single_observation_space.shape or ()))
     agent = Agent(obs_dim, nvec)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
     rollout = Rollout(args.num_steps, args.num_envs, obs_dim, len(nvec))

@@ -123,14 +123,10 @@ def summaries(results: Sequence[EvaluationResult], room: Headroom | None = None)
     out = []
     for r in results:
         score = room.score_of(r.agent) if room is not None else None
-        finite = score is not None and math.isfinite(score.score)
-        out.append(
-            r.summary()
-            | {
-                "mind_reading_score": score.score if finite else None,
-                "mind_reading_score_ci95": list(score.ci95) if finite else None,
-            }
-        )
+        if score is None or not math.isfinite(score.score):
+            out.append(r.summary() | {"mind_reading_score": None, "mind_reading_score_ci95": None})
+        else:
+            out.append(r.summary() | {"mind_reading_score": score.score, "mind_reading_score_ci95": list(score.ci95)})
     return out
 
 
