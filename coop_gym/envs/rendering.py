@@ -34,6 +34,7 @@ import numpy as np
 from gymnasium.error import DependencyNotInstalled
 from numpy.typing import NDArray
 
+from compiled.checks import is_integer
 from coop_gym.envs.config import Outcome
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -254,7 +255,7 @@ class SitToStandRenderer:
             ValueError: If ``width`` or ``height`` is not an integer of at least 60 / 40.
         """
         for name, value, minimum in (("width", width, 60), ("height", height, 40)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+            if not is_integer(value) or value < minimum:
                 raise ValueError(f"SitToStandRenderer {name} must be an int >= {minimum}, got {value!r}")
         self.width = int(width)
         self.height = int(height)

@@ -12,6 +12,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
+from compiled.checks import is_integer
 from coop_gym.envs.actions import CMD, ActionDecoder
 from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import check_threads
@@ -97,14 +98,14 @@ class SitToStandVectorEnv(VectorEnv):
         **kwargs: Any,
     ) -> None:
         """Create ``num_envs`` envs; ``kwargs``: the keywords of :class:`~coop_gym.envs.contract.EnvArguments`."""
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+        if not is_integer(num_envs) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive int, got {num_envs!r}")
         arguments = EnvArguments.from_keywords(type(self).__name__, kwargs)
         config = arguments.resolve(self.metadata["render_modes"])
         threads = check_threads(arguments.threads)
         if max_episode_steps is None:
             max_episode_steps = config.timing.max_episode_steps
-        if isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer)):
+        if not is_integer(max_episode_steps):
             raise ValueError(f"max_episode_steps must be a positive int or None, got {max_episode_steps!r}")
         if max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be a positive int or None, got {max_episode_steps!r}")
@@ -150,7 +151,7 @@ class SitToStandVectorEnv(VectorEnv):
         options = dict(options) if options else {}
         mask = self._reset_mask(options.pop("reset_mask", None))
         persona_index, initial_xi = parse_reset_options(options, self.personas)
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+        if is_integer(seed):
             super().reset(seed=int(seed))  # the vector env's own np_random, as Gymnasium's envs do
         indices = self._all[mask]
         core = self.core
@@ -297,7 +298,7 @@ class SitToStandVectorEnv(VectorEnv):
         n = self.num_envs
         if seed is None:
             return [None] * n
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+        if is_integer(seed):
             if seed < 0:
                 raise ValueError(f"seed must be a non-negative int, got {seed!r}")
             return [int(seed) + i for i in range(n)]
@@ -307,7 +308,7 @@ class SitToStandVectorEnv(VectorEnv):
         if len(seeds) != n:
             raise ValueError(f"a list of seeds must have num_envs={n} entries, got {len(seeds)}")
         for s in seeds:
-            if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
+            if s is not None and (not is_integer(s) or s < 0):
                 raise ValueError(f"each seed must be a non-negative int or None, got {s!r}")
         return [None if s is None else int(s) for s in seeds]
 
