@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any
 
 from compiled.checks import check_choice, check_flag, check_integer, check_number
 
@@ -25,10 +25,8 @@ __all__ = [
     "Realism",
     "Sensors",
     "Timing",
-    "from_mapping",
 ]
 
-T = TypeVar("T")
 
 MAX_REACTION_DELAY_S = 1.2
 """Longest supported reaction delay [s]; the delay line holds this many seconds of cues."""
@@ -49,15 +47,6 @@ def _set_checked(obj: Any, name: str, checked: Any) -> None:
     """Store a validated field's Python value if the given one was a NumPy scalar."""
     if checked is not getattr(obj, name):
         object.__setattr__(obj, name, checked)
-
-
-def from_mapping(cls: type[T], values: dict[str, Any]) -> T:
-    """Build dataclass ``cls`` from a mapping; unknown keys raise ``ValueError`` naming them."""
-    known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"unknown {cls.__name__} field(s): {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    return cls(**values)
 
 
 @dataclass(frozen=True)
