@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from compiled.cache import guard_kernel_cache
 from compiled.checks import is_integer, is_number, python_scalar
 from estimator.kalman import NOMINAL, nominal_row
-from estimator.multiple_model import N_MODES, _mean_step, _riccati_step
+from estimator.multiple_model import N_MODES, mode_covariance_step, mode_mean_step
 from estimator.nominal import NominalModel
 
 __all__ = [
@@ -219,7 +219,7 @@ def _trial_mode_log_likelihoods(
                 P[1, 1] = initial_velocity_var
                 P[2, 2] = initial_intention_var
                 for t in range(1, t_max):
-                    S = _riccati_step(P, row, K)
+                    S = mode_covariance_step(P, row, K)
                     gains[t, 0] = K[0]
                     gains[t, 1] = K[1]
                     gains[t, 2] = K[2]
@@ -232,7 +232,7 @@ def _trial_mode_log_likelihoods(
                 m[2] = y0
                 ll = 0.0
                 for t in range(1, lengths[i]):
-                    e = _mean_step(
+                    e = mode_mean_step(
                         m, row, float(j - 1), push_force_n[i, t], verbal_cue[i, t], measured_position_m[i, t], gains[t]
                     )
                     # Prediction-error decomposition: log N(e_t; 0, S_t).

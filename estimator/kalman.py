@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from compiled.cache import guard_kernel_cache
 from compiled.schema import index_table
-from estimator.nominal import STATE_DIM, NominalModel
+from estimator.nominal import STATE_DIM, NominalModel, euler_transition
 
 __all__ = [
     "NOMINAL",
@@ -42,6 +42,7 @@ __all__ = [
     "PaperKalmanFilter",
     "kalman_step",
     "nominal_row",
+    "nominal_transition",
 ]
 
 NOMINAL_FIELDS: tuple[str, ...] = (
@@ -76,6 +77,23 @@ def nominal_row(model: NominalModel) -> NDArray[np.float64]:
     derived = dict(zip(NOMINAL_DERIVED_COLUMNS, (q[0], q[1], q[2], q[3], model.measurement_variance), strict=True))
     values = {**{name: getattr(model, name) for name in NOMINAL_FIELDS}, **derived}
     return np.array([values[name] for name in NOMINAL_COLUMNS])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def nominal_transition(
+    nominal: NDArray[np.float64], push_force_n: float, verbal_cue: float
+) -> tuple[float, float, float, float, float, float]:
+    """:func:`~estimator.nominal.euler_transition` of a nominal row: ``(a01, a10, a11, a12, a23, b1)``."""
+    return euler_transition(  # type: ignore[no-any-return]
+        nominal[NOMINAL.dt_s],
+        nominal[NOMINAL.damping_rate_per_s],
+        nominal[NOMINAL.voluntary_gain_per_s2],
+        nominal[NOMINAL.push_compliance_m_per_s2_n],
+        nominal[NOMINAL.push_gain_m_per_s_n],
+        nominal[NOMINAL.verbal_gain_m_per_s],
+        push_force_n,
+        verbal_cue,
+    )
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -238,14 +256,8 @@ def kalman_step(
         ``(innovation, S)``: the measurement residual and its variance, for
         likelihoods (system identification, multiple-model estimators).
     """
-    dt = nominal[NOMINAL.dt_s]
     # --- predict: A from the cues (eqs. 1, 6, 10 Euler-discretised) ---
-    a01 = dt
-    a10 = -nominal[NOMINAL.voluntary_gain_per_s2] * dt
-    a11 = 1.0 - nominal[NOMINAL.damping_rate_per_s] * dt
-    a12 = nominal[NOMINAL.voluntary_gain_per_s2] * dt
-    a23 = (nominal[NOMINAL.push_gain_m_per_s_n] * push_force_n + nominal[NOMINAL.verbal_gain_m_per_s] * verbal_cue) * dt
-    b1 = nominal[NOMINAL.push_compliance_m_per_s2_n] * dt
+    a01, a10, a11, a12, a23, b1 = nominal_transition(nominal, push_force_n, verbal_cue)
     m0, m1, m2, m3 = m[0], m[1], m[2], m[3]
     m[0] = m0 + a01 * m1
     m[1] = a10 * m0 + a11 * m1 + a12 * m2 + b1 * push_force_n

@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from compiled.cache import guard_kernel_cache
 from compiled.checks import is_number
-from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, nominal_row
+from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, nominal_row, nominal_transition
 from estimator.nominal import NominalModel
 
 __all__ = [
@@ -50,6 +50,8 @@ __all__ = [
     "MultipleModelEstimator",
     "confident_judgment",
     "map_judgment",
+    "mode_covariance_step",
+    "mode_mean_step",
     "sequential_judgment",
     "switching_transition_matrix",
 ]
@@ -100,16 +102,14 @@ def _logaddexp(a: float, b: float) -> float:
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _riccati_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArray[np.float64]) -> float:
+def mode_covariance_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArray[np.float64]) -> float:
     """Predict and Joseph-update one mode covariance ``P`` (3, 3) in place; write the gain ``K`` (3,).
 
     Returns:
         The innovation variance ``S``.
     """
-    dt = nominal[NOMINAL.dt_s]
-    f10 = -nominal[NOMINAL.voluntary_gain_per_s2] * dt
-    f11 = 1.0 - nominal[NOMINAL.damping_rate_per_s] * dt
-    f12 = nominal[NOMINAL.voluntary_gain_per_s2] * dt
+    # F: the upper-left (3, 3) block of the nominal A, which the cues do not enter.
+    dt, f10, f11, f12, _, _ = nominal_transition(nominal, 0.0, 0.0)
     # P = F P F^T + Q, with F's sparse rows [1, dt, 0], [f10, f11, f12], [0, 0, 1].
     fp00 = P[0, 0] + dt * P[1, 0]
     fp01 = P[0, 1] + dt * P[1, 1]
@@ -161,7 +161,7 @@ def _riccati_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArr
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _mean_step(
+def mode_mean_step(
     m: NDArray[np.float64],
     nominal: NDArray[np.float64],
     xi: float,
@@ -171,6 +171,10 @@ def _mean_step(
     K: NDArray[np.float64],
 ) -> float:
     """Predict ``m = F m + B_xi u`` and update with gain ``K``, in place on ``m`` (3,).
+
+    The mean is predicted in the difference form of eqs. 1 and 6 (``xdot + dt (...)``), not by
+    multiplying out :func:`~estimator.nominal.euler_transition`'s entries: the two round
+    differently, and the multiple-model estimators' recorded numbers are this form's.
 
     Returns:
         The innovation ``y - H m`` of the predicted mean.
@@ -240,11 +244,11 @@ def _mmae_env_step(
     """One MMAE step of env ``i``: shared Riccati (``P[i, 0]``), three mean updates, Bayes on the modes."""
     row = nominal[i]
     # One covariance recursion serves all modes: F, Q, H, R are mode-independent.
-    S = _riccati_step(P[i, 0], row, K)
+    S = mode_covariance_step(P[i, 0], row, K)
     log_S_term = _LOG_2PI + math.log(S)
     for j in range(N_MODES):
         xi = float(j - 1)
-        innovation = _mean_step(means[i, j], row, xi, push_force_n, verbal_cue, measured_position_m, K)
+        innovation = mode_mean_step(means[i, j], row, xi, push_force_n, verbal_cue, measured_position_m, K)
         # Floor: mix the prediction with the uniform distribution, mu_j <- (1 - 3 eps) mu_j + eps.
         lp = log_mu[i, j]
         if log_floor > -np.inf:
@@ -315,8 +319,8 @@ def _imm_env_step(
             for b in range(_STATE):
                 P[i, j, k, b] = mixed_P[j, k, b]
         # Mode-matched Kalman filter, then mu_j proportional to Lambda_j cbar_j.
-        S = _riccati_step(P[i, j], row, K)
-        innovation = _mean_step(means[i, j], row, float(j - 1), push_force_n, verbal_cue, measured_position_m, K)
+        S = mode_covariance_step(P[i, j], row, K)
+        innovation = mode_mean_step(means[i, j], row, float(j - 1), push_force_n, verbal_cue, measured_position_m, K)
         lm[j] = log_cbar[j] - 0.5 * (_LOG_2PI + math.log(S) + innovation * innovation / S)
     _log_normalise(lm)
 

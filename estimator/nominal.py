@@ -21,11 +21,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
+from compiled.cache import guard_kernel_cache
 from compiled.checks import is_number, python_scalar
 
-__all__ = ["STATE_DIM", "NominalModel"]
+__all__ = ["STATE_DIM", "NominalModel", "euler_transition"]
 
 STATE_DIM = 4
 """Length of the paper filter's state ``[x, xdot, eta, xi]``."""
@@ -109,21 +111,26 @@ class NominalModel:
             push_force_n: Measured push force ``c_p`` [N] during the step.
             verbal_cue: Verbal cue ``c_v`` in {-1, 0, +1} during the step.
         """
-        dt = self.dt_s
         a = np.eye(STATE_DIM)
-        # eq. 1: x' = x + dt*xdot ; xdot' = xdot + dt*(-lambda1*xdot + k1*(eta - x)) (+ B*c_p)
-        a[0, 1] = dt
-        a[1, 0] = -self.voluntary_gain_per_s2 * dt
-        a[1, 1] = 1.0 - self.damping_rate_per_s * dt
-        a[1, 2] = self.voluntary_gain_per_s2 * dt
-        # eq. 6: eta' = eta + xi*(k3*c_p + k4*c_v)*dt -- bilinear, so the cue enters A.
-        a[2, 3] = (self.push_gain_m_per_s_n * push_force_n + self.verbal_gain_m_per_s * verbal_cue) * dt
+        a[0, 1], a[1, 0], a[1, 1], a[1, 2], a[2, 3], _ = self._euler_transition(push_force_n, verbal_cue)
         return a
+
+    def _euler_transition(self, push_force_n: float, verbal_cue: float) -> tuple[float, ...]:
+        return euler_transition(  # type: ignore[no-any-return]
+            self.dt_s,
+            self.damping_rate_per_s,
+            self.voluntary_gain_per_s2,
+            self.push_compliance_m_per_s2_n,
+            self.push_gain_m_per_s_n,
+            self.verbal_gain_m_per_s,
+            float(push_force_n),
+            float(verbal_cue),
+        )
 
     @property
     def input_vector(self) -> NDArray[np.float64]:
         """``B`` (4,): the push force's direct effect on velocity, ``k2*dt`` (eq. 1)."""
-        return np.array([0.0, self.push_compliance_m_per_s2_n * self.dt_s, 0.0, 0.0])
+        return np.array([0.0, self._euler_transition(0.0, 0.0)[5], 0.0, 0.0])
 
     @property
     def measurement_matrix(self) -> NDArray[np.float64]:
@@ -161,3 +168,39 @@ class NominalModel:
     def initial_state(self, first_position_m: float) -> NDArray[np.float64]:
         """``s0`` (4,): at rest where first seen, intending to stay, ``xi`` unknown (0)."""
         return np.array([first_position_m, 0.0, first_position_m, 0.0])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def euler_transition(
+    dt_s: float,
+    damping_rate_per_s: float,
+    voluntary_gain_per_s2: float,
+    push_compliance_m_per_s2_n: float,
+    push_gain_m_per_s_n: float,
+    verbal_gain_m_per_s: float,
+    push_force_n: float,
+    verbal_cue: float,
+) -> tuple[float, float, float, float, float, float]:
+    """The entries of ``A`` and ``B`` that differ from ``I`` and 0: eqs. 1 and 6, Euler-discretised.
+
+    The one form of the nominal transition: :meth:`NominalModel.transition_matrix`, the
+    paper filter's :func:`~estimator.kalman.kalman_step` and the multiple-model covariance step
+    read it from here.
+
+    Returns:
+        ``(a01, a10, a11, a12, a23, b1)``: eq. 1, ``x' = x + dt xdot`` and
+        ``xdot' = xdot + dt (-lambda1 xdot + k1 (eta - x) + k2 c_p)``, gives ``a01 = dt``,
+        ``a10 = -k1 dt``, ``a11 = 1 - lambda1 dt``, ``a12 = k1 dt`` and ``b1 = k2 dt``; eq. 6,
+        ``eta' = eta + xi (k3 c_p + k4 c_v) dt`` (bilinear, so the cue enters ``A``), gives
+        ``a23 = (k3 c_p + k4 c_v) dt``.
+    """
+    a01 = dt_s
+    a10 = -voluntary_gain_per_s2 * dt_s
+    a11 = 1.0 - damping_rate_per_s * dt_s
+    a12 = voluntary_gain_per_s2 * dt_s
+    a23 = (push_gain_m_per_s_n * push_force_n + verbal_gain_m_per_s * verbal_cue) * dt_s
+    b1 = push_compliance_m_per_s2_n * dt_s
+    return a01, a10, a11, a12, a23, b1
+
+
+guard_kernel_cache(__name__)
