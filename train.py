@@ -528,7 +528,6 @@ def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> i
     from agents.plots import plot_learning_curve, plot_outcome_rates
     from agents.rl import MODEL_FILE, load_agent
     from agents.run_report import (
-        baseline_names,
         compare_with_baselines,
         finish_run,
         verdict_against_handbook,
@@ -539,16 +538,7 @@ def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> i
     model_path = Path(args.model) if args.eval_only and args.model else run_dir / MODEL_FILE
     # The saved agent (what a user loads) and the baselines, on the same episodes.
     label = f"{plan.algo} (learned)"
-    comparison = compare_with_baselines(
-        load_agent(model_path),
-        label,
-        env_id,
-        args.eval_personas,
-        args.eval_episodes,
-        args.eval_seed,
-        baseline_names(args.baselines),
-        run_dir,
-    )
+    comparison = compare_with_baselines(load_agent(model_path), label, env_id, args, run_dir)
     results = comparison.results
     plot_outcome_rates(results, run_dir / "outcome_rates.png")
     curve_points = finished["learning_curve"]
@@ -570,7 +560,7 @@ def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> i
         "seed": args.seed,
         "model": str(model_path),
         "training": finished["training"],
-        **comparison.summary(args.eval_personas, args.eval_episodes, args.eval_seed),
+        **comparison.summary(),
         "learning_curve": curve_points,
         "verdict": verdict_against_handbook(label, results),
         **versions(),

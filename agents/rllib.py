@@ -339,7 +339,7 @@ def run(args: Any) -> int:
     """
     import ray
 
-    from agents.run_report import baseline_names, compare_with_baselines, finish_run, new_run_folder
+    from agents.run_report import compare_with_baselines, finish_run, new_run_folder
 
     torch.set_num_threads(args.threads)
     env_id = args.env or hyperparams_for("ppo").env_id
@@ -360,16 +360,7 @@ def run(args: Any) -> int:
     print(f"trained {training['timesteps']} steps in {training['wall_time_s']:.0f} s")
 
     # The same evaluation path, the same seeded episodes as every other agent.
-    comparison = compare_with_baselines(
-        load_rllib_agent(run_dir),
-        "rllib ppo (learned)",
-        env_id,
-        args.eval_personas,
-        args.eval_episodes,
-        args.eval_seed,
-        baseline_names(args.baselines),
-        run_dir,
-    )
+    comparison = compare_with_baselines(load_rllib_agent(run_dir), "rllib ppo (learned)", env_id, args, run_dir)
     summary = {
         "run": run_dir.name,
         "framework": FRAMEWORK,
@@ -378,7 +369,7 @@ def run(args: Any) -> int:
         "seed": args.seed,
         "model": str(run_dir / CHECKPOINT_DIR),
         "training": training,
-        **comparison.summary(args.eval_personas, args.eval_episodes, args.eval_seed),
+        **comparison.summary(),
         "ray": ray.__version__,
         "torch": torch.__version__,
     }

@@ -11,7 +11,6 @@ written last, so a run folder without them did not finish.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -63,46 +62,44 @@ class Comparison:
     Attributes:
         results: One :class:`~agents.evaluate.EvaluationResult` per agent, the learned one first.
         room: Headroom and mind-reading scores (None without an oracle and a blind baseline).
+        settings: The run's ``train.Args`` (its evaluation settings).
         wall_time_s: Time the evaluations took [s].
     """
 
-    def __init__(self, results: list[EvaluationResult], wall_time_s: float) -> None:
+    def __init__(self, results: list[EvaluationResult], settings: Any, wall_time_s: float) -> None:
         """Hold the results; the headroom is computed once, here."""
         self.results = results
         self.room: Headroom | None = headroom(results)
+        self.settings = settings
         self.wall_time_s = wall_time_s
 
-    def summary(self, personas: str, episodes: int, seed: int) -> dict[str, Any]:
+    def summary(self) -> dict[str, Any]:
         """The ``evaluation`` and ``headroom`` entries of ``results.json``."""
-        room = self.room
         return {
             "evaluation": {
-                "personas": personas,
-                "episodes": episodes,
-                "seed": seed,
+                "personas": self.settings.eval_personas,
+                "episodes": self.settings.eval_episodes,
+                "seed": self.settings.eval_seed,
                 "wall_time_s": self.wall_time_s,
-                "results": summaries(self.results, room),
+                "results": summaries(self.results, self.room),
             },
-            "headroom": None if room is None else room.as_json(),
+            "headroom": None if self.room is None else self.room.as_json(),
         }
 
 
-def compare_with_baselines(
-    agent: Any,
-    label: str,
-    env_id: str,
-    personas: str,
-    episodes: int,
-    seed: int,
-    baselines: Sequence[str],
-    run_dir: Path,
-) -> Comparison:
-    """Score ``agent`` and the baselines on the same episodes; print the table, write ``eval.json`` and ``eval.csv``."""
+def compare_with_baselines(agent: Any, label: str, env_id: str, settings: Any, run_dir: Path) -> Comparison:
+    """Score ``agent`` and the baselines on the same episodes; print the table, write ``eval.json`` and ``eval.csv``.
+
+    ``settings`` is the run's ``train.Args``: ``eval_personas``, ``eval_episodes``, ``eval_seed``
+    and ``baselines`` say which episodes and which scripted agents.
+    """
+    personas = personas_arg(settings.eval_personas)
+    episodes, seed = settings.eval_episodes, settings.eval_seed
     started = time.perf_counter()
-    results = [evaluate(agent, env_id, personas_arg(personas), episodes, seed, name=label)]
-    for name in baselines:
-        results.append(evaluate(name, env_id, personas_arg(personas), episodes, seed))
-    comparison = Comparison(results, time.perf_counter() - started)
+    results = [evaluate(agent, env_id, personas, episodes, seed, name=label)]
+    for name in baseline_names(settings.baselines):
+        results.append(evaluate(name, env_id, personas, episodes, seed))
+    comparison = Comparison(results, settings, time.perf_counter() - started)
     print_table(results, room=comparison.room)
     write_json(results, run_dir / "eval.json", episodes=True)
     write_csv(results, run_dir / "eval.csv", room=comparison.room)
