@@ -13,11 +13,14 @@ Nothing here imports torch or SB3.
 from __future__ import annotations
 
 import dataclasses
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from compiled.checks import check_integer
+from coop_gym.cli import SEED_LIMIT
 from coop_gym.io import write_text
 from coop_gym.model.personas import TEST_PERSONAS, resolve_personas
 
@@ -81,10 +84,8 @@ class TrainingConfig:
         """Validate ranges."""
         if self.algo not in ALGORITHMS:
             raise ValueError(f"TrainingConfig.algo must be one of {list(ALGORITHMS)}, got {self.algo!r}")
-        for name in ("n_envs", "total_timesteps"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"TrainingConfig.{name} must be a positive int, got {value!r}")
+        check_integer("TrainingConfig.n_envs", self.n_envs, 1, SEED_LIMIT)  # envs seeded seed .. seed + n_envs - 1
+        check_integer("TrainingConfig.total_timesteps", self.total_timesteps, 1, sys.maxsize)
         held_out = {p.name for p in resolve_personas(self.personas)} & set(TEST_PERSONAS)
         if held_out:
             raise ValueError(f"TrainingConfig.personas must not include held-out personas, got {sorted(held_out)}")

@@ -42,6 +42,7 @@ import coop_gym
 from agents.base import Agent, action_type_of, feature_mismatch, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
+from compiled.checks import check_integer
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
@@ -278,12 +279,13 @@ def _open_recorder(
 
 def _check_recording(fps: Any, max_steps: Any, seed: Any) -> None:
     """ValueError naming a bad ``fps``, ``max_steps`` or ``seed`` of :func:`record_episode`."""
-    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, int) or fps < 1):
-        raise ValueError(f"fps must be a positive int, got {fps!r}")
-    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1):
-        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < SEED_LIMIT):
-        raise ValueError(f"seed must be None or an int with 0 <= seed < 2**32, got {seed!r}")
+    for name, value, low, high in (
+        ("fps", fps, 1, 1000),
+        ("max_steps", max_steps, 1, SEED_LIMIT),
+        ("seed", seed, 0, SEED_LIMIT - 1),
+    ):
+        if value is not None:
+            check_integer(name, value, low, high)
 
 
 def _env_kwargs(

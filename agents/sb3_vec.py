@@ -27,6 +27,8 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
+from compiled.checks import check_integer
+from coop_gym.cli import SEED_LIMIT
 from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
 
@@ -210,10 +212,9 @@ class SB3VecEnvAdapter(VecEnv):
         """Seeds for the next :meth:`reset`: env ``i`` gets ``seed + i`` (None: keep their generators)."""
         if seed is None:
             self._seeds = [None] * self.num_envs
-        elif isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative int or None, got {seed!r}")
         else:
-            self._seeds = [int(seed) + i for i in range(self.num_envs)]
+            first = check_integer("seed", seed, 0, SEED_LIMIT - self.num_envs)  # env i gets seed + i
+            self._seeds = [first + i for i in range(self.num_envs)]
         return list(self._seeds)
 
     def get_images(self) -> Sequence[NDArray[Any] | None]:
@@ -263,8 +264,7 @@ def make_sb3_vec_env(
     Returns:
         The :class:`SB3VecEnvAdapter` (not yet reset; SB3's ``learn`` resets it).
     """
-    if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
-        raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
+    check_integer("n_envs", n_envs, 1, SEED_LIMIT)
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise ValueError(f"env_kwargs must be a dict or None, got {type(env_kwargs).__name__}")
     kwargs = dict(env_kwargs or {})

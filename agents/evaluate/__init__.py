@@ -57,6 +57,7 @@ from agents.evaluate.results import (
     wilson_interval,
 )
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
+from compiled.checks import check_integer
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.model.personas import resolve_personas
 
@@ -190,10 +191,9 @@ def _policy(
 
 def _check_counts(episodes: Any, n_envs: Any, seed: Any, backend: str) -> None:
     """ValueError naming the first bad count, seed or backend of :func:`evaluate`."""
-    for what, value, low in (("episodes", episodes, 1), ("n_envs", n_envs, 1), ("seed", seed, 0)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            kind = "positive" if low else "non-negative"
-            raise ValueError(f"{what} must be a {kind} int, got {value!r}")
+    check_integer("episodes", episodes, 1, SEED_LIMIT)
+    check_integer("n_envs", n_envs, 1, SEED_LIMIT)
+    check_integer("seed", seed, 0, SEED_LIMIT - 1)
     if seed + episodes > SEED_LIMIT:
         raise ValueError(f"seed + episodes must be <= 2**32 (episode k uses seed + k), got seed={seed}")
     if backend not in ("auto", "vector", "single"):

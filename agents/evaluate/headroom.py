@@ -280,7 +280,8 @@ class AggregateScore:
     def text(self) -> str:
         """``IQM 0.81 [0.77, 0.85] over 3 runs``."""
         ci = "" if not math.isfinite(self.ci95[0]) else f" [{self.ci95[0]:.2f}, {self.ci95[1]:.2f}]"
-        return f"IQM {self.iqm:.2f}{ci} over {sum(self.runs.values())} runs"
+        n = sum(self.runs.values())
+        return f"IQM {self.iqm:.2f}{ci} over {n} run{'' if n == 1 else 's'}"
 
 
 def _iqm(*samples: Any, axis: int = -1) -> Any:

@@ -22,6 +22,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, Ve
 import coop_gym  # noqa: F401 -- registers the env ids
 from agents.hyperparams import ALGORITHMS, TrainingConfig
 from agents.sb3_vec import make_sb3_vec_env
+from compiled.checks import check_integer
+from coop_gym.cli import SEED_LIMIT
 
 __all__ = [
     "LinearDecay",
@@ -75,8 +77,7 @@ def make_train_env(
     Returns:
         The ``VecEnv`` (``VecMonitor``-wrapped; ``VecNormalize`` outermost if asked).
     """
-    if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
-        raise ValueError(f"n_envs must be a positive int, got {n_envs!r}")
+    check_integer("n_envs", n_envs, 1, SEED_LIMIT)  # envs are seeded seed .. seed + n_envs - 1
     if backend not in ("auto", "batched", "dummy"):
         raise ValueError(f"backend must be 'auto', 'batched' or 'dummy', got {backend!r}")
     kwargs = {"personas": personas, **(env_kwargs or {})}
