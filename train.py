@@ -68,21 +68,19 @@ class Args:
     """Command-line arguments; each field's docstring is its ``--help``."""
 
     algo: str = "ppo"
-    """algorithm: ppo (belief observation), recurrent_ppo (raw observation, LSTM) or dqn (flat Discrete actions)"""
+    """ppo (belief observation), recurrent_ppo (raw observation, LSTM) or dqn (flat Discrete actions)"""
     env: str | None = None
-    """env id to train on (default: the algorithm's own: ppo CoopGym/SitToStandHard-v1, recurrent_ppo
-    CoopGym/SitToStandRaw-v0, dqn CoopGym/SitToStandDiscrete-v0)"""
+    """env id to train on; None: the algorithm's own (agents/hyperparams.py; ppo: CoopGym/SitToStandHard-v1)"""
     timesteps: int | None = None
-    """training env steps (default: agents/hyperparams.py); with --resume, steps added to the saved count"""
+    """training env steps; None: the algorithm's budget (agents/hyperparams.py); with --resume, steps added"""
     n_envs: int | None = None
-    """parallel training envs (default: agents/hyperparams.py; --framework rllib: 64, split over the env runners)"""
+    """parallel training envs; None: the algorithm's (agents/hyperparams.py; --framework rllib: 64 in all)"""
     seed: int = 0
     """seed of training (envs, network init, sampling)"""
     out: str = "runs"
     """folder that receives the run folder {env}__{algo}__{seed}__{time}"""
     resume: str | None = None
-    """continue a run: an unfinished run folder resumes in place from its last checkpoint with its recorded
-    settings; a finished run folder or a model.zip starts a new run from that model (the step count continues)"""
+    """an unfinished run folder: resume in place from its last checkpoint; a finished one or a model: start from it"""
     eval_episodes: int = 1000
     """seeded evaluation episodes per agent (episode k uses seed eval_seed + k)"""
     eval_seed: int = 0
@@ -94,25 +92,21 @@ class Args:
     model: str | None = None
     """saved model (a run folder or its model.zip) for --eval-only"""
     baselines: str = "random,lift_at_once,push_then_lift,handbook,blind,prober,oracle"
-    """scripted agents to compare with, joined by ',' (empty: none); with blind and oracle among them the
-    table adds each agent's mind-reading score"""
+    """scripted agents to compare with, joined by ','; with blind and oracle: the mind-reading score"""
     eval_points: int = 8
     """evaluations during training for the learning curve (min(200, eval_episodes) episodes each; 0: none)"""
     checkpoint_every: int | None = None
-    """env steps between checkpoints, taken at the next rollout boundary (default: a tenth of --timesteps;
-    0: only when interrupted)"""
+    """env steps between checkpoints, at the next rollout boundary; None: a tenth of --timesteps; 0: on stop only"""
     threads: int = 1
-    """torch CPU threads (1 by default: these small networks gain little from more threads, and the envs
-    need the cores; compare with python bench/time_to_quality.py)"""
+    """torch CPU threads (these small networks gain little from more, and the envs need the cores)"""
     progress: bool = True
     """show a progress bar while training"""
     framework: str = "sb3"
-    """sb3 (Stable-Baselines3, in this process) or rllib (Ray RLlib PPO, new API stack; needs the [rllib] extra)"""
+    """sb3 (Stable-Baselines3, in this process) or rllib (Ray RLlib PPO, new API stack; the [rllib] extra)"""
     num_env_runners: int = 0
-    """--framework rllib: sampling actors (0: sample in the driver, which saves moving episodes between
-    processes on a single machine; on a cluster, one or more per node)"""
+    """--framework rllib: sampling actors (0: in the driver, no episodes between processes; cluster: 1+ per node)"""
     address: str | None = None
-    """--framework rllib: an existing Ray cluster (ray://head:10001 or auto; default: start a local instance)"""
+    """--framework rllib: an existing Ray cluster (ray://head:10001 or auto); None: start a local instance"""
 
 
 # --- arguments: tyro parses Args; the checks below name what is wrong ----------------
