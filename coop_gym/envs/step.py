@@ -53,55 +53,27 @@ def step_env(
 ) -> None:
     r"""One agent action of one env: cues -> (person -> sensors -> filter -> judgment) x substeps -> outcome -> reward.
 
-    A lift ends the episode, judged on the true state (§II): success if the person is
-    cooperative and leans past ``success_lean_m``, unsafe if uncooperative or not yet past
-    ``upright_m``, else premature. Otherwise the cues play for ``substeps`` filter steps and
-    the episode times out at ``episode_s``. The reward is the sum of the named terms
-    (:class:`~coop_gym.envs.config.RewardWeights`), each written to the report:
-
-    .. math::
-
-        r = w_\text{success}[\text{success}] - w_\text{unsafe}[\text{unsafe}]
-            - w_\text{premature}[\text{premature}] - w_\text{time}\,\Delta t_\text{action}[\text{no lift}]
-            - w_\text{force} \int F_\text{push}\,dt
-
-    Args:
-        row: The env's packed state (:data:`~coop_gym.envs.layout.BLOCKS`), updated in place.
-        command: The decoded action (:data:`~coop_gym.envs.contract.CMD`).
-        generator: The env's bit generator row (:mod:`compiled.rng`).
-        normals: Scratch for one substep's standard normals.
-        obs_row: The env's observation, written when ``consts[build_obs]`` is set.
-        consts: The constants row (:data:`~coop_gym.envs.layout.CONSTS`).
+    A lift ends the episode, judged on the true state (§II); else the cues play for ``substeps``
+    filter steps and the episode times out at ``episode_s``. The reward is the sum of the named
+    terms (:func:`_write_reward`). ``row`` is the env's packed state (:data:`~coop_gym.envs.layout.BLOCKS`).
     """
     substeps = int(consts[CONSTS.substeps])
     person = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
-    params = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
     cue = row[BLOCKS.cues : BLOCKS.cues + len(CUE_COLUMNS)]
-    report = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
-    # The multiple-model bank's inputs of each substep: measured force, verbal cue, position.
-    bank_inputs = row[BLOCKS.end : BLOCKS.end + 3 * substeps]
     push_force_n = command[CMD.push_force_n]
     lift = command[CMD.lift] > 0.5
     cue[CUES.impulse_n_s] = 0.0
     if lift:
-        if person[STATE.xi] > 0.5 and person[STATE.x_m] >= consts[CONSTS.success_lean_m]:
-            outcome = _SUCCESS
-        elif person[STATE.xi] < -0.5 or person[STATE.x_m] < consts[CONSTS.upright_m]:
-            outcome = _UNSAFE
-        else:
-            outcome = _PREMATURE
-        # The bank's inputs hold still: no push, no cue, the last reading.
-        for k in range(substeps):
-            bank_inputs[k] = 0.0
-            bank_inputs[substeps + k] = 0.0
-            bank_inputs[2 * substeps + k] = report[REPORT.measured_position_m]
+        outcome = _lift_outcome(person, consts)
+        _hold_bank_inputs(row, substeps)
     else:
-        mean = row[BLOCKS.mean : BLOCKS.mean + STATE_DIM]
-        covariance = row[BLOCKS.cov : BLOCKS.cov + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
-        judge = row[BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
-        nominal = row[BLOCKS.nominal : BLOCKS.nominal + len(NOMINAL_COLUMNS)]
+        params = row[BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
         delay_push = row[BLOCKS.delay_push : BLOCKS.delay_push + DELAY_LINE_LENGTH]
         delay_verbal = row[BLOCKS.delay_verbal : BLOCKS.delay_verbal + DELAY_LINE_LENGTH]
+        mean = row[BLOCKS.mean : BLOCKS.mean + STATE_DIM]
+        covariance = row[BLOCKS.cov : BLOCKS.cov + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
+        nominal = row[BLOCKS.nominal : BLOCKS.nominal + len(NOMINAL_COLUMNS)]
+        judge = row[BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
         dt = params[PERSON.dt_s]
         # A verbal cue is an utterance of fixed length; one can't talk over oneself.
         if cue[CUES.verbal_remaining_s] <= 0.0 and command[CMD.verbal_cue] != 0.0:
@@ -117,38 +89,84 @@ def step_env(
             cue_active = push_force_n > 0.0 or verbal_cue != 0.0
             judgment_substep(judge, cue_active, mean[3], consts[CONSTS.judgment_delay_s],
                              consts[CONSTS.judgment_threshold], dt)  # fmt: skip
-            bank_inputs[k] = force_n
-            bank_inputs[substeps + k] = verbal_cue
-            bank_inputs[2 * substeps + k] = position_m
+            _record_readings(row, k, substeps, force_n, verbal_cue, position_m)
             cue[CUES.verbal_remaining_s] -= dt
             cue[CUES.impulse_n_s] += push_force_n * dt
-            report[REPORT.measured_position_m] = position_m
-            report[REPORT.measured_force_n] = force_n
         if cue[CUES.verbal_remaining_s] <= 1e-9:
             cue[CUES.verbal_remaining_s] = 0.0
             cue[CUES.verbal_value] = 0.0
         cue[CUES.elapsed_s] += substeps * dt
-        _report_belief(report, person, cue, mean, covariance, judge, consts[CONSTS.episode_s])
+        _report_belief(row, consts[CONSTS.episode_s])
         outcome = _TIMEOUT if cue[CUES.elapsed_s] >= consts[CONSTS.episode_s] - 1e-9 else _NONE
-    report[REPORT.reward_success] = consts[CONSTS.reward_success] if outcome == _SUCCESS else 0.0
-    report[REPORT.reward_unsafe] = -consts[CONSTS.reward_unsafe] if outcome == _UNSAFE else 0.0
-    report[REPORT.reward_premature] = -consts[CONSTS.reward_premature] if outcome == _PREMATURE else 0.0
-    report[REPORT.reward_time] = 0.0 if lift else consts[CONSTS.time_term]
-    report[REPORT.reward_force] = -consts[CONSTS.force_per_n_s] * cue[CUES.impulse_n_s]
-    report[REPORT.reward] = (report[REPORT.reward_success] + report[REPORT.reward_unsafe]
-                             + report[REPORT.reward_premature] + report[REPORT.reward_time]
-                             + report[REPORT.reward_force])  # fmt: skip
+    report = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+    _write_reward(report, outcome, lift, cue[CUES.impulse_n_s], consts)
     _report_truth(report, person, outcome, 0.0 if lift else push_force_n)
     if consts[CONSTS.build_obs] > 0.5:
         observe_row(row, obs_row, consts)
 
 
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")
-def _report_belief(
-    report: NDArray[np.float64], person: NDArray[np.float64], cue: NDArray[np.float64], mean: NDArray[np.float64],
-    covariance: NDArray[np.float64], judge: NDArray[np.float64], episode_s: float,
-) -> None:  # fmt: skip
+def _write_reward(
+    report: NDArray[np.float64], outcome: int, lift: bool, impulse_n_s: float, consts: NDArray[np.float64]
+) -> None:
+    r"""The named reward terms of a step and their sum, into the report.
+
+    :math:`r = w_\text{success}[\text{success}] - w_\text{unsafe}[\text{unsafe}]
+    - w_\text{premature}[\text{premature}] - w_\text{time} \Delta t_\text{action} [\text{no lift}]
+    - w_\text{force} \int F_\text{push} dt`, the weights those of
+    :class:`~coop_gym.envs.config.RewardWeights` (``time_term`` is ``-w_time dt_action``).
+    """
+    report[REPORT.reward_success] = consts[CONSTS.reward_success] if outcome == _SUCCESS else 0.0
+    report[REPORT.reward_unsafe] = -consts[CONSTS.reward_unsafe] if outcome == _UNSAFE else 0.0
+    report[REPORT.reward_premature] = -consts[CONSTS.reward_premature] if outcome == _PREMATURE else 0.0
+    report[REPORT.reward_time] = 0.0 if lift else consts[CONSTS.time_term]
+    report[REPORT.reward_force] = -consts[CONSTS.force_per_n_s] * impulse_n_s
+    report[REPORT.reward] = (report[REPORT.reward_success] + report[REPORT.reward_unsafe]
+                             + report[REPORT.reward_premature] + report[REPORT.reward_time]
+                             + report[REPORT.reward_force])  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _lift_outcome(person: NDArray[np.float64], consts: NDArray[np.float64]) -> int:
+    # Success if the person is cooperative and leans past success_lean_m; unsafe if uncooperative
+    # or not yet past upright_m; else premature.
+    if person[STATE.xi] > 0.5 and person[STATE.x_m] >= consts[CONSTS.success_lean_m]:
+        return _SUCCESS
+    if person[STATE.xi] < -0.5 or person[STATE.x_m] < consts[CONSTS.upright_m]:
+        return _UNSAFE
+    return _PREMATURE
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _hold_bank_inputs(row: NDArray[np.float64], substeps: int) -> None:
+    # A lift's multiple-model bank inputs hold still: no push, no cue, the last reading.
+    for k in range(substeps):
+        row[BLOCKS.end + k] = 0.0
+        row[BLOCKS.end + substeps + k] = 0.0
+        row[BLOCKS.end + 2 * substeps + k] = row[BLOCKS.report + REPORT.measured_position_m]
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _record_readings(
+    row: NDArray[np.float64], k: int, substeps: int, force_n: float, verbal_cue: float, position_m: float
+) -> None:
+    # Substep k's readings: the multiple-model bank's inputs (measured force, verbal cue, position)
+    # and the report's last readings.
+    row[BLOCKS.end + k] = force_n
+    row[BLOCKS.end + substeps + k] = verbal_cue
+    row[BLOCKS.end + 2 * substeps + k] = position_m
+    row[BLOCKS.report + REPORT.measured_position_m] = position_m
+    row[BLOCKS.report + REPORT.measured_force_n] = force_n
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _report_belief(row: NDArray[np.float64], episode_s: float) -> None:
     # The features after a non-lift step: the cue, the filter's belief, the judgment, the clocks.
+    report = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
+    cue = row[BLOCKS.cues : BLOCKS.cues + len(CUE_COLUMNS)]
+    judge = row[BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
+    mean = row[BLOCKS.mean : BLOCKS.mean + STATE_DIM]
+    covariance = row[BLOCKS.cov : BLOCKS.cov + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
     report[REPORT.verbal_cue] = cue[CUES.verbal_value]
     report[REPORT.time_since_cue_onset_s] = min(judge[JUDGE.since_onset_s], episode_s)
     report[REPORT.x_hat_m] = mean[0]
@@ -158,7 +176,7 @@ def _report_belief(
     report[REPORT.xi_std] = np.sqrt(max(covariance[3, 3], 0.0))
     report[REPORT.judgment] = judge[JUDGE.judgment]
     report[REPORT.elapsed_s] = cue[CUES.elapsed_s]
-    report[REPORT.true_xi] = person[STATE.xi]
+    report[REPORT.true_xi] = row[BLOCKS.person + STATE.xi]
 
 
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")
