@@ -1,12 +1,53 @@
 """Searches behind the headroom baselines: the blind family and the probing caregiver.
 
-``python -m agents.tune_baselines blind --level hard`` scores every setting of the
-mental-state-blind family (:func:`blind_grid`: push x words x push-until-lean x lean
-threshold x timer x hold, 648 settings) on the *training* personas, 300 episodes from seed
-1,000,000 each, and prints the best; the winners are kept in
-:data:`agents.scripted.TUNED_BLIND` and scored by :mod:`agents.evaluate` on the held-out
-personas with fresh seeds. ``python -m agents.tune_baselines prober`` does the same for
-:class:`agents.scripted.ProbingCaregiver` (36 settings). Rerun both after a model change.
+Every headline figure (value of reading the mind, achieved insight, mind-reading score) is
+measured against the best mental-state-blind policy, so the blind search must be wide.
+
+**The blind family** (:class:`agents.scripted.BlindSettings`): a fixed schedule of cue
+phases -- each a push (none/soft/firm), words (none/"lean forward"/"lean back"), a duration
+and whether a lift may come in it -- played in order from the start, then either repeated
+or followed by a final phase held to the end; and a lift rule on the shoulder estimate and
+the clock (lean threshold, hold time, earliest lift, release on lean, a last-call lift).
+It reads ``elapsed_s``, ``verbal_cue`` (its own utterance) and ``x_hat_m``, never a mind
+feature. The grid searched here (``python -m agents.tune_baselines blind --level LEVEL``):
+
+* **schedules** (:func:`schedule_grid`, 1,605): the 5 one-routine schedules of the original
+  family (push x words held from the start); openings of one or two phases followed by a
+  held final phase (silence, words, soft push or soft push + words); repeated cycles of two
+  phases; and repeated cycles "words, a push, words or silence". Phase cues are silence,
+  words, soft push, soft push + words and firm push + words, durations 0.5, 1, 2 or 4 s;
+  "lean back" is in the family but not searched (it only confuses: every level's chain
+  moves the person one level down while it is heard);
+* **lift rules** (:func:`lift_rules`, 336 per schedule, 168 where every phase pushes or none
+  does): lean threshold 0.12-0.4 m (7) x earliest lift 0/4/10/20 s x hold 0/1/2 s x release
+  on lean x lift in any phase or only in the phases without a push; then a last-call lift
+  (none, or from 25 s / 28 s on any lean of 0.16 m).
+
+Schedules x lift rules is 486,024 settings (:func:`blind_grid`; x3 with the last calls),
+too many to score whole, so the search is **coarse-to-fine with successive halving**
+(:func:`search_blind`), every round on the same seeded episodes of the *training*
+personas from :data:`TUNING_SEED` (common random numbers: candidates meet identical people):
+
+1. every schedule under 2-4 coarse lift rules (lean 0.2/0.3 m x any/unpushed phases; 5,786
+   candidates) on 30 episodes; the top 10 % on 100; their top 10 % on 300; the best 10
+   distinct schedules go on;
+2. those schedules x every lift rule, plus the 648 settings of the original family
+   (:func:`original_blind_grid`, so the original winner competes on the same episodes),
+   about 3,900 settings on 40 episodes; the top 10 % on 200; the top 10, each with the three
+   last-call choices, on 1000, beside the original family's winner
+   (:data:`ORIGINAL_BLIND_WINNERS`, its 648 settings on 300 episodes each), so the widened
+   winner scores at least as well as the original one on the final episodes;
+3. the winner: the best on those 1000 episodes (success, then fewer unsafe lifts).
+
+About 490,000 episodes a level, about 5 minutes of one core (the batched env's step is ~3 us
+per env and agent step; ``time python -m agents.tune_baselines blind --level hard``).
+Candidates are scored many at a time in one natively batched vector env
+(:func:`play_population`: slot ``i`` plays candidate ``i // episodes`` on episode
+``i % episodes``, the episodes :func:`agents.evaluate.evaluate` would play). The winners
+are kept in :data:`agents.scripted.TUNED_BLIND` and scored by :mod:`agents.evaluate` on the
+held-out personas with fresh seeds (``--personas test``, seeds from 0).
+``python -m agents.tune_baselines prober`` searches :class:`agents.scripted.ProbingCaregiver`
+(36 settings, 300 episodes each). Rerun both after a model change.
 """
 
 from __future__ import annotations
@@ -14,13 +55,34 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import itertools
+import time
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from agents.evaluate import evaluate
-from agents.scripted import BlindAgent, BlindSettings, ProbingCaregiver, ProbingSettings, ScriptedAgent
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
 
-__all__ = ["LEVEL_ENV_IDS", "blind_grid", "main", "prober_grid", "tune"]
+import coop_gym  # noqa: F401 -- registers the env ids
+from agents.base import action_type_of, features_of
+from agents.evaluate import evaluate
+from agents.scripted import BlindAgent, BlindSettings, CuePhase, ProbingCaregiver, ProbingSettings, ScriptedAgent
+from coop_gym.envs.config import Outcome
+
+__all__ = [
+    "LEVEL_ENV_IDS",
+    "ORIGINAL_BLIND_WINNERS",
+    "TUNING_SEED",
+    "blind_grid",
+    "lift_rules",
+    "main",
+    "original_blind_grid",
+    "play_population",
+    "prober_grid",
+    "schedule_grid",
+    "search_blind",
+    "tune",
+]
 
 LEVEL_ENV_IDS: dict[str, str] = {
     "v0": "CoopGym/SitToStand-v0",
@@ -33,16 +95,123 @@ LEVEL_ENV_IDS: dict[str, str] = {
 TUNING_SEED = 1_000_000
 """Seed of the first tuning episode: far from the evaluation seeds (0, 1, ...)."""
 
+# The cues a searched phase may hold: (push, verbal).
+CUES: dict[str, tuple[str, str]] = {
+    "silence": ("none", "none"),
+    "words": ("none", "forward"),
+    "push": ("soft", "none"),
+    "guided": ("soft", "forward"),
+    "firm": ("firm", "forward"),
+}
+# Final (held) phases: what the original family's push x words can hold.
+FINALS = ("silence", "words", "push", "guided")
+DURATIONS_S = (0.5, 1.0, 2.0, 4.0)
 
-def blind_grid() -> Iterator[BlindSettings]:
-    """Every setting of the blind family that the search tries."""
-    for push, words, release in itertools.product(("none", "soft", "firm"), (False, True), (False, True)):
-        if push == "none" and (not words or release):
-            continue  # no cue at all, or nothing to release
+LEANS_M = (0.12, 0.16, 0.2, 0.25, 0.3, 0.35, 0.4)
+MIN_TIMES_S = (0.0, 4.0, 10.0, 20.0)
+HOLDS_S = (0.0, 1.0, 2.0)
+LAST_CALLS: tuple[tuple[float, float] | None, ...] = (None, (25.0, 0.16), (28.0, 0.16))
+"""Last-call choices tried on the finalists: None, or (from time [s], on lean [m])."""
+
+
+ORIGINAL_ROUTINES: tuple[tuple[str, bool], ...] = (
+    ("none", True),
+    ("soft", False),
+    ("soft", True),
+    ("firm", False),
+    ("firm", True),
+)
+"""(push, words) of the original family's one routine held from the start (no cue at all is left out)."""
+
+
+ORIGINAL_BLIND_WINNERS: dict[str, BlindSettings] = {
+    "v0": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
+    "easy": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
+    "medium": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=4.0),
+    "hard": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=0.0),
+}
+"""Each level's winner of the original family (:func:`original_blind_grid`, 300 training episodes each)."""
+
+
+def original_blind_grid() -> Iterator[BlindSettings]:
+    """The 648 settings of the original family: one routine from the start, lift rule on the lean."""
+    for (push, words), release in itertools.product(ORIGINAL_ROUTINES, (False, True)):
+        if push == "none" and release:
+            continue  # nothing to release
         for lean_m, min_time_s, hold_s in itertools.product(
             (0.12, 0.16, 0.2, 0.25, 0.3, 0.35), (0.0, 4.0, 10.0, 20.0), (0.0, 1.0, 2.0)
         ):
             yield BlindSettings(push, words, lean_m, min_time_s, release, hold_s)
+
+
+def _phase(cue: str, duration_s: float) -> CuePhase:
+    push, verbal = CUES[cue]
+    return CuePhase(push, verbal, duration_s)
+
+
+def _held(opening: tuple[CuePhase, ...], final: str) -> BlindSettings:
+    push, verbal = CUES[final]
+    return BlindSettings(push=push, words=verbal == "forward", schedule=opening)
+
+
+def schedule_grid() -> Iterator[BlindSettings]:
+    """The cue schedules the search tries, each with the default lift rule (see the module docstring)."""
+    for push, words in ORIGINAL_ROUTINES:
+        yield BlindSettings(push=push, words=words)
+    timed = [(cue, d) for cue in CUES for d in DURATIONS_S]
+    for first in timed:  # one opening phase, then a held final phase
+        for final in FINALS:
+            if final != first[0]:
+                yield _held((_phase(*first),), final)
+    for first, second in itertools.product(timed, timed):  # two opening phases
+        if first[0] != second[0]:
+            for final in FINALS:
+                if final != second[0]:
+                    yield _held((_phase(*first), _phase(*second)), final)
+    for first, second in itertools.product(timed, timed):  # a repeated cycle of two phases
+        if first[0] != second[0]:
+            yield BlindSettings(schedule=(_phase(*first), _phase(*second)), repeat=True)
+    for d0, push, d1, rest, d2 in itertools.product(
+        (1.0, 2.0), ("push", "guided", "firm"), DURATIONS_S, ("words", "silence"), DURATIONS_S
+    ):  # explain, push, then words or silence: repeated
+        yield BlindSettings(schedule=(_phase("words", d0), _phase(push, d1), _phase(rest, d2)), repeat=True)
+
+
+def _lift_only_unpushed(settings: BlindSettings) -> BlindSettings | None:
+    """``settings`` lifting only in its phases without a push; None when that changes nothing or never lifts."""
+    flags = [p.push == "none" for p in settings.phases]
+    if all(flags) or not any(flags):
+        return None
+    return dataclasses.replace(
+        settings,
+        schedule=tuple(dataclasses.replace(p, lift=p.push == "none") for p in settings.schedule),
+        final_lift=settings.push == "none",
+    )
+
+
+def lift_rules(
+    schedule: BlindSettings,
+    leans_m: Sequence[float] = LEANS_M,
+    min_times_s: Sequence[float] = MIN_TIMES_S,
+    holds_s: Sequence[float] = HOLDS_S,
+    releases: Sequence[bool] = (False, True),
+) -> Iterator[BlindSettings]:
+    """``schedule`` under every lift rule of the grid (any phase, then only unpushed phases)."""
+    variants = [schedule]
+    unpushed = _lift_only_unpushed(schedule)
+    if unpushed is not None:
+        variants.append(unpushed)
+    for variant in variants:
+        for lean_m, min_time_s, hold_s, release in itertools.product(leans_m, min_times_s, holds_s, releases):
+            yield dataclasses.replace(
+                variant, lean_m=lean_m, min_time_s=min_time_s, hold_s=hold_s, release_on_lean=release
+            )
+
+
+def blind_grid() -> Iterator[BlindSettings]:
+    """Every schedule x lift rule of the searched grid (last calls aside): 486,024 settings."""
+    for schedule in schedule_grid():
+        yield from lift_rules(schedule)
 
 
 def prober_grid() -> Iterator[ProbingSettings]:
@@ -77,25 +246,177 @@ def tune(
     return scored
 
 
+# --- scoring many blind candidates at once ------------------------------------
+
+
+def play_population(
+    candidates: Sequence[BlindSettings],
+    env_id: str,
+    personas: str = "train",
+    episodes: int = 100,
+    seed: int = TUNING_SEED,
+    batch: int = 8192,
+    threads: int | None = 1,
+) -> NDArray[np.int64]:
+    """Outcome of every candidate on episodes ``seed, ..., seed + episodes - 1`` (one batched env).
+
+    Slot ``i`` of a batch plays candidate ``i // episodes`` on episode ``i % episodes``
+    (seeded as :func:`agents.evaluate.evaluate` seeds it), so every candidate meets the
+    same people. Episodes that end are reset by the env and no longer recorded.
+
+    Returns:
+        (len(candidates), episodes) :class:`~coop_gym.envs.config.Outcome` codes.
+    """
+    total = len(candidates) * episodes
+    n = min(batch, total)
+    env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", personas=personas, threads=threads)
+    features, action_type = features_of(env), action_type_of(env)
+    outcomes = np.zeros(total, dtype=np.int64)
+    try:
+        for start in range(0, total, n):
+            # The last batch is filled up with copies of its first slots (played, not recorded).
+            slots = ((start + np.arange(n)) % total).tolist()
+            chunk = min(n, total - start)
+            agent = BlindAgent(features, action_type, settings=[candidates[i // episodes] for i in slots])
+            obs, _ = env.reset(seed=[seed + i % episodes for i in slots])  # type: ignore[arg-type]  # a seed each
+            recorded = np.zeros(n, dtype=bool)
+            state, episode_start = None, np.ones(n, dtype=bool)
+            while not recorded[:chunk].all():
+                actions, state = agent.predict(obs, state=state, episode_start=episode_start)
+                obs, _, terminated, truncated, info = env.step(actions)
+                done = terminated | truncated
+                fresh = done & ~recorded
+                outcomes[start + np.flatnonzero(fresh[:chunk])] = np.asarray(info["outcome_code"])[:chunk][
+                    fresh[:chunk]
+                ]
+                recorded |= done
+                episode_start = done
+    finally:
+        env.close()
+    codes = outcomes.reshape(len(candidates), episodes)
+    return np.where(codes == Outcome.NONE, int(Outcome.TIMEOUT), codes)
+
+
+def _ranked(outcomes: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Candidate indices best first: success rate, then fewer unsafe lifts (stable)."""
+    success = (outcomes == Outcome.SUCCESS).mean(axis=1)
+    unsafe = (outcomes == Outcome.UNSAFE).mean(axis=1)
+    return np.lexsort((unsafe, -success))
+
+
+def _halve(
+    candidates: list[BlindSettings],
+    env_id: str,
+    rounds: Sequence[tuple[int, float | int]],
+    log: Any,
+    **play: Any,
+) -> tuple[list[BlindSettings], NDArray[np.int64]]:
+    """Successive halving: each round scores the survivors on more episodes and keeps the best.
+
+    ``rounds``: ``(episodes, keep)`` with ``keep`` a fraction (< 1) or a count. Returns the
+    survivors of the last round, best first, and their outcomes on its episodes.
+    """
+    outcomes = np.zeros((0, 0), dtype=np.int64)
+    for episodes, keep in rounds:
+        t0 = time.perf_counter()
+        outcomes = play_population(candidates, env_id, episodes=episodes, **play)
+        order = _ranked(outcomes)
+        count = max(1, round(keep * len(candidates)) if keep < 1 else int(keep))
+        best = (outcomes[order[0]] == Outcome.SUCCESS).mean()
+        log(
+            f"  {len(candidates)} candidates x {episodes} episodes ({time.perf_counter() - t0:.0f} s): "
+            f"best {100 * best:.1f} %, keep {min(count, len(candidates))}"
+        )
+        candidates = [candidates[i] for i in order[:count]]
+        outcomes = outcomes[order[:count]]
+    return candidates, outcomes
+
+
+def search_blind(
+    env_id: str,
+    incumbent: BlindSettings | None = None,
+    top_schedules: int = 10,
+    finalists: int = 10,
+    final_episodes: int = 1000,
+    log: Any = print,
+    **play: Any,
+) -> list[tuple[BlindSettings, float, float]]:
+    """The coarse-to-fine successive-halving search of the module docstring, on the training personas.
+
+    ``incumbent`` (e.g. the original family's winner) joins the final round whatever its
+    earlier scores.
+
+    Returns:
+        The finalists best first: ``[(settings, success_rate, unsafe_rate), ...]`` on the
+        ``final_episodes`` training episodes from :data:`TUNING_SEED`.
+    """
+    schedules = list(schedule_grid())
+    coarse = [c for s in schedules for c in lift_rules(s, (0.2, 0.3), (0.0,), (0.0,), (False,))]
+    log(f"stage 1: {len(schedules)} schedules under coarse lift rules")
+    survivors, _ = _halve(coarse, env_id, [(30, 0.1), (100, 0.1), (300, 0.5)], log, **play)
+    best_schedules: list[BlindSettings] = []
+    for settings in survivors:  # distinct schedules, in rank order
+        template = dataclasses.replace(
+            settings, lean_m=0.16, schedule=tuple(dataclasses.replace(p, lift=True) for p in settings.schedule)
+        )
+        template = dataclasses.replace(template, final_lift=True)
+        if template not in best_schedules:
+            best_schedules.append(template)
+    best_schedules = best_schedules[:top_schedules]
+    fine = list(dict.fromkeys([*original_blind_grid(), *(c for s in best_schedules for c in lift_rules(s))]))
+    log(f"stage 2: {len(best_schedules)} schedules x lift rules + the original family = {len(fine)} settings")
+    survivors, _ = _halve(fine, env_id, [(40, 0.1), (200, finalists)], log, **play)
+    final = [
+        s if call is None else dataclasses.replace(s, last_call_s=call[0], last_call_lean_m=call[1])
+        for s in survivors
+        for call in LAST_CALLS
+    ]
+    if incumbent is not None and incumbent not in final:
+        final.append(incumbent)
+    log(f"stage 3: {len(final)} finalists (with last calls and the incumbent)")
+    survivors, outcomes = _halve(final, env_id, [(final_episodes, len(final))], log, **play)
+    return [
+        (s, float((o == Outcome.SUCCESS).mean()), float((o == Outcome.UNSAFE).mean()))
+        for s, o in zip(survivors, outcomes, strict=True)
+    ]
+
+
+def describe(settings: BlindSettings) -> str:
+    """A one-line summary of a blind setting (only the fields that differ from the defaults)."""
+    always = ("push", "words", "lean_m", "min_time_s", "hold_s", "release_on_lean")
+    fields = {
+        f.name: getattr(settings, f.name)
+        for f in dataclasses.fields(settings)
+        if f.name in always or getattr(settings, f.name) != f.default
+    }
+    return f"BlindSettings({', '.join(f'{k}={v!r}' for k, v in fields.items())})"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run a search and print the best settings."""
     parser = argparse.ArgumentParser(prog="python -m agents.tune_baselines", description=__doc__.split("\n")[0])
     parser.add_argument("family", choices=("blind", "prober"))
     parser.add_argument("--level", choices=tuple(LEVEL_ENV_IDS), default="hard")
-    parser.add_argument("--episodes", type=int, default=300, help="episodes per setting")
+    parser.add_argument(
+        "--episodes",
+        type=int,
+        default=None,
+        help="episodes per finalist (blind, default 1000) or setting (prober, 300)",
+    )
+    parser.add_argument("--threads", type=int, default=1, help="threads of the batched env's compiled step")
     parser.add_argument("--top", type=int, default=10, help="rows to print")
     args = parser.parse_args(argv)
+    env_id = LEVEL_ENV_IDS[args.level]
     if args.family == "blind":
-        rows = tune(
-            lambda s: BlindAgent(settings=s), list(blind_grid()), LEVEL_ENV_IDS[args.level], episodes=args.episodes
+        t0 = time.perf_counter()
+        rows = search_blind(
+            env_id, ORIGINAL_BLIND_WINNERS[args.level], final_episodes=args.episodes or 1000, threads=args.threads
         )
-    else:
-        rows = tune(
-            lambda s: ProbingCaregiver(settings=s),
-            list(prober_grid()),
-            LEVEL_ENV_IDS[args.level],
-            episodes=args.episodes,
-        )
+        print(f"search took {time.perf_counter() - t0:.0f} s")
+        for settings, success, unsafe in rows[: args.top]:
+            print(f"success {100 * success:5.1f} %  unsafe {100 * unsafe:4.1f} %  {describe(settings)}")
+        return 0
+    rows = tune(lambda s: ProbingCaregiver(settings=s), list(prober_grid()), env_id, episodes=args.episodes or 300)
     for settings, success, unsafe in rows[: args.top]:
         print(f"success {100 * success:5.1f} %  unsafe {100 * unsafe:4.1f} %  {dataclasses.asdict(settings)}")
     return 0

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.evaluate import EpisodeRecord, EvaluationResult, evaluate, headroom
+from agents.evaluate import OUTCOMES, EpisodeRecord, EvaluationResult, evaluate, headroom
 from agents.scripted import TUNED_BLIND, BlindAgent, BlindSettings, ProbingCaregiver, make_scripted
 from coop_gym.envs.sit_to_stand import observation_features
 
@@ -126,3 +126,24 @@ def test_headroom_arithmetic() -> None:
 
 def test_tuned_blind_covers_every_level() -> None:
     assert set(TUNED_BLIND) == {"v0", "easy", "medium", "hard"}
+
+
+def test_the_blind_search_scores_candidates_as_the_evaluation_does() -> None:
+    # play_population (many candidates in one batched env) gives each candidate the episodes
+    # agents.evaluate gives it: same seeds, same people, same outcomes.
+    from agents.scripted import CuePhase
+    from agents.tune_baselines import play_population
+
+    env_id = "CoopGym/SitToStandHard-v1"
+    candidates = [
+        TUNED_BLIND["hard"],
+        BlindSettings(
+            lean_m=0.25,
+            schedule=(CuePhase("soft", "forward", 1.0, lift=False), CuePhase("none", "forward", 2.0)),
+            repeat=True,
+        ),
+    ]
+    outcomes = play_population(candidates, env_id, "train", episodes=24, seed=5, batch=20)  # batches cut candidates
+    for settings, row in zip(candidates, outcomes, strict=True):
+        result = evaluate(BlindAgent(settings=settings), env_id, "train", 24, 5)
+        assert [OUTCOMES[code - 1] for code in row] == [r.outcome for r in result.records]

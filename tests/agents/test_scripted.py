@@ -271,3 +271,170 @@ def test_settings_refuse_bools_arrays_and_out_of_range_values_by_name(settings, 
 def test_settings_accept_numpy_scalars():
     assert HandbookSettings(lean_m=np.float32(0.2)).lean_m == np.float32(0.2)
     assert PushThenLiftSettings(escalate_after_s=np.int64(3)).escalate_after_s == 3
+
+
+# --- the mental-state-blind family -----------------------------------------------------------
+
+_BLIND_COLUMNS = ("elapsed_s", "verbal_cue", "x_hat_m")
+
+
+def _old_blind_rule(settings, x, silent, now, lean_since):
+    """The original one-routine blind rule, as it was before the schedules (the reference)."""
+    pushes = {"none": 0, "soft": 1, "firm": 2}
+    leaning = x >= settings.lean_m
+    held = lean_since is not None and now - lean_since >= settings.hold_s - 1e-6
+    lift = leaning and held and now >= settings.min_time_s - 1e-6
+    guiding = not lift and not (leaning and settings.release_on_lean)
+    push = pushes[settings.push] if guiding else 0
+    verbal = 2 if guiding and silent and settings.words else 0
+    return [push, verbal, int(lift)]
+
+
+def _lean_walks(n_envs, steps, seed=0):
+    """Shoulder estimates and utterance flags that cross every lean threshold back and forth."""
+    rng = np.random.default_rng(seed)
+    x = np.clip(np.cumsum(rng.normal(0.0, 0.03, size=(steps, n_envs)), axis=0) + 0.15, -0.1, 0.5)
+    silent = rng.random((steps, n_envs)) < 0.6
+    return x, silent
+
+
+def _grid_sample(every):
+    """Every ``every``-th schedule of the searched grid, each under a different one of its lift rules."""
+    from agents.tune_baselines import lift_rules, schedule_grid
+
+    picked = []
+    for k, schedule in enumerate(list(schedule_grid())[::every]):
+        rules = list(lift_rules(schedule))
+        picked.append(rules[(37 * k) % len(rules)])
+    return picked
+
+
+def _blind_obs(features, now, x, silent):
+    obs = np.zeros((len(x), len(features)))
+    obs[:, features.index("elapsed_s")] = now
+    obs[:, features.index("x_hat_m")] = x
+    obs[:, features.index("verbal_cue")] = np.where(silent, 0.0, 1.0)
+    return obs
+
+
+def test_the_original_blind_settings_are_members_and_behave_as_before():
+    from agents.scripted import BlindAgent
+    from agents.tune_baselines import lift_rules, original_blind_grid, schedule_grid
+
+    original = list(original_blind_grid())
+    assert len(original) == 648
+    routines = [s for s in schedule_grid() if not s.schedule]
+    assert set(original) <= {c for s in routines for c in lift_rules(s)}
+    # Each env of one batched agent runs one original setting; the new rule must act as the old one.
+    features = observation_features("belief", "kalman")
+    agent = BlindAgent(features, settings=original)
+    x, silent = _lean_walks(len(original), 120)
+    lean_since = [None] * len(original)
+    state = None
+    for step in range(120):
+        now = 0.1 * step
+        actions, state = agent.predict(_blind_obs(features, now, x[step], silent[step]), state=state)
+        for i, settings in enumerate(original):
+            leaning = x[step, i] >= settings.lean_m
+            lean_since[i] = (lean_since[i] if lean_since[i] is not None else now) if leaning else None
+            assert actions[i].tolist() == _old_blind_rule(settings, x[step, i], silent[step, i], now, lean_since[i])
+
+
+def test_blind_schedule_phases_run_in_order_for_their_durations():
+    from agents.scripted import BlindAgent, BlindSettings, CuePhase
+
+    features = observation_features("belief", "kalman")
+    schedule = (CuePhase("none", "forward", 1.0), CuePhase("soft", "forward", 2.0), CuePhase("none", "none", 0.5))
+    held = BlindSettings(push="firm", words=False, lean_m=0.3, schedule=schedule)
+    looped = BlindSettings(lean_m=0.3, schedule=schedule, repeat=True)
+    agent = BlindAgent(features, settings=[held, looped])
+    seen = []
+    for step in range(80):
+        obs = _blind_obs(features, 0.1 * step, np.zeros(2), np.ones(2, dtype=bool))
+        actions, _ = agent.predict(obs)
+        seen.append(actions[:, :2].tolist())
+    seen = np.array(seen)  # (step, env, [push, verbal])
+    expected = [[0, 2]] * 10 + [[1, 2]] * 20 + [[0, 0]] * 5  # words 1 s, guided push 2 s, silence 0.5 s
+    assert seen[:35, 0].tolist() == expected and seen[35:, 0].tolist() == [[2, 0]] * 45  # then the final phase
+    assert seen[:70, 1].tolist() == expected * 2 and seen[70:, 1].tolist() == expected[:10]  # or again
+
+
+def test_blind_lifts_only_in_phases_that_allow_it_and_on_the_last_call():
+    from agents.scripted import BlindAgent, BlindSettings, CuePhase
+
+    features = observation_features("belief", "kalman")
+    schedule = (CuePhase("soft", "forward", 1.0, lift=False), CuePhase("none", "forward", 1.0))
+    settings = [
+        BlindSettings(lean_m=0.2, schedule=schedule, repeat=True),
+        BlindSettings(lean_m=0.4, schedule=schedule, repeat=True, last_call_s=3.0, last_call_lean_m=0.2),
+    ]
+    first_lift = []
+    for s in settings:
+        agent = BlindAgent(features, settings=s)
+        for step in range(60):
+            action, _ = agent.predict(_blind_obs(features, 0.1 * step, np.full(1, 0.25), np.ones(1, dtype=bool)))
+            if action[0, 2]:
+                first_lift.append(step)
+                break
+    # Leaning from the start: the lift waits for the unpushed phase (1 s), or for the last call (3 s).
+    assert first_lift == [10, 30]
+
+
+def test_per_env_blind_settings_equal_one_agent_per_setting():
+    from agents.scripted import BlindAgent
+
+    features = observation_features("belief", "kalman")
+    picked = _grid_sample(38)[:24]
+    batched = BlindAgent(features, settings=picked)
+    singles = [BlindAgent(features, settings=s) for s in picked]
+    x, silent = _lean_walks(len(picked), 200, seed=1)
+    for step in range(200):
+        obs = _blind_obs(features, 0.1 * step, x[step], silent[step])
+        actions, _ = batched.predict(obs)
+        for i, agent in enumerate(singles):
+            assert np.array_equal(agent.predict(obs[i])[0], actions[i])
+    with pytest.raises(ValueError, match="settings for 24 envs"):
+        batched.predict(obs[:3])
+
+
+def test_the_blind_family_reads_only_its_clock_its_words_and_the_lean():
+    from agents.scripted import BlindAgent
+
+    assert set(BlindAgent.needs) == set(_BLIND_COLUMNS)
+    features = observation_features("oracle", "imm")  # every mind feature there is, true xi included
+    picked = _grid_sample(7)
+    a, b = BlindAgent(features, settings=picked), BlindAgent(features, settings=picked)
+    rng = np.random.default_rng(2)
+    x, silent = _lean_walks(len(picked), 300, seed=2)
+    for step in range(300):
+        obs = _blind_obs(features, 0.1 * step, x[step], silent[step])
+        scrambled = obs.copy()
+        for k, name in enumerate(features):
+            if name not in _BLIND_COLUMNS:  # xi_hat, judgment, P(xi), true_xi, ... all scrambled
+                scrambled[:, k] = rng.uniform(-1.0, 1.0, len(picked))
+        assert np.array_equal(a.predict(obs)[0], b.predict(scrambled)[0])
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda s, p: p(push="gentle"), r"CuePhase\.push must be one of"),
+        (lambda s, p: p(verbal="sit"), r"CuePhase\.verbal must be one of"),
+        (lambda s, p: p(duration_s=0.0), r"CuePhase\.duration_s must be in"),
+        (lambda s, p: p(lift=1), r"CuePhase\.lift must be a bool"),
+        (lambda s, p: s(push="hard"), r"BlindSettings\.push must be one of"),
+        (lambda s, p: s(words="yes"), r"BlindSettings\.words must be a bool"),
+        (lambda s, p: s(lean_m=2.0), r"BlindSettings\.lean_m must be in"),
+        (lambda s, p: s(hold_s=-1.0), r"BlindSettings\.hold_s must be in"),
+        (lambda s, p: s(schedule=[p()]), r"BlindSettings\.schedule must be a tuple of CuePhase"),
+        (lambda s, p: s(schedule=({"push": "soft"},)), r"BlindSettings\.schedule must be a tuple of CuePhase"),
+        (lambda s, p: s(repeat=True), r"BlindSettings\.repeat needs a non-empty BlindSettings\.schedule"),
+        (lambda s, p: s(last_call_s=float("nan")), r"BlindSettings\.last_call_s must be in"),
+        (lambda s, p: s(last_call_lean_m=-0.1), r"BlindSettings\.last_call_lean_m must be in"),
+    ],
+)
+def test_bad_blind_settings_raise_naming_the_field(make, match):
+    from agents.scripted import BlindSettings, CuePhase
+
+    with pytest.raises(ValueError, match=match):
+        make(BlindSettings, CuePhase)
