@@ -208,7 +208,9 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
     if args.json:
         print(json.dumps(results_json(results)))
     else:
-        print_table(results)  # with the headroom and mind-reading lines when there is an oracle and a blind agent
+        room = print_table(results)  # with the headroom and mind-reading lines given an oracle and a blind agent
+        if room is None and len(results) > 1:
+            print("(add blind and oracle to --compare for the value of reading the mind and each mind-reading score)")
         if args.by_persona:
             split = [sub for r in results for sub in _split_named(r)]
             print_table(split, title="by persona")
