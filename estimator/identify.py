@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from compiled.cache import guard_kernel_cache
 from compiled.checks import is_integer, is_number, python_scalar
 from estimator.kalman import NOMINAL, nominal_row
-from estimator.multiple_model import N_MODES, mode_covariance_step, mode_mean_step
+from estimator.mode_kernels import N_MODES, mode_covariance_step, mode_mean_step
 from estimator.nominal import NominalModel
 
 __all__ = [
