@@ -17,12 +17,18 @@ machine. Ray's single-machine mode (``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``) wou
 ``127.0.0.1`` but refuses a second node. The nodes are stopped by their process groups,
 not ``ray stop --force``, which would kill every Ray process of the user on the machine
 (other jobs' clusters too).
+
+Authentication: the cluster uses Ray's token auth with a token of its own, given to every
+process it starts through ``RAY_AUTH_MODE=token`` and ``RAY_AUTH_TOKEN``. Left unset, a
+``~/.ray/auth_token`` written by any earlier Ray use turns token auth on for ``ray start``
+but not for the drivers, which are then refused (``InvalidAuthToken``).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import secrets
 import shutil
 import signal
 import socket
@@ -48,13 +54,13 @@ def _free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def _ray_start(args: list[str], log: Path) -> subprocess.Popen[bytes]:
+def _ray_start(args: list[str], log: Path, env: dict[str, str]) -> subprocess.Popen[bytes]:
     """``ray start ... --block`` in a session of its own, so the node's processes share one group to stop."""
     ray_cli = str(Path(sys.executable).with_name("ray"))
     common = ["--num-cpus=1", "--object-store-memory=100000000", "--disable-usage-stats", "--block"]
     with log.open("wb") as out:
         return subprocess.Popen(
-            [ray_cli, "start", *args, *common], stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+            [ray_cli, "start", *args, *common], stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
         )
 
 
@@ -87,7 +93,7 @@ print(json.dumps({"nodes": nodes, "runners": runners}))
 """
 
 
-def _cluster_state(address: str) -> dict:
+def _cluster_state(address: str, env: dict[str, str]) -> dict:
     """Alive nodes and the node of every env runner ever started, from the GCS (a driver of its own).
 
     The actor table outlives the job, so the runners of a finished ``train.py`` are still
@@ -99,6 +105,7 @@ def _cluster_state(address: str) -> dict:
         capture_output=True,
         text=True,
         timeout=300,
+        env=env,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -111,20 +118,21 @@ def test_train_py_on_a_two_node_cluster():
     address = f"127.0.0.1:{port}"
     # Short paths: Ray's unix sockets live under the temp dir (108-byte limit on socket paths).
     root = Path(tempfile.mkdtemp(prefix="rc", dir="/tmp"))
+    env = os.environ | {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
     nodes: list[subprocess.Popen[bytes]] = []
     try:
         head_args = ["--head", f"--port={port}", "--include-dashboard=false", f"--temp-dir={root / 'h'}"]
-        nodes.append(_ray_start(head_args, root / "head.log"))
+        nodes.append(_ray_start(head_args, root / "head.log", env))
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline and "Ray runtime started" not in (root / "head.log").read_text():
             assert nodes[0].poll() is None, (root / "head.log").read_text()[-3000:]
             time.sleep(1)
-        nodes.append(_ray_start([f"--address={address}", f"--temp-dir={root / 'w'}"], root / "node.log"))
+        nodes.append(_ray_start([f"--address={address}", f"--temp-dir={root / 'w'}"], root / "node.log", env))
         alive: list[dict] = []
         while time.monotonic() < deadline and len(alive) < 2:
             assert nodes[1].poll() is None, (root / "node.log").read_text()[-3000:]
             time.sleep(2)
-            alive = _cluster_state(address)["nodes"]
+            alive = _cluster_state(address, env)["nodes"]
         assert len(alive) == 2, (root / "node.log").read_text()[-3000:]
         assert len({n["ip"] for n in alive}) == 1  # two nodes, one machine
         up_s = time.perf_counter() - started
@@ -133,7 +141,7 @@ def test_train_py_on_a_two_node_cluster():
         argv = [sys.executable, str(ROOT / "train.py"), "--framework", "rllib", "--address", address]
         argv += ["--env", ENV_ID, "--num-env-runners", "2", "--n-envs", "8", "--timesteps", "4096"]
         argv += ["--eval-episodes", "20", "--eval-points", "0", "--baselines", "", "--out", str(out)]
-        proc = subprocess.run(argv, capture_output=True, text=True, timeout=1800, cwd=ROOT)
+        proc = subprocess.run(argv, capture_output=True, text=True, timeout=1800, cwd=ROOT, env=env)
         assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
         (run_dir,) = out.iterdir()
         assert (run_dir / "COMPLETE").exists()
@@ -142,7 +150,7 @@ def test_train_py_on_a_two_node_cluster():
         train_s = time.perf_counter() - started - up_s
 
         # The env runners' nodes, from the cluster's actor table: one runner on each node.
-        runner_nodes = _cluster_state(address)["runners"]
+        runner_nodes = _cluster_state(address, env)["runners"]
         assert sorted(runner_nodes) == sorted(n["id"] for n in alive), (runner_nodes, alive)
 
         # The checkpoint scored by the one evaluation path, as a user would.
@@ -152,6 +160,7 @@ def test_train_py_on_a_two_node_cluster():
             text=True,
             timeout=900,
             cwd=ROOT,
+            env=env,
         )
         assert score.returncode == 0, score.stderr[-3000:]
         summary = json.loads(score.stdout)
