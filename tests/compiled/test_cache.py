@@ -38,7 +38,7 @@ def test_the_env_kernels_are_keyed_by_the_model_filter_judgment_and_rng_sources(
 
 
 def test_identification_kernel_is_keyed_by_the_multiple_model_steps_it_inlines() -> None:
-    assert "estimator/multiple_model.py" in _relative(project_sources("estimator.identify"))
+    assert "estimator/mode_kernels.py" in _relative(project_sources("estimator.identify"))
 
 
 def _project_modules() -> list[str]:
