@@ -9,12 +9,11 @@ from estimator.identify import (
     DEFAULT_FITTED_FIELDS,
     Trial,
     identify,
-    simulate_nominal,
-    simulate_nominal_trials,
     trial_log_likelihoods,
 )
 from estimator.kalman import FastKalmanFilter
 from estimator.nominal import NominalModel
+from estimator.nominal_trials import simulate_nominal, simulate_nominal_trials
 
 # The known model these tests identify: the filter's pre-calibration tuning, whose small velocity noise keeps
 # the dynamics gains well identified from 25 trials.
