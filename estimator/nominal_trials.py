@@ -87,6 +87,31 @@ def simulate_nominal(
     return measured[0], states[0]
 
 
+def _draw_cues(
+    rng: np.random.Generator,
+    n_trials: int,
+    n_steps: int,
+    push_levels_n: Sequence[float],
+    allow_no_cue: bool,
+    duration: int,
+    onsets: tuple[int, int],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    # Each trial's push and verbal cue, ``duration`` steps from their own onsets in [margin, last_onset].
+    margin, last_onset = onsets
+    cp = np.zeros((n_trials, n_steps))
+    cv = np.zeros((n_trials, n_steps))
+    for i in range(n_trials):
+        while True:
+            push = float(rng.choice(np.asarray(push_levels_n, dtype=np.float64)))
+            verbal = float(rng.integers(-1, 2))
+            if allow_no_cue or push != 0.0 or verbal != 0.0:
+                break
+        onset_p, onset_v = rng.integers(min(margin, last_onset), last_onset + 1, 2)
+        cp[i, onset_p : onset_p + duration] = push
+        cv[i, onset_v : onset_v + duration] = verbal
+    return cp, cv
+
+
 def simulate_nominal_trials(
     model: NominalModel,
     n_trials: int,
@@ -142,17 +167,7 @@ def simulate_nominal_trials(
         xis = np.broadcast_to(np.asarray(xi, dtype=np.int64), (n_trials,))
         if not np.all(np.isin(xis, (-1, 0, 1))):
             raise ValueError(f"xi must be in {{-1, 0, +1}}, got {xi!r}")
-    cp = np.zeros((n_trials, n_steps))
-    cv = np.zeros((n_trials, n_steps))
-    for i in range(n_trials):
-        while True:
-            push = float(rng.choice(np.asarray(push_levels_n, dtype=np.float64)))
-            verbal = float(rng.integers(-1, 2))
-            if allow_no_cue or push != 0.0 or verbal != 0.0:
-                break
-        onset_p, onset_v = rng.integers(min(margin, last_onset), last_onset + 1, 2)
-        cp[i, onset_p : onset_p + duration] = push
-        cv[i, onset_v : onset_v + duration] = verbal
+    cp, cv = _draw_cues(rng, n_trials, n_steps, push_levels_n, allow_no_cue, duration, (margin, last_onset))
     xi_steps = np.repeat(xis.astype(np.float64)[:, None], n_steps, axis=1)
     start = np.zeros((n_trials, 3))
     if initial_state == "prior":

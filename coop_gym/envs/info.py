@@ -56,36 +56,10 @@ def report_info(r: list[float], persona_names: Sequence[str], probabilities: boo
     """
     # Unpacked by position (checked against REPORT_COLUMNS at import): one bytecode
     # instead of ~25 indexed look-ups on the hot path.
-    (
-        _pos,
-        _force,
-        verbal,
-        _since,
-        _x_hat,
-        _xdot_hat,
-        _eta_hat,
-        xi_hat,
-        _xi_std,
-        judgment,
-        elapsed,
-        p_uncoop,
-        p_unresp,
-        p_coop,
-        _true_xi_feature,
-        success,
-        unsafe,
-        premature,
-        time_term,
-        force_term,
-        _reward,
-        outcome,
-        push,
-        true_x,
-        true_xdot,
-        true_eta,
-        true_xi,
-        persona,
-    ) = r
+    (_pos, _force, verbal, _since, _x_hat, _xdot_hat, _eta_hat, xi_hat, _xi_std, judgment, elapsed,
+     p_uncoop, p_unresp, p_coop, _true_xi_feature,
+     success, unsafe, premature, time_term, force_term, _reward, outcome,
+     push, true_x, true_xdot, true_eta, true_xi, persona) = r  # fmt: skip
     info: dict[str, Any] = {
         "true_x_m": true_x,
         "true_xdot_m_per_s": true_xdot,
