@@ -205,23 +205,17 @@ class SitToStandVectorEnv(VectorEnv):
 
         Returns:
             ``(obs, rewards, terminated, truncated, final)``; the infos' values are the rows
-            of ``self.core.report`` (:data:`~coop_gym.envs.core.REPORT_COLUMNS`). ``final`` is
+            of ``self.core.report`` (:data:`~coop_gym.envs.report.REPORT_COLUMNS`). ``final`` is
             None unless envs ended and were reset on this step (``SAME_STEP``); then it is
             ``(done, last_obs, last_report)``, observations and report rows from before the
             reset (rows of other envs are stale).
         """
-        if not self._started.all():
-            never = np.flatnonzero(~self._started).tolist()
-            raise RuntimeError(f"step() called before reset(): envs {never} were never reset; call reset()")
+        self._check_started()
         core = self.core
         self._actions.batch(actions, core.cmd)
         mode = self.autoreset_mode
         pending = self._done
-        if mode == AutoresetMode.DISABLED and pending.any():
-            raise RuntimeError(
-                f"envs {np.flatnonzero(pending).tolist()} finished their episodes and autoreset is disabled; "
-                'reset them with reset(options={"reset_mask": mask}) before stepping'
-            )
+        self._check_no_reset_waits()
         # NEXT_STEP: the envs that finished last step are reset now instead of stepped (in the
         # same call: on a threaded step the resets overlap the stepping).
         stepped = ~pending
@@ -255,6 +249,20 @@ class SitToStandVectorEnv(VectorEnv):
         else:
             self._done = done
         return self._observe(core.obs), rewards, terminated, truncated, final
+
+    def _check_started(self) -> None:
+        """Raise unless every env was reset."""
+        if not self._started.all():
+            never = np.flatnonzero(~self._started).tolist()
+            raise RuntimeError(f"step() called before reset(): envs {never} were never reset; call reset()")
+
+    def _check_no_reset_waits(self) -> None:
+        """With autoreset disabled, raise if an env's episode ended and it was not reset."""
+        if self.autoreset_mode == AutoresetMode.DISABLED and self._done.any():
+            raise RuntimeError(
+                f"envs {np.flatnonzero(self._done).tolist()} finished their episodes and autoreset is disabled; "
+                'reset them with reset(options={"reset_mask": mask}) before stepping'
+            )
 
     def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]
         """Draw env 0 (``"rgb_array"``: return its frame)."""
