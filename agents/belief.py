@@ -18,7 +18,7 @@ It lifts, in any phase, once ``P(xi = +1) >= lift_p`` and the shoulder estimate 
 ``lean_m`` (what a safe lift needs of the posture: the success criterion of
 :class:`coop_gym.envs.config.LiftCriteria`, 0.15 m, plus a margin for the reading).
 
-The settings were chosen on the TRAINING personas (``python -m agents.belief --tune``) and are
+The settings were chosen on the TRAINING personas (``python -m agents.tune_belief``) and are
 scored on the held-out ones by :mod:`agents.evaluate`.
 
 Example:
@@ -62,7 +62,7 @@ class BeliefSettings:
         reprobe_p: After a probe window, probe again (no push) while ``P(xi = +1)`` is at least this.
     """
 
-    lift_p: float = 0.9
+    lift_p: float = 0.85
     lean_m: float = 0.16
     burst_s: float = 0.5
     settle_s: float = 0.3

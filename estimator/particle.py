@@ -217,7 +217,7 @@ class SwitchingParticleFilter:
         dt_s: The step [s] (turns the jitter rate into a probability per step).
     """
 
-    def __init__(
+    def __init__(  # noqa: D107  (the class docstring gives the arguments)
         self,
         params: ArrayLike,
         initial_state: ArrayLike,
@@ -316,14 +316,15 @@ class SwitchingParticleFilter:
             if rows.ndim == 2:
                 rows = rows[:, None, :]
             k, c = self.params.shape[1:]
-            if rows.shape[0] != idx.shape[0] or rows.shape[2] != c or k % rows.shape[1] or not np.all(np.isfinite(rows)):
+            fits = rows.shape[0] == idx.shape[0] and rows.shape[2] == c and k % rows.shape[1] == 0
+            if not fits or not np.all(np.isfinite(rows)):
                 raise ValueError(f"params must be a finite ({idx.shape[0]}, {k}, {c}) or ({idx.shape[0]}, {c}) array")
             self.params[idx] = np.repeat(rows, k // rows.shape[1], axis=1)
         if seeds is not None:
             seed_list = [int(v) for v in np.asarray(seeds).reshape(-1)]
             if len(seed_list) != idx.shape[0] or min(seed_list, default=0) < 0:
                 raise ValueError(f"seeds must be {idx.shape[0]} non-negative ints")
-            for e, seed in zip(idx, seed_list):
+            for e, seed in zip(idx, seed_list, strict=True):
                 bits = self.rngs[e].bit_generator
                 bits.state = type(bits)(seed).state
         m = self.n_particles
@@ -343,7 +344,9 @@ class SwitchingParticleFilter:
             self._probs[e] = [np.mean(modes == k) for k in (-1.0, 0.0, 1.0)]
             self._mean[e] = [lean.mean(), 0.0, lean.mean()]
 
-    def run(self, push_force_n: ArrayLike, verbal_cue: ArrayLike, measured_position_m: ArrayLike) -> NDArray[np.float64]:
+    def run(
+        self, push_force_n: ArrayLike, verbal_cue: ArrayLike, measured_position_m: ArrayLike
+    ) -> NDArray[np.float64]:
         """Filter (N, T) steps of known cues and readings.
 
         Args:
