@@ -1,4 +1,4 @@
-"""Numbers the README and the docstrings quote from the parameter dataclasses match the code.
+"""Numbers the README, the docs pages and the docstrings quote from the parameter dataclasses match the code.
 
 Each case: a file, a regular expression whose groups are the quoted numbers, and the
 values the dataclasses give. A prose number that drifts from its field fails here.
@@ -21,6 +21,10 @@ from estimator.judgment import ThresholdJudgment
 
 ROOT = Path(__file__).resolve().parents[1]
 README = "README.md"
+ENVIRONMENTS = "docs/environments.md"
+AGENTS_PAGE = "docs/agents.md"
+ESTIMATORS_PAGE = "docs/estimators.md"
+BENCHMARKS = "docs/BENCHMARKS.md"
 ENV = "coop_gym/envs/sit_to_stand.py"
 JUDGMENT = "estimator/judgment.py"
 
@@ -48,29 +52,43 @@ def _max_episode_steps() -> tuple[float, ...]:
     return (float(steps.pop()),)
 
 
-CASES: list[tuple[str, str, str, Callable[[], tuple[float, ...]]]] = [
-    ("readme-pushes", README, r"soft (\d+) N, firm (\d+) N", lambda: (Cues().soft_push_n, Cues().firm_push_n)),
-    ("readme-rate", README, r"(\d+) Hz simulation and filter", lambda: (1.0 / Timing().dt_s,)),
-    ("readme-action", README, r"agent acts every ([\d.]+) s", lambda: (Timing().action_period_s,)),
+# The environment at a glance: the README's table, and the same table on the docs page.
+ENV_TABLE_CASES: list[tuple[str, str, Callable[[], tuple[float, ...]]]] = [
+    ("pushes", r"soft (\d+) N, firm (\d+) N", lambda: (Cues().soft_push_n, Cues().firm_push_n)),
+    ("rate", r"(\d+) Hz simulation and filter", lambda: (1.0 / Timing().dt_s,)),
+    ("action", r"agent acts every ([\d.]+) s", lambda: (Timing().action_period_s,)),
+    ("episode", r"truncated at (\d+) s \((\d+) steps\)", lambda: (Timing().episode_s, *_max_episode_steps())),
+    ("variation", r"~(\d+) % per-episode variation", _variation_percent),
+    ("success", r"shoulder ≥ ([\d.]+) m forward", lambda: (LiftCriteria().success_lean_m,)),
+    ("upright", r"upright \(< ([\d.]+) m\)", lambda: (LiftCriteria().upright_m,)),
     (
-        "readme-episode",
-        README,
-        r"truncated at (\d+) s \((\d+) steps\)",
-        lambda: (Timing().episode_s, *_max_episode_steps()),
-    ),
-    ("readme-variation", README, r"~(\d+) % per-episode variation", _variation_percent),
-    ("readme-wide-variation", README, r"has\nstd ([\d.]+) around its persona instead of ([\d.]+)", _wide_variation),
-    ("readme-success", README, r"shoulder ≥ ([\d.]+) m forward", lambda: (LiftCriteria().success_lean_m,)),
-    ("readme-upright", README, r"upright \(< ([\d.]+) m\)", lambda: (LiftCriteria().upright_m,)),
-    (
-        "readme-reward",
-        README,
+        "reward",
         r"\+(\d+) success, \u2212(\d+) unsafe, \u2212([\d.]+) premature, \u2212([\d.]+) per s, \u2212([\d.]+) per N·s",
         _reward_weights,
     ),
-    ("readme-judgment-delay", README, r"filter ([\d.]+) s after the first cue", lambda: (ThresholdJudgment().delay_s,)),
+]
+
+CASES: list[tuple[str, str, str, Callable[[], tuple[float, ...]]]] = [
+    *[
+        (f"{prefix}-{name}", path, pattern, expected)
+        for name, pattern, expected in ENV_TABLE_CASES
+        for prefix, path in (("readme", README), ("docs-environments", ENVIRONMENTS))
+    ],
+    ("docs-wide-variation", AGENTS_PAGE, r"has\nstd ([\d.]+) around its persona instead of ([\d.]+)", _wide_variation),
+    (
+        "docs-judgment-delay",
+        ESTIMATORS_PAGE,
+        r"filter ([\d.]+) s after the first cue",
+        lambda: (ThresholdJudgment().delay_s,),
+    ),
     ("readme-judgment-band", README, r"its ±([\d.]+) band", lambda: (ThresholdJudgment().threshold,)),
-    ("readme-reaction-delay", README, r"\(([\d.]+) s reaction delay\)", lambda: (Intention().reaction_delay_s,)),
+    (
+        "docs-judgment-band",
+        ESTIMATORS_PAGE,
+        r"thresholds the `xi` estimate at ±([\d.]+)",
+        lambda: (ThresholdJudgment().threshold,),
+    ),
+    ("docs-reaction-delay", BENCHMARKS, r"\(([\d.]+) s reaction delay\)", lambda: (Intention().reaction_delay_s,)),
     (
         "env-rate",
         ENV,
