@@ -7,6 +7,11 @@ native vector env, and compares observations, rewards, termination, truncation a
 value to the recording in ``data/recorded_v0.npz`` exactly. A selection of the ``-v1`` ids
 (difficulty levels, oracle, IMM) is held the same way by ``data/recorded_v1.npz``.
 
+Bit for bit holds at one NumPy SIMD level: NumPy's AVX-512 ``exp`` differs from its AVX2 ``exp``
+in the last bit, and each person is drawn through ``np.exp``. The recording was made at the AVX2
+level (``X86_V3``), and the repository's ``conftest.py`` runs every test at that level
+(``NPY_DISABLE_CPU_FEATURES``), so the replay holds on any x86 CPU.
+
 Re-record (only when a change is *meant* to alter a version, which the versioning rule forbids)::
 
     COOP_GYM_RECORD=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py     # -v0
