@@ -117,3 +117,49 @@ def test_bad_inputs_raise_and_change_nothing():
         pf.reset([0], 0.0, seeds=[-1])
     with pytest.raises(ValueError, match="estimator_options for 'switching'"):
         switching_filter(nominal_rows(1, HARD, Realism(), TIMING), TIMING, [np.random.default_rng(0)], {"bogus": 1})
+
+
+def _play(estimator, seed, steps=40, **kwargs):
+    import gymnasium as gym
+
+    import coop_gym  # noqa: F401
+
+    env = gym.make("CoopGym/SitToStandHard-v1", estimator=estimator, **kwargs)
+    obs, info = env.reset(seed=seed)
+    truth, observed = [info["true_x_m"]], [obs]
+    for k in range(steps):
+        action = np.array([1 if k % 10 < 5 else 0, 2 if k % 10 == 0 else 0, 0])
+        obs, _, terminated, truncated, info = env.step(action)
+        truth.append(info["true_x_m"])
+        observed.append(obs)
+        if terminated or truncated:
+            break
+    return np.array(truth), np.array(observed), env.unwrapped.features
+
+
+def test_the_env_estimate_is_deterministic_and_leaves_the_person_alone():
+    options = {"n_particles": 64, "hypotheses": 8}
+    truth_kf, _, _ = _play("kalman", 5)
+    truth_a, obs_a, features = _play("switching", 5, estimator_options=options)
+    truth_b, obs_b, _ = _play("switching", 5, estimator_options=options)
+    # The particles draw from their own generator: the person moves exactly as with the paper's filter.
+    np.testing.assert_array_equal(truth_a, truth_kf)
+    np.testing.assert_array_equal(obs_a, obs_b)
+    probs = obs_a[:, [features.index(f) for f in ("p_uncooperative", "p_unresponsive", "p_cooperative")]]
+    np.testing.assert_allclose(probs.sum(axis=1), 1.0, atol=1e-5)
+    _, obs_c, _ = _play("switching", 6, estimator_options=options)
+    assert not np.array_equal(obs_a[1:], obs_c[1 : len(obs_a)])
+
+
+def test_env_options_reach_the_filter_and_bad_ones_are_named():
+    import gymnasium as gym
+
+    import coop_gym  # noqa: F401
+
+    env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching", estimator_options={"n_particles": 32, "hypotheses": 8})
+    env.reset(seed=0)
+    bank = env.unwrapped.core.mm
+    assert bank.filter.n_particles == 32
+    assert bank.options.difficulty == "hard"
+    with pytest.raises(ValueError, match="n_particles"):
+        gym.make("CoopGym/SitToStandHard-v1", estimator="switching", estimator_options={"n_particles": 0}).reset(seed=0)
