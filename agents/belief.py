@@ -41,12 +41,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE, WAIT
-from agents.scripted import PhaseState, ScriptedAgent
+from agents.scripted_base import EPS_S, PhaseState, ScriptedAgent
 from compiled.checks import check_number
 
 __all__ = ["BeliefCaregiver", "BeliefSettings"]
-
-_EPS_S = 1e-6  # slack on clock comparisons: elapsed time is a float sum of 0.1 s steps
 
 
 @dataclass(frozen=True)
@@ -105,10 +103,10 @@ class BeliefCaregiver(ScriptedAgent):
         age = now - memory.phase_start_s
         phase = memory.phase.copy()  # transitions are decided on the phase at the start of the step
         # Recruit -> settle after one burst; settle -> probe (ask "lean forward" without a push).
-        memory.enter((phase == self.RECRUIT) & (age >= s.burst_s - _EPS_S), self.SETTLE, now)
-        asking = (phase == self.SETTLE) & (age >= s.settle_s - _EPS_S)
+        memory.enter((phase == self.RECRUIT) & (age >= s.burst_s - EPS_S), self.SETTLE, now)
+        asking = (phase == self.SETTLE) & (age >= s.settle_s - EPS_S)
         # A probe's window is over: ask again while cooperation is likely, else recruit again.
-        over = (phase == self.PROBE) & (age >= s.window_s - _EPS_S) & ~lift
+        over = (phase == self.PROBE) & (age >= s.window_s - EPS_S) & ~lift
         again = over & (p_cooperative >= s.reprobe_p)
         memory.enter(asking | again, self.PROBE, now)
         memory.enter(over & ~again, self.RECRUIT, now)

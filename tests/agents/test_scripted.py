@@ -144,7 +144,9 @@ def test_random_agent_is_seeded_and_valid():
 @pytest.mark.parametrize("name", sorted(SCRIPTED_AGENTS))
 def test_batched_equals_one_by_one_and_state_is_not_mutated(name):
     env_id = "CoopGym/SitToStandOracle-v0"
-    envs = [gym.make(env_id, personas="all") for _ in range(3)]
+    # The belief caregiver reads the switching filter's P(xi = +1) (a small filter: this test is about batching).
+    switching = {"estimator": "switching", "estimator_options": {"n_particles": 64, "hypotheses": 8}}
+    envs = [gym.make(env_id, personas="all", **(switching if name == "belief" else {})) for _ in range(3)]
     features = envs[0].unwrapped.features
     batched = make_scripted(name, features, seed=0)
     singles = [make_scripted(name, features, seed=0) for _ in envs]

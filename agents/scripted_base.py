@@ -1,0 +1,186 @@
+"""The base of every scripted caregiver: SB3's ``predict`` over per-env phase memory.
+
+Every agent follows SB3's ``predict(obs, state, episode_start, deterministic) -> (actions,
+state)`` (:class:`agents.base.Agent`), batched over a leading env axis; a single
+unbatched observation gives a single action. Features are found by *name* in the
+env's feature list (``env.unwrapped.features``), never by position, so the same agent
+runs on every observation mode and estimator that provides what it reads.
+
+Per-env memory (phase and phase timers) lives in a :class:`PhaseState`. It is returned
+as the ``state`` of ``predict``; pass it back to keep the episode going. When the caller
+passes ``state=None`` (the usual ``action, _ = agent.predict(obs)`` loop) the agent
+keeps the memory itself. Memory is reset for every env marked in ``episode_start``
+and for every observation whose ``elapsed_s`` is 0 (the first of an episode).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.base import action_type_of, encode_actions, features_of, require_features
+from coop_gym.envs.config import ACTION_TYPES
+from coop_gym.envs.contract import observation_features
+
+__all__ = ["EPS_S", "PhaseState", "ScriptedAgent"]
+
+EPS_S = 1e-6
+"""Slack on clock comparisons [s]: elapsed time is a float sum of 0.1 s steps."""
+_EPS_S = EPS_S
+
+
+@dataclass
+class PhaseState:
+    """Per-env memory of a scripted agent (mutable arrays of shape (N,)).
+
+    Attributes:
+        phase: Current phase (meaning depends on the agent).
+        phase_start_s: Episode time at which the phase began [s].
+        count: A per-phase counter (e.g. pushes since the last explanation).
+        flag: A per-phase flag (e.g. the explanation has been spoken).
+        anchor: A per-phase value (e.g. the shoulder position when a probe began) [m].
+    """
+
+    phase: NDArray[np.int64]
+    phase_start_s: NDArray[np.float64]
+    count: NDArray[np.int64]
+    flag: NDArray[np.bool_]
+    anchor: NDArray[np.float64] = None  # type: ignore[assignment]  # zeros when not given
+
+    def __post_init__(self) -> None:
+        """Give ``anchor`` its zeros when it was not passed (agents that do not use it)."""
+        if self.anchor is None:
+            self.anchor = np.zeros(self.phase.shape[0])
+
+    @classmethod
+    def zeros(cls, n_envs: int) -> PhaseState:
+        """Fresh memory for ``n_envs`` envs."""
+        return cls(
+            np.zeros(n_envs, dtype=np.int64),
+            np.zeros(n_envs),
+            np.zeros(n_envs, dtype=np.int64),
+            np.zeros(n_envs, dtype=bool),
+            np.zeros(n_envs),
+        )
+
+    @property
+    def n_envs(self) -> int:
+        """Number of envs this memory covers."""
+        return int(self.phase.shape[0])
+
+    def copy(self) -> PhaseState:
+        """An independent copy (``predict`` never mutates the state it is given)."""
+        return PhaseState(
+            self.phase.copy(), self.phase_start_s.copy(), self.count.copy(), self.flag.copy(), self.anchor.copy()
+        )
+
+    def enter(self, mask: NDArray[np.bool_], phase: int, now_s: NDArray[np.float64]) -> None:
+        """Move the envs in ``mask`` to ``phase``, starting its clock now."""
+        self.phase[mask] = phase
+        self.phase_start_s[mask] = now_s[mask]
+        self.flag[mask] = False
+
+
+class ScriptedAgent:
+    """Base class: batching, feature lookup, per-env memory and action encoding.
+
+    Subclasses set :attr:`name` and :attr:`needs` (the features they read) and implement
+    :meth:`_decide`.
+
+    Args:
+        features: Names of the observation's features, in order (``env.unwrapped.features``
+            or :func:`coop_gym.envs.contract.observation_features`). Default: the
+            belief observation of the paper's Kalman filter.
+        action_type: ``"multidiscrete"`` (default), ``"discrete"`` or ``"continuous"``.
+        seed: Seed of the agent's own random generator (only :class:`RandomAgent` draws).
+    """
+
+    name: ClassVar[str] = "scripted"
+    needs: ClassVar[tuple[str, ...]] = ("elapsed_s",)
+
+    def __init__(
+        self,
+        features: Sequence[str] | None = None,
+        action_type: str = "multidiscrete",
+        seed: int | None = None,
+    ) -> None:
+        """Check that the observation provides what the agent reads."""
+        if action_type not in ACTION_TYPES:
+            raise ValueError(f"action_type must be one of {list(ACTION_TYPES)}, got {action_type!r}")
+        self.features = tuple(features) if features is not None else observation_features("belief", "kalman")
+        self.action_type = action_type
+        self.columns = require_features(self.features, self.needs, type(self).__name__)
+        self.rng = np.random.default_rng(seed)
+        self._memory: PhaseState | None = None
+
+    @classmethod
+    def for_env(cls, env: Any, **kwargs: Any) -> ScriptedAgent:
+        """Build the agent for a (single or vector) coop_gym env: its features and action type."""
+        return cls(features_of(env), action_type_of(env), **kwargs)
+
+    def reset(self) -> None:
+        """Forget the memory kept for ``state=None`` callers."""
+        self._memory = None
+
+    def predict(
+        self,
+        observation: Any,
+        state: PhaseState | None = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[NDArray[Any], PhaseState]:
+        """Actions for a batch of observations (SB3's protocol).
+
+        Args:
+            observation: (N, F) batch or a single (F,) observation.
+            state: The :class:`PhaseState` returned by the previous call, or None to use the
+                memory the agent keeps itself.
+            episode_start: (N,) bools, True where an episode has just begun (memory reset).
+            deterministic: Ignored by the scripted agents except :class:`RandomAgent`'s
+                documented behaviour (it always samples).
+
+        Returns:
+            ``(actions, state)``: (N, ...) actions of the agent's action type (unbatched if
+            ``observation`` was), and the memory to pass back.
+        """
+        obs = np.asarray(observation, dtype=np.float64)
+        single = obs.ndim == 1
+        if single:
+            obs = obs[None]
+        if obs.ndim != 2 or obs.shape[1] != len(self.features):
+            raise ValueError(
+                f"{type(self).__name__}.predict: observation has shape {np.shape(observation)}; expected "
+                f"(N, {len(self.features)}) or ({len(self.features)},) for features {list(self.features)}"
+            )
+        if not np.all(np.isfinite(obs)):
+            raise ValueError(f"{type(self).__name__}.predict: observation contains NaN or inf")
+        n = obs.shape[0]
+        memory = state if state is not None else self._memory
+        fresh = memory is None or memory.n_envs != n
+        memory = PhaseState.zeros(n) if fresh or memory is None else memory.copy()
+        now = obs[:, self.columns["elapsed_s"]]
+        starts = np.full(n, fresh) | (now <= _EPS_S)
+        if episode_start is not None:
+            mask = np.asarray(episode_start, dtype=bool).reshape(-1)
+            if mask.shape != (n,):
+                raise ValueError(f"episode_start has {mask.shape[0]} entries for {n} observations")
+            starts |= mask
+        if np.any(starts):
+            memory.enter(starts, 0, now)
+            memory.count[starts] = 0
+        push, verbal, lift = self._decide(obs, memory, now)
+        self._memory = memory
+        actions = encode_actions(push, verbal, lift, self.action_type)
+        return (actions[0] if single else actions), memory
+
+    def _decide(
+        self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        raise NotImplementedError
+
+    def _column(self, obs: NDArray[np.float64], feature: str) -> NDArray[np.float64]:
+        return obs[:, self.columns[feature]]

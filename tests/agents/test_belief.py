@@ -1,0 +1,62 @@
+import numpy as np
+import pytest
+
+from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE
+from agents.belief import BeliefCaregiver, BeliefSettings
+from coop_gym.envs.contract import observation_features
+
+FEATURES = observation_features("belief", "switching")
+
+
+def _obs(now, p_cooperative, x_hat_m=0.0):
+    obs = np.zeros((1, len(FEATURES)))
+    obs[0, FEATURES.index("elapsed_s")] = now
+    obs[0, FEATURES.index("p_cooperative")] = p_cooperative
+    obs[0, FEATURES.index("x_hat_m")] = x_hat_m
+    return obs
+
+
+def _play(agent, p_cooperative, x_hat_m=0.0, steps=40):
+    state, actions = None, []
+    for k in range(steps):
+        action, state = agent.predict(_obs(round(0.1 * k, 1), p_cooperative, x_hat_m), state)
+        actions.append(action[0].tolist())
+    return actions
+
+
+def test_recruits_settles_then_probes_with_words_alone():
+    settings = BeliefSettings(burst_s=0.5, settle_s=0.3, window_s=1.0, reprobe_p=0.5)
+    actions = _play(BeliefCaregiver(FEATURES, settings=settings), p_cooperative=0.1)
+    push = [a[0] for a in actions]
+    verbal = [a[1] for a in actions]
+    assert push[:5] == [PUSH_SOFT] * 5 and verbal[0] == VERBAL_FORWARD  # recruit: guided push
+    assert push[5:8] == [PUSH_NONE] * 3 and verbal[5:8] == [VERBAL_NONE] * 3  # settle: silence
+    assert push[8] == PUSH_NONE and verbal[8] == VERBAL_FORWARD  # probe: words alone
+    assert push[9:18] == [PUSH_NONE] * 9  # no push while the answer is watched
+    assert push[18] == PUSH_SOFT  # no answer (P(+1) low): recruit again
+    assert all(a[2] != LIFT for a in actions)
+
+
+def test_probes_again_without_pushing_while_cooperation_is_likely():
+    settings = BeliefSettings(lift_p=0.9, burst_s=0.5, settle_s=0.3, window_s=1.0, reprobe_p=0.5)
+    actions = _play(BeliefCaregiver(FEATURES, settings=settings), p_cooperative=0.7)
+    assert [a[0] for a in actions[8:]] == [PUSH_NONE] * 32
+    assert [a[1] for a in actions[8:40:10]] == [VERBAL_FORWARD] * 4
+
+
+@pytest.mark.parametrize(("p", "x", "lifts"), [(0.9, 0.2, True), (0.9, 0.1, False), (0.5, 0.3, False)])
+def test_lifts_on_the_estimate_and_the_posture(p, x, lifts):
+    agent = BeliefCaregiver(FEATURES, settings=BeliefSettings(lift_p=0.85, lean_m=0.16))
+    action, _ = agent.predict(_obs(1.0, p, x)[0])
+    assert (action[2] == LIFT) == lifts
+    if lifts:
+        assert action[0] == PUSH_NONE and action[1] == VERBAL_NONE
+
+
+def test_needs_the_filter_and_checks_its_settings():
+    with pytest.raises(ValueError, match="p_cooperative"):
+        BeliefCaregiver(observation_features("belief", "kalman"))
+    with pytest.raises(ValueError, match="lift_p"):
+        BeliefSettings(lift_p=1.5)
+    with pytest.raises(ValueError, match="window_s"):
+        BeliefSettings(window_s=-1.0)
