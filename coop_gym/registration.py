@@ -12,7 +12,14 @@ from coop_gym.model.params import Timing
 __all__ = ["ENV_IDS", "register_envs"]
 
 MAX_EPISODE_STEPS = Timing().max_episode_steps
-"""30 s at one action per 0.1 s: the ``TimeLimit`` of every registered id."""
+"""30 s at one action per 0.1 s: the episode length of every registered id on its default timing.
+
+The ids register no ``TimeLimit``: each env ends its episodes by its own clock (``timing.episode_s``,
+truncated with outcome ``"timeout"``), so a custom ``timing`` gives the length it asks for. A
+``TimeLimit`` of 300 steps would cut a 60 s episode in half. ``env.spec.max_episode_steps`` still
+reports the length of the env's own timing (``SitToStandEnv.spec``), for clients that read it.
+``gym.make(id, max_episode_steps=n)`` adds a ``TimeLimit`` of ``n`` steps as usual.
+"""
 
 # id -> keywords of the env (coop_gym.envs.contract.EnvArguments: the single and the vector env take them)
 ENV_IDS: dict[str, dict[str, Any]] = {
@@ -61,6 +68,6 @@ def register_envs() -> None:
             id=env_id,
             entry_point="coop_gym.envs.sit_to_stand:SitToStandEnv",
             vector_entry_point="coop_gym.envs.vector:SitToStandVectorEnv",
-            max_episode_steps=MAX_EPISODE_STEPS,
+            max_episode_steps=None,  # no TimeLimit: the env's clock truncates (see MAX_EPISODE_STEPS)
             kwargs=dict(kwargs),
         )

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, ClassVar, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 from numpy.typing import NDArray
 
 from coop_gym.envs.actions import ActionDecoder
@@ -165,9 +167,13 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
 
     ## Episode End
 
-    Termination: the robot lifts (``info["outcome"]`` says how it went). Truncation:
-    30 s (300 steps) by the ``TimeLimit`` of the registration; ``info["outcome"]`` is
-    ``"timeout"`` on that step. Stepping after either raises ``RuntimeError`` until ``reset()``.
+    Termination: the robot lifts (``info["outcome"]`` says how it went). Truncation: the env's
+    own clock, ``timing.episode_s`` -- 30 s (300 steps) by the ``TimeLimit`` rule (a lift on the
+    last step is truncated too) but from the env, so any ``timing`` gives the episode it asks
+    for (``timing={"episode_s": 60}``: 600 steps); ``info["outcome"]`` is ``"timeout"`` on that
+    step. The registered ids add no ``TimeLimit`` wrapper; ``env.spec.max_episode_steps`` reports
+    the length (``Timing.max_episode_steps``), and ``gym.make(id, max_episode_steps=n)`` adds a
+    ``TimeLimit`` of ``n`` steps. Stepping after either end raises ``RuntimeError`` until ``reset()``.
 
     ## Arguments
 
@@ -223,6 +229,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # type: ignore[misc]
+    _spec: EnvSpec | None = None
 
     def __init__(self, **kwargs: Any) -> None:
         """Create the env from the keywords of :class:`~coop_gym.envs.contract.EnvArguments` (see "Arguments")."""
@@ -250,10 +257,28 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self._needs_reset = True
         self._stepped = False
         self._outcome = int(Outcome.NONE)
+        self._episode_steps = 0
+        self._max_episode_steps = config.timing.max_episode_steps
         self._renderer: Any = None
         self._last_lift = False
 
     # --- Gymnasium API ----------------------------------------------------------
+
+    @property  # type: ignore[override]
+    def spec(self) -> EnvSpec | None:
+        """The registration's spec, its ``max_episode_steps`` the episode length of this env's ``timing``.
+
+        The ids register no ``TimeLimit`` (the env's clock truncates), so ``gym.make`` hands over a
+        spec without a length; clients that read ``env.spec.max_episode_steps`` (sb3-contrib's
+        ``TimeFeatureWrapper``, ``gym.make(env.spec)``) get the length the env really has.
+        """
+        return self._spec
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        if value is not None and value.max_episode_steps is None:
+            value = dataclasses.replace(value, max_episode_steps=self.timing.max_episode_steps)
+        self._spec = value
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -265,6 +290,7 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self._needs_reset = False
         self._stepped = False
         self._outcome = int(Outcome.NONE)
+        self._episode_steps = 0
         self._last_lift = False
         obs = self._observe(self._obs_row)
         info = self._info.single(self._report_row.tolist())
@@ -280,9 +306,11 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         self.core.step_commands(self._actions.single(action, self._cmd))
         r = self._report_row.tolist()
         self._outcome = outcome = int(r[REPORT.outcome])
-        # A lift terminates. The episode clock of ``timing`` truncates (the registered
-        # TimeLimit agrees with it for the default timing; a custom ``timing`` is honoured too).
+        # A lift terminates. The episode clock of ``timing`` truncates; its last step is truncated
+        # whatever it did, a lift too, as Gymnasium's TimeLimit (and the vector env) report it.
         terminated, truncated = EPISODE_END[outcome]
+        self._episode_steps += 1
+        truncated = truncated or self._episode_steps >= self._max_episode_steps
         self._last_lift = terminated
         self._needs_reset = terminated or truncated
         self._stepped = True

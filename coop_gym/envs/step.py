@@ -28,6 +28,7 @@ from coop_gym.model.dynamics import (
     measure,
     person_substep,
 )
+from coop_gym.model.params import EPISODE_CLOCK_TOLERANCE_S
 from estimator.judgment import JUDGE, JUDGMENT_COLUMNS, judgment_substep
 from estimator.kalman import NOMINAL_COLUMNS, kalman_step
 from estimator.nominal import STATE_DIM
@@ -97,7 +98,8 @@ def step_env(
             cue[CUES.verbal_value] = 0.0
         cue[CUES.elapsed_s] += substeps * dt
         _report_belief(row, consts[CONSTS.episode_s])
-        outcome = _TIMEOUT if cue[CUES.elapsed_s] >= consts[CONSTS.episode_s] - 1e-9 else _NONE
+        # The episode clock ends the episode (Timing.max_episode_steps counts the same steps).
+        outcome = _TIMEOUT if cue[CUES.elapsed_s] >= consts[CONSTS.episode_s] - EPISODE_CLOCK_TOLERANCE_S else _NONE
     report = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
     _write_reward(report, outcome, lift, cue[CUES.impulse_n_s], consts)
     _report_truth(report, person, outcome, 0.0 if lift else push_force_n)

@@ -11,12 +11,14 @@ Field names carry their units (``_m``, ``_n``, ``_s``, ``_per_s`` ...).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
 from compiled.checks import check_choice, check_flag, check_integer, check_number
 
 __all__ = [
+    "EPISODE_CLOCK_TOLERANCE_S",
     "Biomechanics",
     "Cooperativeness",
     "Cues",
@@ -300,6 +302,10 @@ class Cues:
             )
 
 
+EPISODE_CLOCK_TOLERANCE_S = 1e-9
+"""An episode's clock (a float sum of action periods) has reached ``episode_s`` within this [s]."""
+
+
 @dataclass(frozen=True)
 class Timing:
     """Time base shared by simulator, sensors and filter.
@@ -326,8 +332,14 @@ class Timing:
 
     @property
     def max_episode_steps(self) -> int:
-        """Agent steps in one full episode."""
-        return round(self.episode_s / self.action_period_s)
+        """Agent steps in one full episode: the first step whose clock reaches ``episode_s``.
+
+        The step kernel adds ``action_period_s`` to the clock each step and ends the episode
+        once it is within :data:`EPISODE_CLOCK_TOLERANCE_S` of ``episode_s`` (the sum's rounding
+        stays far below it); an ``episode_s`` that is not a whole number of actions ends on the
+        step that passes it.
+        """
+        return max(1, math.ceil((self.episode_s - EPISODE_CLOCK_TOLERANCE_S) / self.action_period_s))
 
 
 @dataclass(frozen=True)
