@@ -67,6 +67,15 @@ def action_space_for(action_type: str) -> spaces.Space[Any]:
     return spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
 
 
+def _holds_bool(actions: Any) -> bool:
+    """Whether a (nested) list or tuple of actions holds a bool or ``np.bool_`` anywhere."""
+    if isinstance(actions, (bool, np.bool_)):
+        return True
+    if isinstance(actions, (list, tuple)):
+        return any(_holds_bool(a) for a in actions)
+    return isinstance(actions, np.ndarray) and actions.dtype.kind == "b"
+
+
 def _validated(actions: Any, action_type: str, n_envs: int) -> NDArray[np.float64]:
     """A batch of ``n_envs`` actions as float64, checked: the right shape, finite, in range.
 
@@ -81,8 +90,9 @@ def _validated(actions: Any, action_type: str, n_envs: int) -> NDArray[np.float6
         raise ValueError(f"action could not be read as an array: {exc}") from None
     if a.dtype == object or a.dtype.kind not in "biuf":
         raise ValueError(f"action must be numeric, got dtype {a.dtype}")
-    if a.dtype.kind == "b":
-        # True is not the action 1: a bool is a mistake (a flag passed for an action).
+    if a.dtype.kind == "b" or _holds_bool(actions):
+        # True is not the action 1: a bool is a mistake (a flag passed for an action). In a list
+        # beside numbers np.asarray turns it into one silently, so the elements are looked at.
         raise ValueError(f"{action_type} action must be numbers, not bools, got {actions!r}")
     expected = (n_envs,) if action_type == "discrete" else (n_envs, 3)
     if a.shape != expected:

@@ -251,6 +251,12 @@ BAD_ACTIONS: list[tuple[str, str, Any, str]] = [
     ("discrete", "True", True, r"discrete action must be numbers, not bools, got \[True\]"),
     ("discrete", "numpy False", np.bool_(False), r"discrete action must be numbers, not bools"),
     ("multidiscrete", "bools", np.array([True, False, True]), r"multidiscrete action must be numbers, not bools"),
+    # Issue #21: a bool among numbers (np.asarray makes [True, 2, False] an int array) on every action type.
+    ("multidiscrete", "a bool cue", [True, 2, False], r"multidiscrete action must be numbers, not bools"),
+    ("multidiscrete", "a numpy bool cue", (1, np.True_, 0), r"multidiscrete action must be numbers, not bools"),
+    ("discrete", "a bool in a list", [True], r"discrete action must be numbers, not bools"),
+    ("continuous", "a bool cue", [True, 0.5, -1.0], r"continuous action must be numbers, not bools"),
+    ("continuous", "bools", np.array([True, False, True]), r"continuous action must be numbers, not bools"),
     ("continuous", "above 1", np.array([0.0, 0.0, 1.5], dtype=np.float32), r"continuous action must lie in \[-1, 1\]"),
     ("continuous", "below -1", [-2.0, 0.0, 0.0], r"continuous action must lie in \[-1, 1\]"),
     ("continuous", "NaN", np.array([math.nan, 0, 0], dtype=np.float32), r"action contains NaN or inf"),
@@ -459,7 +465,23 @@ BAD_VECTOR_ACTIONS: list[tuple[str, Any, str]] = [
     ("strings", np.array([["1", "2", "0"]] * 3), r"action must be numeric"),
     ("None", None, r"action must be numeric"),
     ("bools", np.ones((3, 3), dtype=bool), r"multidiscrete action must be numbers, not bools"),
+    ("a bool cue in one env", [[0, 0, 0], [True, 2, False], [0, 0, 0]], r"multidiscrete action must be numbers, not"),
 ]
+
+
+@pytest.mark.parametrize(
+    ("action_type", "action"),
+    [
+        ("multidiscrete", [[0, 0, 0], [1, np.True_, 0]]),
+        ("discrete", [3, True]),
+        ("continuous", [[0.0, 0.0, 0.0], [0.5, False, -1.0]]),
+    ],
+)
+def test_vector_env_refuses_a_bool_cue_on_every_action_type(action_type: str, action: Any) -> None:
+    envs = _vector_env(2, action_type=action_type)
+    envs.reset(seed=0)
+    with pytest.raises(ValueError, match=rf"{action_type} action must be numbers, not bools"):
+        envs.step(action)
 
 
 @pytest.mark.parametrize(
