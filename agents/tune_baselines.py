@@ -382,7 +382,7 @@ def search_blind(
 
 
 def describe(settings: BlindSettings) -> str:
-    """A one-line summary of a blind setting (only the fields that differ from the defaults)."""
+    """A one-line summary of a blind setting: the final phase and lift rule, and every other field set."""
     always = ("push", "words", "lean_m", "min_time_s", "hold_s", "release_on_lean")
     fields = {
         f.name: getattr(settings, f.name)
