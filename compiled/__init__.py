@@ -6,6 +6,8 @@
   every validator of the project.
 - :mod:`compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
+- :mod:`compiled.seeding`: ``PCG64(seed)`` of many envs in one call (NumPy's seeding repeated
+  step for step), their states kept in arrays until a ``Generator`` object is asked for.
 - :mod:`compiled.atomics`: atomic loads, compare-and-swap and add on int64 array elements (how
   the threaded step shares work without the GIL).
 

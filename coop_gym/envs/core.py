@@ -27,7 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from compiled.checks import is_integer
-from compiled.rng import G_STATE, bit_generator_row
+from compiled.rng import G_STATE
+from compiled.seeding import EnvGenerators
 from coop_gym.envs.actions import CMD, CMD_COLUMNS
 from coop_gym.envs.config import LiftCriteria, RewardWeights
 from coop_gym.envs.layout import (
@@ -158,8 +159,10 @@ class SitToStandCore:
         self._bank_force = st[:, BLOCKS.end : BLOCKS.end + substeps]
         self._bank_verbal = st[:, BLOCKS.end + substeps : BLOCKS.end + 2 * substeps]
         self._bank_position = st[:, BLOCKS.end + 2 * substeps : BLOCKS.end + 3 * substeps]
-        self.rngs: list[np.random.Generator | None] = [None] * n
-        self.generators = np.zeros((n, 4), dtype=np.uint64)
+        # Each env's generator: a Generator object, or NumPy's PCG64 state in arrays for envs seeded
+        # in a batch (seed_envs); rngs[i] gives env i's Generator either way.
+        self.rngs = EnvGenerators(n)
+        self.generators = self.rngs.rows
         self.cmd = np.zeros((n, len(CMD_COLUMNS)))
         self.cmd[:, CMD.active] = 1.0
         self.obs = np.zeros((n, n_obs), dtype=np.float32)
@@ -170,7 +173,9 @@ class SitToStandCore:
         if self.estimator == "switching":
             from coop_gym.envs.switching import SwitchingEstimator
 
-            return SwitchingEstimator(self.n_envs, self.timing, self.realism, self.params, self.rngs, options)
+            # rngs: indexable as the list it types (EnvGenerators gives each env's Generator).
+            rngs: Any = self.rngs
+            return SwitchingEstimator(self.n_envs, self.timing, self.realism, self.params, rngs, options)
         from estimator.multiple_model import IMMEstimator, MultipleModelEstimator
 
         cls = IMMEstimator if self.estimator == "imm" else MultipleModelEstimator
@@ -198,10 +203,18 @@ class SitToStandCore:
 
     def set_rng(self, i: int, rng: np.random.Generator) -> None:
         """Make ``rng`` env ``i``'s source of randomness (kept for its following episodes)."""
-        if self.rngs[i] is not rng:
-            self.generators[i] = bit_generator_row(rng)
-            self.rngs[i] = rng
+        if not self.rngs.is_object(i, rng):
+            self.rngs.set(i, rng)
             self._chunks = 0
+
+    def seed_envs(self, indices: NDArray[np.int64], seeds: NDArray[np.uint64]) -> None:
+        """Env ``indices[r]`` draws from ``Generator(PCG64(seeds[r]))`` from now on, all seeded in one call.
+
+        The same numbers as :meth:`set_rng` with those generators (``compiled.seeding``); seeds up to
+        ``compiled.seeding.MAX_BATCH_SEED``.
+        """
+        self.rngs.seed(indices, seeds)
+        self._chunks = 0
 
     def reset_env(
         self, i: int, rng: np.random.Generator, persona_index: int | None = None, initial_xi: int | None = None
@@ -310,11 +323,15 @@ class SitToStandCore:
     # refilled with the saved values (tests/coop_gym/test_determinism.py).
 
     def __getstate__(self) -> dict[str, Any]:
-        """The saved values; ``generators`` is left out (rebuilt from ``rngs``)."""
-        return {k: v for k, v in self.__dict__.items() if k != "generators"}
+        """The saved values; ``generators`` is left out (rebuilt from ``rngs``, saved as Generator objects)."""
+        saved = {k: v for k, v in self.__dict__.items() if k not in ("generators", "rngs")}
+        saved["rngs"] = list(self.rngs)
+        return saved
 
     def __setstate__(self, saved: dict[str, Any]) -> None:
         """Rebuild the arrays and their views, then copy the saved values into them."""
+        saved = dict(saved)
+        rngs = saved.pop("rngs")
         self.__init__(*saved["_init_args"])  # type: ignore[misc]
         for name, value in saved.items():
             current = self.__dict__.get(name)
@@ -322,7 +339,7 @@ class SitToStandCore:
                 np.copyto(current, value)
             elif not (dataclasses.is_dataclass(current) and not isinstance(current, type)):
                 self.__dict__[name] = value  # dataclasses (the settings) are rebuilt equal by __init__
-        for i, rng in enumerate(self.rngs):
+        for i, rng in enumerate(rngs):
             if rng is not None:
-                self.generators[i] = bit_generator_row(rng)
+                self.rngs.set(i, rng)
         self._chunks = 0

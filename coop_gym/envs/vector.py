@@ -13,6 +13,8 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from compiled.checks import is_integer
+from compiled.rng import G_STATE
+from compiled.seeding import MAX_BATCH_SEED
 from coop_gym.envs.actions import CMD, ActionDecoder
 from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import check_threads
@@ -155,11 +157,7 @@ class SitToStandVectorEnv(VectorEnv):
             super().reset(seed=int(seed))  # the vector env's own np_random, as Gymnasium's envs do
         indices = self._all[mask]
         core = self.core
-        for i in indices:
-            if seeds[i] is not None:
-                core.set_rng(int(i), seeding.np_random(seeds[i])[0])
-            elif core.rngs[i] is None:
-                core.set_rng(int(i), seeding.np_random(None)[0])
+        self._seed_envs(indices, seeds)
         core.reset_envs(indices, persona_index, initial_xi)
         self._episode_steps[mask] = 0
         self._done[mask] = False
@@ -301,6 +299,33 @@ class SitToStandVectorEnv(VectorEnv):
         if mask[0]:
             self._env0_stepped = False
             self._env0_lift = False
+
+    def _seed_envs(self, indices: NDArray[np.int64], seeds: list[int | None]) -> None:
+        """Give the envs of ``indices`` with a seed ``Generator(PCG64(seed))``, all in one call.
+
+        Seeded in a batch (``SitToStandCore.seed_envs``: 10^5 envs in milliseconds, where a
+        ``Generator`` object each took seconds), the same numbers as
+        ``gymnasium.utils.seeding.np_random(seed)``. An env without a seed keeps its generator;
+        one that has none yet is seeded from fresh entropy.
+        """
+        core = self.core
+        batch_envs: list[int] = []
+        batch_seeds: list[int] = []
+        for i in indices.tolist():
+            s = seeds[i]
+            if s is None:
+                continue
+            if s <= MAX_BATCH_SEED:
+                batch_envs.append(i)
+                batch_seeds.append(s)
+            else:
+                core.set_rng(i, seeding.np_random(s)[0])
+        if batch_envs:
+            core.seed_envs(np.array(batch_envs, dtype=np.int64), np.array(batch_seeds, dtype=np.uint64))
+        fresh = indices[core.generators[indices, G_STATE] == 0]
+        if fresh.shape[0]:
+            entropy = np.random.default_rng()  # OS entropy, as seeding.np_random(None)
+            core.seed_envs(fresh, entropy.integers(0, MAX_BATCH_SEED, fresh.shape[0], dtype=np.uint64, endpoint=True))
 
     def _seed_list(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
         n = self.num_envs
