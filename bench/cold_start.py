@@ -10,7 +10,10 @@ nested: a kernel's time includes the functions compiled inside it)::
     python bench/cold_start.py --repeats 5 --kernels
 
 Reported: median and range of the time from the first ``gym.make``/``make_vec`` call to the
-end of the first step (the import of coop_gym is timed on its own), with the load average.
+end of the first step (the import of coop_gym is timed on its own), with the load average, and
+each as a ratio to a reference timed the same way in the same run, alternating with it: a fresh
+process that imports gymnasium and makes, resets and steps ``CartPole-v1`` (import included in
+both: what a user waits for before the first step).
 """
 
 from __future__ import annotations
@@ -24,6 +27,16 @@ import sys
 import tempfile
 from pathlib import Path
 from typing import Any
+
+_REFERENCE = r"""
+import json, time
+t0 = time.perf_counter()
+import gymnasium as gym
+env = gym.make("CartPole-v1")
+env.reset(seed=0)
+env.step(env.action_space.sample())
+print(json.dumps({"total_s": time.perf_counter() - t0}))
+"""
 
 _CHILD = r"""
 import json, sys, time
@@ -52,7 +65,7 @@ for ts, ev in rec.buffer if kernels else ():
         name, start, depth = stack.pop()
         compiles.append((start, depth, name, ts - start))
 print(json.dumps({"import_s": t1 - t0, "make_s": t3 - t2, "reset_s": t4 - t3, "step_s": t5 - t4,
-                  "first_step_s": t5 - t2, "compiles": sorted(compiles)}))
+                  "first_step_s": t5 - t2, "total_s": t5 - t0, "compiles": sorted(compiles)}))
 """
 
 
@@ -63,6 +76,11 @@ def _measure(env_id: str, n: int, cache: str, kernels: bool) -> dict[str, Any]:
         env=env, capture_output=True, text=True, check=True,
     )  # fmt: skip
     return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def _reference() -> float:
+    out = subprocess.run([sys.executable, "-c", _REFERENCE], capture_output=True, text=True, check=True)
+    return float(json.loads(out.stdout.strip().splitlines()[-1])["total_s"])
 
 
 def _summary(values: list[float]) -> str:
@@ -89,21 +107,40 @@ def main(argv: list[str] | None = None) -> None:
     results: dict[str, Any] = {"env_id": args.env, "load_start": os.getloadavg()[0], "runs": {}}
     for n in args.num_envs:
         label = "gym.make" if n == 0 else f"make_vec x{n}"
-        cold, warm, imports = [], [], []
+        cold, warm, imports, cold_ratio, warm_ratio, reference = [], [], [], [], [], []
         for r in range(args.repeats):
             with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
+                before = _reference()
                 first = _measure(args.env, n, cache, args.kernels and r == 0)
                 second = _measure(args.env, n, cache, False)
+                after = _reference()
             cold.append(first["first_step_s"])
             warm.append(second["first_step_s"])
             imports.append(second["import_s"])
+            # Import + make + reset + step, each over the mean of the references around it.
+            ref = (before + after) / 2
+            reference.append(ref)
+            cold_ratio.append(first["total_s"] / ref)
+            warm_ratio.append(second["total_s"] / ref)
             if first["compiles"]:
                 print(f"{label}: cold compilations (s, nested)")
                 for _, depth, name, seconds in first["compiles"]:
                     if seconds >= 0.1:
                         print(f"  {'  ' * depth}{seconds:6.2f} {name}")
-        results["runs"][label] = {"cold_s": cold, "warm_s": warm, "import_s": imports}
+        results["runs"][label] = {
+            "cold_s": cold,
+            "warm_s": warm,
+            "import_s": imports,
+            "reference_s": reference,
+            "cold_ratio": cold_ratio,
+            "warm_ratio": warm_ratio,
+        }
         print(f"{label:>14}: cold {_summary(cold)}  warm {_summary(warm)}  import {_summary(imports)}")
+        print(
+            f"{'':>14}  import+first step / CartPole-v1's ({_summary(reference).strip()}): "
+            f"cold {statistics.median(cold_ratio):.1f}x ({min(cold_ratio):.1f}..{max(cold_ratio):.1f}), "
+            f"warm {statistics.median(warm_ratio):.1f}x ({min(warm_ratio):.1f}..{max(warm_ratio):.1f})"
+        )
     results["load_end"] = os.getloadavg()[0]
     print(f"load average {results['load_start']:.1f} -> {results['load_end']:.1f}")
     if args.json:
