@@ -13,7 +13,9 @@ order of :func:`coop_gym.envs.reset.draw_reset`, then ``substeps x NORMALS_PER_S
 standard normals per non-lift step. So env ``i`` of a vector env seeded ``s`` and a single env
 seeded ``s + i`` see identical streams. The kernels draw through the generator's own C
 functions with NumPy's algorithms (:mod:`compiled.rng`), so the ``Generator`` object stays the
-single source of truth. A batch of at least 2 x
+single source of truth. Envs seeded together (:meth:`SitToStandCore.seed_envs`, the vector
+env's ``reset(seed=...)``) keep that ``Generator``'s PCG64 state in arrays instead
+(:mod:`compiled.seeding`) until ``rngs[i]`` asks for the object. A batch of at least 2 x
 :data:`~coop_gym.envs.threads.MIN_ENVS_PER_THREAD` envs steps on several threads
 (:mod:`coop_gym.envs.threads`), with the same numbers.
 """
