@@ -7,6 +7,8 @@ Kept here, the imports run one way (``cli -> rl -> evaluate``). Examples::
     python -m agents.evaluate --agent handbook --personas test --episodes 1000
     python -m agents.evaluate --model runs/.../model.zip --json
     python -m agents.evaluate --model runs/...__rllib_ppo__.../    # an RLlib run folder
+    python -m agents.evaluate --model pretrained:hard-ppo --compare blind,prober,oracle
+    python -m agents.evaluate --compare blind,prober,oracle --env CoopGym/SitToStandHard-v1 --human played.csv
     python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
         --csv out.csv --plot out.png
 
@@ -34,6 +36,7 @@ from agents.evaluate import (
     write_json,
 )
 from agents.evaluate.runs import aggregate_runs, read_run_score, runs_in
+from agents.pretrained import PREFIX, is_pretrained, pretrained_names
 from agents.run_folder import is_rllib_run
 from agents.scripted import SCRIPTED_AGENTS
 from coop_gym.cli import output_path_problem, seed_range_problem
@@ -47,16 +50,23 @@ def _parser() -> argparse.ArgumentParser:
         prog="python -m agents.evaluate",
         description="Score agents on the same seeded sit-to-stand episodes (episode k uses seed + k).",
     )
-    who = parser.add_argument_group("agent (one of --agent, --model, --compare; or --runs)")
+    who = parser.add_argument_group("agent (one of --agent, --model, --compare, --human; or --runs)")
     who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
     who.add_argument(
         "--model",
-        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent) or an RLlib run folder (agents.rllib)",
+        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent), an RLlib run folder (agents.rllib) "
+        f"or a model shipped with the package ({', '.join(PREFIX + n for n in pretrained_names())})",
     )
     who.add_argument(
         "--compare",
         help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
         "(--agent/--model, if given, are added first)",
+    )
+    who.add_argument(
+        "--human",
+        metavar="CSV",
+        help="add the episodes played with python -m agents.play as the 'human' row (replayed on their own seeds; "
+        "scored against blind and oracle on those seeds, never the best non-oracle)",
     )
     who.add_argument(
         "--runs",
@@ -112,6 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 args.seed,
                 n_envs=args.n_envs,
                 deterministic=not args.stochastic,
+                env_kwargs=None if isinstance(agent, str) else getattr(agent, "env_kwargs", None),
                 name=label,
                 backend=args.backend,
             )
@@ -119,7 +130,36 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 2
         results.append(result)
+    if args.human:
+        from agents.play_log import score_played
+
+        try:
+            results.append(score_played(args.human, _human_env(parser, args, planned)))
+        except ValueError as exc:
+            print(f"error: --human {args.human}: {exc}", file=sys.stderr)
+            return 2
     return _report(args, results)
+
+
+def _human_env(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, planned: list[tuple[Agent | str, str, str]]
+) -> str:
+    """The env whose played episodes ``--human`` scores: the agents' env, else ``--env``, else the CSV's only one.
+
+    Raises:
+        ValueError: the CSV cannot be read (only when its env id is needed).
+    """
+    envs = sorted({env_id for _, env_id, _ in planned})
+    if len(envs) > 1:
+        parser.error(f"--human: the agents play on different envs ({', '.join(envs)}): give --env")
+    if envs:
+        return envs[0]
+    if args.env is not None:
+        return str(args.env)
+    from agents.play_log import read_played
+
+    played = sorted({e.env_id for e in read_played(args.human)})
+    return played[0] if len(played) == 1 else DEFAULT_ENV_ID
 
 
 def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
@@ -131,8 +171,10 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
         entries.append(args.model)
     if args.compare:
         entries.extend(e.strip() for e in args.compare.split(",") if e.strip())
-    if not entries:
-        parser.error("give --agent NAME, --model PATH or --compare NAME,NAME,...")
+    if not entries and not args.human:
+        parser.error("give --agent NAME, --model PATH, --compare NAME,NAME,... or --human CSV")
+    if args.human and not Path(args.human).is_file():
+        parser.error(f"--human: no played-episodes CSV at {args.human} (python -m agents.play writes one)")
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
     if args.n_envs < 1:
@@ -157,7 +199,11 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
             f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
         )
     for entry in entries:
-        if entry not in SCRIPTED_AGENTS and not Path(entry).exists():
+        if is_pretrained(entry) and entry.removeprefix(PREFIX) not in pretrained_names():
+            parser.error(
+                f"unknown pretrained model {entry!r}; known: {', '.join(PREFIX + n for n in pretrained_names())}"
+            )
+        if entry not in SCRIPTED_AGENTS and not is_pretrained(entry) and not Path(entry).exists():
             parser.error(
                 f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
             )
@@ -169,7 +215,7 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
     if entry in SCRIPTED_AGENTS:
         return entry, args.env or DEFAULT_ENV_ID, entry
     folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
-    if is_rllib_run(entry):
+    if not is_pretrained(entry) and is_rllib_run(entry):
         from agents.rllib import load_rllib_agent
 
         try:
@@ -185,10 +231,11 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
     except (OSError, ValueError) as exc:
         parser.error(f"--model {entry}: {exc}")
     env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
-    problem = feature_mismatch(loaded.features, observation_features(env_id), env_id)
+    problem = feature_mismatch(loaded.features, observation_features(env_id, env_kwargs=loaded.env_kwargs), env_id)
     if problem:
         parser.error(f"--model {entry}: {problem}")
-    return loaded, env_id, f"{loaded.algo}:{folder.name or Path(entry).stem}"
+    label = loaded.name if is_pretrained(entry) else f"{loaded.algo}:{folder.name or Path(entry).stem}"
+    return loaded, env_id, label
 
 
 def _scripted_on_the_models_env(

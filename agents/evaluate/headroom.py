@@ -18,6 +18,14 @@ percentile bootstrap: episodes are resampled, and the agent, the best blind poli
 oracle are scored on the same resampled episodes (they played the same seeds), so the
 interval reflects the episodes drawn, not three independent samples.
 
+A person's row (:data:`HUMAN_AGENTS`, the episodes played with ``python -m agents.play``)
+is never the best non-oracle: a person plays a handful of seeds of their own choosing, not
+the comparison's episodes, so their success rate is not comparable with the agents' and
+would silently become the "achieved insight". The headroom is computed from the other rows;
+the person still gets a mind-reading score, against the best blind policy and the oracle on
+exactly the episodes they played (matched by seed; ``-`` when the comparison did not play
+them all, on the same persona set).
+
 Across training seeds (one score per run and level), :func:`iqm_across_runs` reports the
 interquartile mean with a stratified bootstrap interval: runs are resampled within each
 level, as rliable does (Agarwal et al., "Deep RL at the Edge of the Statistical Precipice",
@@ -26,6 +34,7 @@ NeurIPS 2021). Both intervals come from :func:`scipy.stats.bootstrap`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -40,6 +49,7 @@ from agents.evaluate.results import EvaluationResult
 
 __all__ = [
     "BLIND_AGENTS",
+    "HUMAN_AGENTS",
     "ORACLE_AGENTS",
     "AggregateScore",
     "Headroom",
@@ -52,6 +62,9 @@ ORACLE_AGENTS = ("oracle",)
 """Agents that see the true mental state: upper bounds, never the "best non-oracle"."""
 BLIND_AGENTS = ("blind", "push_then_lift", "lift_at_once", "random")
 """Scripted agents that never use the cue-response evidence (lean, timers and pushes only)."""
+HUMAN_AGENTS = ("human",)
+"""Rows of episodes people played (:func:`agents.play_log.score_played`): scored on their own
+episodes, never the "best non-oracle"."""
 N_RESAMPLES = 2000
 """Bootstrap resamples: the percentile interval's ends move by well under a point beyond this."""
 BOOTSTRAP_SEED = 0
@@ -77,9 +90,11 @@ class MindReadingScore:
     ci95: Interval
 
     def text(self) -> str:
-        """``0.78 [0.74, 0.82]`` (``-`` when undefined)."""
+        """``0.78 [0.74, 0.82]`` (``-`` when undefined; no interval when it is, e.g. for one episode)."""
         if not math.isfinite(self.score):
             return "-"
+        if not all(math.isfinite(end) for end in self.ci95):
+            return f"{self.score:.2f}"
         return f"{self.score:.2f} [{self.ci95[0]:.2f}, {self.ci95[1]:.2f}]"
 
 
@@ -138,6 +153,11 @@ class Headroom:
                 f"mind-reading score = (success - best blind) / (oracle - best blind): "
                 f"{self.best_reader_agent} {best.text()} (0: ignores the mind, 1: the oracle)"
             )
+        for person in (s for s in self.scores if _kind(s.agent) == "human"):
+            out.append(
+                f"{person.agent}: mind-reading score {person.text()} on the episodes played "
+                "(against the best blind and the oracle on the same seeds; not a candidate for best non-oracle)"
+            )
         return out
 
     def as_json(self) -> dict[str, Any]:
@@ -171,9 +191,12 @@ def _finite(value: Any) -> Any:
 
 
 def _kind(name: str) -> str:
-    """``"oracle"``, ``"blind"`` or ``"reader"`` from an agent's name in a comparison."""
+    """``"oracle"``, ``"blind"``, ``"human"`` or ``"reader"`` from an agent's name in a comparison."""
     base = name.split(":")[0].split(" ")[0]
-    return "oracle" if base in ORACLE_AGENTS else ("blind" if base in BLIND_AGENTS else "reader")
+    for kind, names in (("oracle", ORACLE_AGENTS), ("blind", BLIND_AGENTS), ("human", HUMAN_AGENTS)):
+        if base in names:
+            return kind
+    return "reader"
 
 
 def _paired(results: Sequence[EvaluationResult]) -> bool:
@@ -228,16 +251,39 @@ def mind_reading_score(result: EvaluationResult, blind: EvaluationResult, oracle
     return MindReadingScore(result.agent, point, ci)
 
 
+def _on_episodes_of(person: EvaluationResult, result: EvaluationResult) -> EvaluationResult | None:
+    """``result`` cut to the episodes ``person`` played, in their order (None unless it played them all).
+
+    The same seed is the same person only on the same env and persona set.
+    """
+    if (person.env_id, set(person.personas)) != (result.env_id, set(result.personas)):
+        return None
+    by_seed = {r.seed: r for r in result.records}
+    if any(r.seed not in by_seed for r in person.records):
+        return None
+    return dataclasses.replace(result, records=tuple(by_seed[r.seed] for r in person.records))
+
+
+def _person_score(person: EvaluationResult, blind: EvaluationResult, oracle: EvaluationResult) -> MindReadingScore:
+    """A person's mind-reading score on the episodes they played (NaN when the comparison lacks some)."""
+    blind_there, oracle_there = _on_episodes_of(person, blind), _on_episodes_of(person, oracle)
+    if blind_there is None or oracle_there is None:
+        return MindReadingScore(person.agent, math.nan, (math.nan, math.nan))
+    return mind_reading_score(person, blind_there, oracle_there)
+
+
 def headroom(results: Sequence[EvaluationResult]) -> Headroom | None:
     """:class:`Headroom` of a comparison on the same episodes.
 
     None without an oracle and a blind agent, or when the results did not play the same seeded
-    episodes (e.g. rows split by persona).
+    episodes (e.g. rows split by persona). Rows of :data:`HUMAN_AGENTS` are left out of the
+    anchors and of the best non-oracle; each is scored on the episodes it played.
     """
-    if not _paired(results):
+    agents = [r for r in results if _kind(r.agent) != "human"]
+    if not _paired(agents):
         return None
     best: dict[str, EvaluationResult] = {}
-    for result in results:
+    for result in agents:
         k = _kind(result.agent)
         if k not in best or result.success_rate > best[k].success_rate:
             best[k] = result
@@ -254,7 +300,10 @@ def headroom(results: Sequence[EvaluationResult]) -> Headroom | None:
         oracle_agent=oracle.agent,
         value_ci95=_paired_interval(_difference, (_successes(oracle), _successes(blind))),
         insight_ci95=_paired_interval(_difference, (_successes(reader), _successes(blind))),
-        scores=tuple(mind_reading_score(r, blind, oracle) for r in results),
+        scores=tuple(
+            _person_score(r, blind, oracle) if _kind(r.agent) == "human" else mind_reading_score(r, blind, oracle)
+            for r in results
+        ),
     )
 
 

@@ -30,6 +30,7 @@ import coop_gym
 from agents.base import feature_mismatch
 from agents.hyperparams import ALGORITHMS
 from agents.normalize import ObsNormalizer
+from agents.pretrained import PREFIX, is_pretrained, pretrained_card, pretrained_model_path
 from agents.rl.training import algorithm_class, find_vec_normalize, observation_features
 from agents.run_folder import AGENT_FILE, MODEL_FILE, VECNORMALIZE_FILE
 from coop_gym.io import atomic_path, write_bytes, write_json
@@ -209,6 +210,9 @@ class SB3Agent:
         env_id: Env id it was trained on (None if unknown).
         obs_normalizer: The observation normalisation the model was trained with (or None).
         features: The observation feature names it was trained on (None if unknown).
+        env_kwargs: Env kwargs beyond the env id's own that it plays with (a pretrained
+            model's card says, e.g. the switching filter's estimate in the observation).
+        name: Its name in an evaluation (default: ``algo``).
     """
 
     def __init__(
@@ -218,13 +222,16 @@ class SB3Agent:
         env_id: str | None = None,
         obs_normalizer: ObsNormalizer | None = None,
         features: tuple[str, ...] | None = None,
+        env_kwargs: dict[str, Any] | None = None,
+        name: str | None = None,
     ) -> None:
         """Wrap the model."""
         self.model = model
         self.features = features
         self.algo = algo
         self.env_id = env_id
-        self.name = algo
+        self.env_kwargs = dict(env_kwargs or {})
+        self.name = name or algo
         self.obs_normalizer = obs_normalizer
         self.observation_space = model.observation_space
         self.action_space = model.action_space
@@ -250,15 +257,26 @@ class SB3Agent:
 
 
 def load_agent(path: str | Path) -> SB3Agent:
-    """Load a saved agent (a model folder or its ``model.zip``) for evaluation.
+    """Load a saved agent (a model folder, its ``model.zip``, or ``pretrained:NAME``) for evaluation.
+
+    ``pretrained:NAME`` is a model shipped in :mod:`agents.pretrained`; its card's env kwargs
+    come along (``agent.env_kwargs``) and its name is ``pretrained:NAME``.
 
     Returns:
         An :class:`SB3Agent` with the model's algorithm, env id and normalisation.
 
     Raises:
         FileNotFoundError: nothing saved at ``path``.
-        ValueError: the file is not a loadable SB3 model.
+        ValueError: the file is not a loadable SB3 model, or an unknown pretrained name
+            (the message lists the known ones).
     """
+    if is_pretrained(path):
+        assert isinstance(path, str)
+        card = pretrained_card(path)
+        agent = load_agent(pretrained_model_path(path))
+        agent.name = PREFIX + card["name"]
+        agent.env_kwargs = dict(card.get("env_kwargs") or {})
+        return agent
     model_path, saved_info = resolve_saved(path)
     model, info = load_model(model_path)
     _, bundled = read_bundle(model_path)

@@ -171,8 +171,11 @@ def find_vec_normalize(env: VecEnv | None) -> VecNormalize | None:
     return None
 
 
-def observation_features(env_id: str, env: VecEnv | None = None) -> list[str]:
-    """The observation feature names of ``env`` (a training ``VecEnv``) or of a fresh ``env_id`` env."""
+def observation_features(env_id: str, env: VecEnv | None = None, env_kwargs: dict[str, Any] | None = None) -> list[str]:
+    """The observation feature names of ``env`` (a training ``VecEnv``) or of a fresh ``env_id`` env.
+
+    ``env_kwargs`` are passed to the fresh env (e.g. ``estimator="switching"`` adds its estimate).
+    """
     from agents.base import features_of
 
     if env is not None:
@@ -180,7 +183,7 @@ def observation_features(env_id: str, env: VecEnv | None = None) -> list[str]:
             return [str(f) for f in env.get_attr("features", indices=[0])[0]]
         except (AttributeError, IndexError):
             pass
-    single = gym.make(env_id)
+    single = gym.make(env_id, **(env_kwargs or {}))
     try:
         return list(features_of(single))
     finally:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -247,6 +248,21 @@ def test_no_score_without_the_same_episodes_or_without_anchors():
     assert headroom([_result("prober", 30), _result("blind", 20)]) is None  # no oracle
     room = headroom([_result("oracle", 20), _result("blind", 20), _result("prober", 10)])
     assert room is not None and np.isnan(room.score_of("prober").score)  # nothing to read: undefined
+
+
+def test_a_human_row_is_scored_on_its_own_episodes_and_is_never_the_best_reader():
+    # The person played seeds 0, 1, 2 and 30 (first_seed 0, 40 anchors' episodes) and succeeded in all.
+    human = _result("human", 4, n=4)
+    human = dataclasses.replace(human, records=(*human.records[:3], dataclasses.replace(human.records[3], seed=30)))
+    room = headroom([_result("oracle", 40), _result("blind", 20), _result("prober", 30), human])
+    assert room is not None and room.best_reader_agent == "prober"  # not the human's 100 %
+    # Blind succeeds in 3 of the 4 seeds (0-2, not 30), the oracle in 4: the human scores 1.
+    assert room.score_of("human").score == pytest.approx(1.0)
+    assert any(line.startswith("human: mind-reading score 1.00") for line in room.lines())
+    # Seeds the comparison did not play (or another persona set): no score, the rest unchanged.
+    elsewhere = _result("human", 4, n=4, first_seed=500)
+    room = headroom([_result("oracle", 40), _result("blind", 20), elsewhere])
+    assert room is not None and room.best_reader_agent == "blind" and np.isnan(room.score_of("human").score)
 
 
 def test_table_csv_and_json_carry_the_score(tmp_path):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 pytest.importorskip("pygame")
@@ -141,3 +143,23 @@ def test_a_line_that_no_longer_replays_is_refused(tmp_path):
         score_played(csv_path, ENV_ID)
     with pytest.raises(ValueError, match="no played episode of CoopGym/SitToStand-v0"):
         score_played(csv_path, "CoopGym/SitToStand-v0")
+
+
+def test_evaluate_human_adds_the_played_csv_as_the_human_row(tmp_path, capsys):
+    from agents.evaluate.cli import main as evaluate
+
+    csv_path = tmp_path / "played.csv"
+    (episode,) = play(ENV_ID, 5, "test", csv_path, fps=0, episodes=1, keys=scripted_keys(SCRIPT))
+    argv = ["--compare", "blind,oracle", "--env", ENV_ID, "--episodes", "8", "--human", str(csv_path)]
+    assert evaluate(argv) == 0
+    table = capsys.readouterr().out
+    assert any(line.lstrip("│┃ ").startswith("human ") for line in table.splitlines())
+    assert "best non-oracle (blind)" in table and "human: mind-reading score" in table
+    # Alone, on the CSV's own env id; its outcome is the one played.
+    assert evaluate(["--human", str(csv_path), "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["agent"] == "human" and row["env_id"] == ENV_ID and row["episodes"] == 1
+    assert row[f"{episode.outcome}_rate"] == 1.0
+    with pytest.raises(SystemExit) as exc:
+        evaluate(["--agent", "blind", "--human", str(tmp_path / "none.csv")])
+    assert exc.value.code == 2 and "--human: no played-episodes CSV" in capsys.readouterr().err

@@ -1,0 +1,154 @@
+r"""Ship a trained model as a pretrained caregiver: copy it into ``agents/pretrained/`` and write its card.
+
+The card (``agents/pretrained/NAME.json``) holds what a user needs to trust the model: the env
+it plays (id and kwargs), how it was trained, and its held-out table -- the model beside the
+best blind policy, the prober and the oracle on the same ``--episodes`` seeded episodes of the
+``test`` personas, each with success, unsafe, premature and timeout rates (95 % Wilson
+intervals) and the mind-reading score -- exactly what ::
+
+    python -m agents.evaluate --model pretrained:NAME --compare blind,push_then_lift,prober,oracle \
+        --personas test --episodes 1000 --seed 0
+
+prints. ``check`` holds the outcome counts and mean return of the model alone on the first
+``--check-episodes`` of those episodes, which ``tests/agents/test_pretrained.py`` reproduces
+exactly (the evaluation is deterministic: the same seeds, a deterministic policy)::
+
+    python scripts/make_pretrained_card.py hard-ppo --model /tmp/pre/RUN/model.zip \
+        --command "python train.py --out /tmp/pre" --training-json /tmp/pre/RUN/training.json
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tyro
+
+BASELINES = ("blind", "push_then_lift", "prober", "oracle")
+"""The agents beside the model: the blind family's two best, the prober and the oracle."""
+PRETRAINED = Path(__file__).resolve().parents[1] / "agents" / "pretrained"
+
+
+@dataclass
+class Args:
+    """Command-line arguments; each field's docstring is its ``--help``."""
+
+    name: tyro.conf.Positional[str]
+    """the pretrained model's name (hard-ppo: loaded as pretrained:hard-ppo)"""
+    model: str
+    """the trained model.zip (agents.rl.save_agent's bundle)"""
+    command: str
+    """the command that trained it (recorded in the card)"""
+    training_json: str
+    """the training summary (train.py's training.json or the script's): steps, wall time, seed"""
+    env_kwargs: str = "{}"
+    """env kwargs the model plays with, as JSON (the switching filter's estimate: {"estimator": "switching", ...})"""
+    notes: list[str] = field(default_factory=list)
+    """sentences for the card's notes"""
+    episodes: int = 1000
+    """held-out evaluation episodes (seeds seed .. seed + episodes - 1)"""
+    check_episodes: int = 200
+    """the first episodes the test replays"""
+    seed: int = 0
+    """seed of evaluation episode 0"""
+    n_envs: int = 64
+    """episodes played side by side (python -m agents.evaluate's default)"""
+
+
+def _row(result: Any, score: Any) -> dict[str, Any]:
+    """One row of the card's table."""
+    row: dict[str, Any] = {"agent": result.agent, "episodes": result.episodes}
+    for outcome in ("success", "unsafe", "premature", "timeout"):
+        row[outcome] = result.rate(outcome)
+        row[f"{outcome}_ci95"] = list(result.interval(outcome))
+    row["mind_reading_score"] = score.score if score is not None else None
+    row["mind_reading_score_ci95"] = list(score.ci95) if score is not None else None
+    row["mean_return"] = result.mean_return
+    return row
+
+
+def _counts(result: Any) -> dict[str, Any]:
+    """What the test compares: the outcome counts and the mean return."""
+    counts: dict[str, Any] = {o: result.count(o) for o in ("success", "unsafe", "premature", "timeout")}
+    return {
+        "episodes": result.episodes,
+        **counts,
+        "success_rate": result.success_rate,
+        "mean_return": result.mean_return,
+    }
+
+
+def main() -> None:
+    """Copy the model, evaluate it and the baselines, write the card."""
+    args = tyro.cli(Args)
+    from agents.evaluate import evaluate, headroom, print_table
+    from agents.rl import load_agent
+
+    env_kwargs = json.loads(args.env_kwargs)
+    training = json.loads(Path(args.training_json).read_text())
+    training = training.get("training", training)
+    target = PRETRAINED / f"{args.name}.zip"
+    shutil.copyfile(args.model, target)
+    agent = load_agent(target)
+    assert agent.env_id is not None
+    env_id = agent.env_id
+    label = f"pretrained:{args.name}"
+    common: dict[str, Any] = {"personas": "test", "seed": args.seed, "n_envs": args.n_envs}
+
+    model_result = evaluate(agent, env_id, episodes=args.episodes, env_kwargs=env_kwargs, name=label, **common)
+    results = [model_result] + [evaluate(b, env_id, episodes=args.episodes, **common) for b in BASELINES]
+    room = headroom(results)
+    assert room is not None
+    print_table(results)
+    check = evaluate(agent, env_id, episodes=args.check_episodes, env_kwargs=env_kwargs, name=label, **common)
+    first = model_result.records[: args.check_episodes]
+    same = [(r.outcome, r.episode_return) for r in first] == [(r.outcome, r.episode_return) for r in check.records]
+
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False)
+    card = {
+        "name": args.name,
+        "model": target.name,
+        "algo": agent.algo,
+        "env_id": env_id,
+        "env_kwargs": env_kwargs,
+        "features": list(agent.features or ()),
+        "training": {
+            "command": args.command,
+            "seed": training.get("seed", 0),
+            "timesteps": training["timesteps"],
+            "n_envs": training.get("n_envs"),
+            "personas": training.get("personas"),
+            "wall_time_s": round(float(training["wall_time_s"]), 1),
+            "hyperparams": f"agents/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']",
+        },
+        "evaluation": {
+            "command": (
+                f"python -m agents.evaluate --model {label} --compare {','.join(BASELINES)} "
+                f"--personas test --episodes {args.episodes} --seed {args.seed}"
+            ),
+            "personas": "test",
+            "episodes": args.episodes,
+            "seed": args.seed,
+            "n_envs": args.n_envs,
+            "best_blind_agent": room.best_blind_agent,
+            "table": [_row(r, room.score_of(r.agent)) for r in results],
+        },
+        "check": {
+            "what": f"the model alone on the first {args.check_episodes} episodes of the evaluation "
+            "(tests/agents/test_pretrained.py reproduces these exactly)",
+            **_counts(check),
+            "same_as_the_evaluations_first_episodes": same,
+        },
+        "carded_at_commit": commit.stdout.strip(),
+        "notes": args.notes,
+    }
+    (PRETRAINED / f"{args.name}.json").write_text(json.dumps(card, indent=2) + "\n")
+    print(f"wrote {target} and {target.with_suffix('.json')}")
+
+
+if __name__ == "__main__":
+    main()
