@@ -29,10 +29,18 @@ from numpy.typing import NDArray
 from compiled.cache import guard_kernel_cache
 from compiled.rng import G_STATE, bit_generator_row
 
-__all__ = ["LAYOUT", "MAX_BATCH_SEED", "EnvGenerators", "seed_states"]
+__all__ = ["LAYOUT", "MAX_BATCH_SEED", "MIN_BATCH_ENVS", "EnvGenerators", "seed_states"]
 
 MAX_BATCH_SEED = 2**63 - 1
 """Seeds up to this are seeded in the batch; a larger one gets its ``Generator`` object."""
+
+MIN_BATCH_ENVS = 10_000
+"""Fewer envs than this are seeded with a ``Generator`` object each (the same numbers).
+
+On a fresh install :func:`seed_states` costs a compile of ~1 s (``python bench/cold_start.py
+--num-envs 1024 --kernels``), about what 10^4 ``Generator`` objects cost (``python bench/reset.py``);
+a smaller batch would only pay it on the first step of every fresh install.
+"""
 
 # NumPy's SeedSequence (numpy/random/bit_generator.pyx): a pool of 4 uint32 words hashed from
 # the seed's 32-bit words, then hashed out into the bit generator's seed words.
@@ -240,7 +248,7 @@ class EnvGenerators:
 
     def seed(self, indices: NDArray[np.int64], seeds: NDArray[np.uint64]) -> None:
         """Env ``indices[r]`` draws from ``Generator(PCG64(seeds[r]))`` (seeds up to :data:`MAX_BATCH_SEED`)."""
-        if LAYOUT is None:
+        if LAYOUT is None or indices.shape[0] < MIN_BATCH_ENVS:
             for i, s in zip(indices.tolist(), seeds.tolist(), strict=True):
                 self.set(i, np.random.Generator(np.random.PCG64(s)))
             return

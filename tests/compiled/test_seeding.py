@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from numba import njit
 
+from compiled import seeding
 from compiled.rng import integers, random, standard_normal
 from compiled.seeding import LAYOUT, MAX_BATCH_SEED, EnvGenerators, seed_states
 
@@ -54,6 +55,12 @@ def _generator_draws(rng: np.random.Generator, count: int, offset: int = 0) -> l
         else:
             out.append(float(rng.random()))
     return out
+
+
+@pytest.fixture(autouse=True)
+def _always_in_arrays(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Small batches here too: the arrays, not a Generator object each.
+    monkeypatch.setattr(seeding, "MIN_BATCH_ENVS", 0)
 
 
 @pytest.mark.parametrize("split", [1, 4, 10])

@@ -6,11 +6,22 @@ import pickle
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import coop_gym  # noqa: F401  (registers the ids)
+from compiled import seeding
 from compiled.seeding import MAX_BATCH_SEED
 
 ENV_ID = "CoopGym/SitToStand-v0"
+
+
+@pytest.fixture(autouse=True, params=["in arrays", "objects"])
+def _batch(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Both ways of seeding a batch: the compiled one (the arrays) and a Generator object each.
+    if request.param == "in arrays":
+        monkeypatch.setattr(seeding, "MIN_BATCH_ENVS", 0)
+
+
 ACTIONS = np.array([[1, 2, 0], [2, 0, 0], [0, 1, 0]])
 
 
