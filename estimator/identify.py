@@ -349,6 +349,7 @@ def identify(
         The best run's fitted model and diagnostics.
 
     Example:
+        >>> from estimator.nominal_trials import simulate_nominal_trials
         >>> trials = simulate_nominal_trials(NominalModel(), 5, 300, np.random.default_rng(0))
         >>> result = identify(trials, restarts=1)
         >>> result.success, result.model.dt_s, sorted(result.standard_errors) == sorted(result.fitted_fields)

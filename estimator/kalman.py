@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 from numba import njit
 from numpy.typing import NDArray
 
@@ -354,6 +353,10 @@ class PaperKalmanFilter:
     def __init__(self, model: NominalModel, first_position_m: float = 0.0) -> None:
         """Create the filter centred on the first measurement."""
         self.model = model
+        # filterpy (and the scipy.stats it imports, ~2 s) loads only when the reference filter is built:
+        # `import coop_gym` and the compiled filter never need it.
+        from filterpy.kalman import KalmanFilter
+
         self.kf = KalmanFilter(dim_x=STATE_DIM, dim_z=1, dim_u=1)
         self.kf.x = model.initial_state(first_position_m).reshape(STATE_DIM, 1)
         self.kf.P = model.initial_covariance()

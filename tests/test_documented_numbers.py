@@ -47,7 +47,8 @@ def _reward_weights() -> tuple[float, ...]:
 
 
 def _max_episode_steps() -> tuple[float, ...]:
-    steps = {gym.spec(env_id).max_episode_steps for env_id in coop_gym.ENV_IDS}
+    # The ids register no TimeLimit; each env reports its own length in its spec.
+    steps = {gym.make(env_id).spec.max_episode_steps for env_id in coop_gym.ENV_IDS}
     assert len(steps) == 1
     return (float(steps.pop()),)
 

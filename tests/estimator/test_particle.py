@@ -142,6 +142,7 @@ def test_the_env_estimate_is_deterministic_and_leaves_the_person_alone():
     truth_kf, _, _ = _play("kalman", 5)
     truth_a, obs_a, features = _play("switching", 5, estimator_options=options)
     truth_b, obs_b, _ = _play("switching", 5, estimator_options=options)
+    np.testing.assert_array_equal(truth_b, truth_a)
     # The particles draw from their own generator: the person moves exactly as with the paper's filter.
     np.testing.assert_array_equal(truth_a, truth_kf)
     np.testing.assert_array_equal(obs_a, obs_b)
@@ -156,7 +157,8 @@ def test_env_options_reach_the_filter_and_bad_ones_are_named():
 
     import coop_gym  # noqa: F401
 
-    env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching", estimator_options={"n_particles": 32, "hypotheses": 8})
+    small = {"n_particles": 32, "hypotheses": 8}
+    env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching", estimator_options=small)
     env.reset(seed=0)
     bank = env.unwrapped.core.mm
     assert bank.filter.n_particles == 32
