@@ -93,7 +93,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("train.py", "resume nothing", ["--resume", "/nonexistent/run"], r"--resume: nothing saved at /nonexistent/run"),
     ("train.py", "threads 0", ["--threads", "0"], r"--threads >= 1"),
     ("train.py", "eval-points < 0", ["--eval-points", "-1"], r"--eval-points must be >= 0"),
-    ("agents.evaluate", "no agent", [], r"give --agent NAME, --model PATH or --compare"),
+    ("agents.evaluate", "no agent", [], r"give --agent NAME, --model PATH, --compare NAME,NAME,\.\.\. or --human CSV"),
     ("agents.evaluate", "unknown flag", ["--agent", "random", "--bogus"], r"unrecognized arguments: --bogus"),
     ("agents.evaluate", "unknown agent", ["--agent", "nobody"], r"'nobody' is neither a scripted agent"),
     ("agents.evaluate", "missing model", ["--model", "/nonexistent/model.zip"], r"neither a scripted agent .* model"),

@@ -59,7 +59,12 @@ def test_run_folder_is_complete_and_the_model_loads(first_run):
     # ... and the mind-reading score of every agent, the learned one first, beside its rates.
     learned = results["evaluation"]["results"][0]
     assert "mind_reading_score" in learned and set(room["mind_reading_score"]) >= {"ppo (learned)", "blind", "oracle"}
-    assert room["mind_reading_score"]["oracle"]["score"] == pytest.approx(1.0)
+    # The oracle scores 1 by definition -- where the score is defined: on these 8 episodes the widened blind
+    # policy may succeed as often as the oracle, and then no score is made up.
+    if room["oracle"] > room["best_blind"]:
+        assert room["mind_reading_score"]["oracle"]["score"] == pytest.approx(1.0)
+    else:
+        assert room["mind_reading_score"]["oracle"]["score"] is None
     assert all(r["episodes"] == 8 and r["personas"] == ["frail", "forgetful"] for r in results["evaluation"]["results"])
     assert set(results["verdict"]) >= {"higher_success_than_handbook", "no_more_unsafe_than_handbook"}
     assert results["training"]["timesteps"] >= 256
