@@ -44,7 +44,7 @@ Modes are ordered ``xi = -1, 0, +1`` in every ``(..., 3)`` array, as in
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -227,7 +227,7 @@ class SwitchingParticleFilter:
         n_noises: int,
         position_column: int,
         xi_column: int,
-        rngs: list[np.random.Generator],
+        rngs: Sequence[np.random.Generator],
         n_particles: int = 256,
         mode_prior: ArrayLike = (0.3, 0.6, 0.1),
         lean_std_m: float = 0.01,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -126,7 +127,7 @@ def training_mode_prior() -> tuple[float, float, float]:
 def switching_filter(
     person_rows: NDArray[np.float64],
     timing: Timing,
-    rngs: list[np.random.Generator],
+    rngs: Sequence[np.random.Generator],
     options: SwitchingOptions | dict[str, Any] | None = None,
 ) -> SwitchingParticleFilter:
     """A switching particle filter of ``len(rngs)`` envs over packed person rows.
@@ -228,7 +229,7 @@ class SwitchingEstimator:
         timing: Timing,
         realism: Realism,
         true_people: NDArray[np.float64],
-        rngs: list[np.random.Generator | None],
+        rngs: Sequence[np.random.Generator | None],
         options: SwitchingOptions | dict[str, Any] | None = None,
     ) -> None:
         self.options = _as_options(options)
