@@ -34,7 +34,6 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,18 +80,8 @@ class BeliefCaregiver(ScriptedAgent):
 
     name = "belief"
     needs = ("elapsed_s", "x_hat_m", "p_cooperative")
+    settings_class = BeliefSettings
     RECRUIT, SETTLE, PROBE = 0, 1, 2
-
-    def __init__(
-        self,
-        features: Sequence[str] | None = None,
-        action_type: str = "multidiscrete",
-        seed: int | None = None,
-        settings: BeliefSettings | None = None,
-    ) -> None:
-        """See :class:`ScriptedAgent`; ``settings`` default to :class:`BeliefSettings`."""
-        super().__init__(features, action_type, seed)
-        self.settings = settings or BeliefSettings()
 
     def _decide(
         self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]

@@ -125,6 +125,7 @@ class PushThenLiftAgent(ScriptedAgent):
     """
 
     name = "push_then_lift"
+    settings_class = PushThenLiftSettings
 
     def __init__(
         self,
@@ -133,9 +134,8 @@ class PushThenLiftAgent(ScriptedAgent):
         seed: int | None = None,
         settings: PushThenLiftSettings | None = None,
     ) -> None:
-        """See :class:`ScriptedAgent`; ``settings`` default to :class:`PushThenLiftSettings`."""
-        super().__init__(features, action_type, seed)
-        self.settings = settings or PushThenLiftSettings()
+        """See :class:`ScriptedAgent`; it reads ``x_hat_m`` where the observation has it."""
+        super().__init__(features, action_type, seed, settings)
         self.lean_feature = "x_hat_m" if "x_hat_m" in self.features else "measured_position_m"
         self.columns |= require_features(self.features, (self.lean_feature,), type(self).__name__)
 
@@ -208,18 +208,8 @@ class HandbookCaregiver(ScriptedAgent):
 
     name = "handbook"
     needs = ("elapsed_s", "verbal_cue", "x_hat_m", "judgment")
+    settings_class = HandbookSettings
     EXPLAIN, PAUSE, PUSH, LEAN = 0, 1, 2, 3
-
-    def __init__(
-        self,
-        features: Sequence[str] | None = None,
-        action_type: str = "multidiscrete",
-        seed: int | None = None,
-        settings: HandbookSettings | None = None,
-    ) -> None:
-        """See :class:`ScriptedAgent`; ``settings`` default to :class:`HandbookSettings`."""
-        super().__init__(features, action_type, seed)
-        self.settings = settings or HandbookSettings()
 
     def _decide(
         self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
@@ -290,6 +280,8 @@ class OracleAgent(ScriptedAgent):
     name = "oracle"
     needs = ("elapsed_s", "verbal_cue", "x_hat_m", "true_xi")
 
+    settings_class = OracleSettings
+
     def __init__(
         self,
         features: Sequence[str] | None = None,
@@ -298,10 +290,8 @@ class OracleAgent(ScriptedAgent):
         settings: OracleSettings | None = None,
     ) -> None:
         """See :class:`ScriptedAgent`; the default features are the oracle observation's."""
-        super().__init__(
-            features if features is not None else observation_features("oracle", "kalman"), action_type, seed
-        )
-        self.settings = settings or OracleSettings()
+        features = features if features is not None else observation_features("oracle", "kalman")
+        super().__init__(features, action_type, seed, settings)
 
     def _decide(
         self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
@@ -350,18 +340,8 @@ class ProbingCaregiver(ScriptedAgent):
 
     name = "prober"
     needs = ("elapsed_s", "x_hat_m")
+    settings_class = ProbingSettings
     RECRUIT, SETTLE, PROBE = 0, 1, 2
-
-    def __init__(
-        self,
-        features: Sequence[str] | None = None,
-        action_type: str = "multidiscrete",
-        seed: int | None = None,
-        settings: ProbingSettings | None = None,
-    ) -> None:
-        """See :class:`ScriptedAgent`; ``settings`` default to :class:`ProbingSettings`."""
-        super().__init__(features, action_type, seed)
-        self.settings = settings or ProbingSettings()
 
     def _decide(
         self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]

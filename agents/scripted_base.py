@@ -88,8 +88,8 @@ class PhaseState:
 class ScriptedAgent:
     """Base class: batching, feature lookup, per-env memory and action encoding.
 
-    Subclasses set :attr:`name` and :attr:`needs` (the features they read) and implement
-    :meth:`_decide`.
+    Subclasses set :attr:`name` and :attr:`needs` (the features they read), optionally
+    :attr:`settings_class` (the frozen dataclass of their settings), and implement :meth:`_decide`.
 
     Args:
         features: Names of the observation's features, in order (``env.unwrapped.features``
@@ -97,18 +97,27 @@ class ScriptedAgent:
             belief observation of the paper's Kalman filter.
         action_type: ``"multidiscrete"`` (default), ``"discrete"`` or ``"continuous"``.
         seed: Seed of the agent's own random generator (only :class:`RandomAgent` draws).
+        settings: An instance of :attr:`settings_class` (default: its defaults); agents without
+            settings take none.
     """
 
     name: ClassVar[str] = "scripted"
     needs: ClassVar[tuple[str, ...]] = ("elapsed_s",)
+    settings_class: ClassVar[type | None] = None
 
     def __init__(
         self,
         features: Sequence[str] | None = None,
         action_type: str = "multidiscrete",
         seed: int | None = None,
+        settings: Any = None,
     ) -> None:
-        """Check that the observation provides what the agent reads."""
+        """Check that the observation provides what the agent reads, and the settings."""
+        cls = self.settings_class
+        if settings is not None and (cls is None or not isinstance(settings, cls)):
+            wanted = "no settings" if cls is None else f"a {cls.__name__}"
+            raise ValueError(f"{type(self).__name__} takes {wanted}, got {type(settings).__name__}")
+        self.settings: Any = settings if settings is not None or cls is None else cls()
         if action_type not in ACTION_TYPES:
             raise ValueError(f"action_type must be one of {list(ACTION_TYPES)}, got {action_type!r}")
         self.features = tuple(features) if features is not None else observation_features("belief", "kalman")
