@@ -1,11 +1,14 @@
 """Where the person model and the switching particle filter meet: the filter's process model is the person.
 
 :class:`estimator.particle.SwitchingParticleFilter` is generic over its transition; here it is
-given the simulator's own person step (:func:`coop_gym.model.dynamics.person_substep`) and a
-NOMINAL person -- the ``typical`` persona at the env's difficulty level, which is what a
-caregiver may assume of someone they have not met. :func:`switching_filter` can also be given
-each episode's TRUE person (``true_person=True`` in :class:`SwitchingOptions`): the bound a
-caregiver who knew the person could reach.
+given the simulator's own person step (:func:`coop_gym.model.dynamics.person_substep`) and
+NOMINAL people -- what a caregiver may assume of someone they have not met: by default 128
+hypotheses drawn around the training personas at the env's difficulty level, each with its push
+compliance scaled over a wide range (:class:`SwitchingOptions`), which the particles share out
+and the readings weigh; ``hypotheses=1`` is the ``typical`` persona alone. With
+``true_person=True`` the filter is given each episode's TRUE person instead: the bound a
+caregiver who knew the person could reach. :class:`SwitchingEstimator` is the filter as the env
+core's estimator (``estimator="switching"``).
 """
 
 from __future__ import annotations
