@@ -377,14 +377,6 @@ class SwitchingParticleFilter:
             raise ValueError(f"push_force_n, verbal_cue and measured_position_m of env {failed} must be finite")
         return out
 
-    def probability(self, xi: int, min_position_m: float = -math.inf) -> NDArray[np.float64]:
-        """(N,) posterior probability that the mode is ``xi`` and the shoulder is at least ``min_position_m``."""
-        w = np.exp(self.log_w)
-        hit = (self.particles[:, :, self.xi_column] == float(xi)) & (
-            self.particles[:, :, self.position_column] >= min_position_m
-        )
-        return (w * hit).sum(axis=1)
-
 
 def reference_run(
     pf: SwitchingParticleFilter,
