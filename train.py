@@ -231,7 +231,9 @@ def _problem_with_paths(args: Args) -> str | None:
     problem = output_path_problem(args.out, folder=True)
     if problem:
         return f"--out: {problem}"
-    if args.model is not None and not (Path(args.model).exists() or Path(args.model).with_suffix(".zip").exists()):
+    shipped = args.model is not None and args.model.startswith("pretrained:")  # by name: agents.rl.load_agent
+    saved = args.model is not None and (Path(args.model).exists() or Path(args.model).with_suffix(".zip").exists())
+    if args.model is not None and not (shipped or saved):
         return f"--model: nothing saved at {args.model}"
     return None
 
@@ -529,7 +531,7 @@ def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> i
     )
 
     run_dir, env_id = plan.run_dir, plan.env_id
-    model_path = Path(args.model) if args.eval_only and args.model else run_dir / MODEL_FILE
+    model_path = args.model if args.eval_only and args.model else run_dir / MODEL_FILE
     # The saved agent (what a user loads) and the baselines, on the same episodes.
     label = f"{plan.algo} (learned)"
     comparison = compare_with_baselines(load_agent(model_path), label, env_id, args, run_dir)

@@ -53,3 +53,18 @@ def test_an_unknown_name_lists_the_known_ones(capsys):
         main(["--model", "pretrained:nope"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "unknown pretrained model 'pretrained:nope'" in err and "pretrained:hard-ppo" in err
+
+
+def test_train_py_scores_a_pretrained_model_by_name(tmp_path):
+    import json
+
+    import train
+
+    code = train.main(
+        ["--eval-only", "--model", "pretrained:hard-ppo", "--eval-episodes", "4", "--baselines", "handbook",
+         "--out", str(tmp_path), "--no-progress"]
+    )  # fmt: skip
+    assert code == 0
+    (run_dir,) = tmp_path.iterdir()
+    results = json.loads((run_dir / "results.json").read_text())
+    assert [r["agent"] for r in results["evaluation"]["results"]][:2] == ["ppo (learned)", "handbook"]
