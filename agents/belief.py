@@ -61,9 +61,9 @@ class BeliefSettings:
 
     lift_p: float = 0.85
     lean_m: float = 0.16
-    burst_s: float = 0.5
+    burst_s: float = 1.0
     settle_s: float = 0.3
-    window_s: float = 1.5
+    window_s: float = 1.0
     reprobe_p: float = 0.5
 
     def __post_init__(self) -> None:

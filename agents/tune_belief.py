@@ -22,12 +22,15 @@ __all__ = ["main", "settings_grid"]
 
 
 def settings_grid() -> list[BeliefSettings]:
-    """The settings ``python -m agents.belief --tune`` tries (lift gate x lean x re-probe gate)."""
+    """The settings ``python -m agents.tune_belief`` tries: lift gate x recruiting burst x probe window.
+
+    (An earlier grid over the lean and re-probe gates found them tied; they keep their defaults.)
+    """
     return [
-        BeliefSettings(lift_p=lift_p, lean_m=lean_m, reprobe_p=reprobe_p)
-        for lift_p in (0.85, 0.95)
-        for lean_m in (0.16, 0.2)
-        for reprobe_p in (0.3, 0.6)
+        BeliefSettings(lift_p=lift_p, burst_s=burst_s, window_s=window_s)
+        for lift_p in (0.8, 0.85)
+        for burst_s in (0.5, 1.0)
+        for window_s in (1.0, 1.5, 2.0)
     ]
 
 
