@@ -32,6 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import erfc
 
 import coop_gym  # noqa: F401  (registers the ids)
 from agents.scripted import make_scripted
@@ -49,8 +50,7 @@ _BINS = 10
 def _kalman_probabilities(xi_hat: NDArray[np.float64], xi_std: NDArray[np.float64]) -> NDArray[np.float64]:
     # The paper's filter keeps xi continuous: its mode is the thresholded estimate, its P(+1) the tail above 0.5.
     std = np.maximum(xi_std, 1e-9)
-    p_up = 0.5 * (1.0 - np.vectorize(math.erf)((0.5 - xi_hat) / (std * math.sqrt(2.0))))
-    return p_up
+    return 0.5 * erfc((0.5 - xi_hat) / (std * math.sqrt(2.0)))
 
 
 def collect(

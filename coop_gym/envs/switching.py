@@ -186,14 +186,14 @@ def hypothesis_rows(
     return np.stack(rows)
 
 
-def nominal_rows(
+def hypothesis_bank(
     n_envs: int,
     difficulty: Difficulty | None,
     realism: Realism,
     timing: Timing,
     options: SwitchingOptions | None = None,
 ) -> NDArray[np.float64]:
-    """(N, K, C) every env's parameter hypotheses (:func:`hypothesis_rows`)."""
+    """(N, K, C) every env's parameter hypotheses (:func:`hypothesis_rows`): one bank, shared by every env."""
     bank = hypothesis_rows(options or SwitchingOptions(), difficulty, realism, timing)
     return np.ascontiguousarray(np.broadcast_to(bank, (n_envs, *bank.shape)))
 
@@ -237,7 +237,7 @@ class SwitchingEstimator:
     ) -> None:
         self.options = _as_options(options)
         difficulty = None if self.options.difficulty is None else get_difficulty(self.options.difficulty)
-        rows = nominal_rows(n_envs, difficulty, realism, timing, self.options)
+        rows = hypothesis_bank(n_envs, difficulty, realism, timing, self.options)
         own = [np.random.default_rng(i) for i in range(n_envs)]
         self.filter = switching_filter(rows, timing, own, self.options)
         self._true_people = true_people

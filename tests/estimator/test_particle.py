@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from coop_gym.envs.switching import SwitchingOptions, nominal_rows, switching_filter
+from coop_gym.envs.switching import SwitchingOptions, hypothesis_bank, switching_filter
 from coop_gym.model.difficulty import get_difficulty
 from coop_gym.model.dynamics import person_substep, simulate
 from coop_gym.model.params import Realism, Timing
@@ -16,7 +16,7 @@ HARD = get_difficulty("hard")
 
 def _filter(n_envs=2, seed=0, **options):
     opts = SwitchingOptions(difficulty="hard", **options)
-    rows = nominal_rows(n_envs, HARD, Realism(), TIMING, opts)
+    rows = hypothesis_bank(n_envs, HARD, Realism(), TIMING, opts)
     rngs = [np.random.default_rng(seed + i) for i in range(n_envs)]
     return switching_filter(rows, TIMING, rngs, opts)
 
@@ -116,7 +116,7 @@ def test_bad_inputs_raise_and_change_nothing():
     with pytest.raises(ValueError, match="seeds"):
         pf.reset([0], 0.0, seeds=[-1])
     with pytest.raises(ValueError, match="estimator_options for 'switching'"):
-        switching_filter(nominal_rows(1, HARD, Realism(), TIMING), TIMING, [np.random.default_rng(0)], {"bogus": 1})
+        switching_filter(hypothesis_bank(1, HARD, Realism(), TIMING), TIMING, [np.random.default_rng(0)], {"bogus": 1})
 
 
 def _play(estimator, seed, steps=40, **kwargs):
