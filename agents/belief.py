@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE, WAIT
 from agents.scripted_base import EPS_S, PhaseState, ScriptedAgent
-from compiled.checks import check_number
+from coop_gym.compiled.checks import check_number
 
 __all__ = ["BeliefCaregiver", "BeliefSettings"]
 

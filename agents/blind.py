@@ -29,7 +29,7 @@ from agents.base import (
 )
 from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
-from compiled.checks import check_flag, check_number
+from coop_gym.compiled.checks import check_flag, check_number
 from coop_gym.envs.config import LiftCriteria
 
 __all__ = ["TUNED_BLIND", "BlindAgent", "BlindSettings", "CuePhase"]

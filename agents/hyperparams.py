@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from compiled.checks import check_integer
 from coop_gym.cli import SEED_LIMIT
+from coop_gym.compiled.checks import check_integer
 from coop_gym.io import write_text
 from coop_gym.model.personas import TEST_PERSONAS, resolve_personas
 

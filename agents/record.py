@@ -42,10 +42,10 @@ import coop_gym
 from agents.base import Agent, action_type_of, feature_mismatch, features_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
-from compiled.checks import check_integer
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
+from coop_gym.compiled.checks import check_integer
 from coop_gym.io import atomic_path
 
 __all__ = [

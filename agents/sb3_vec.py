@@ -27,8 +27,8 @@ from numpy.typing import NDArray
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from compiled.checks import check_integer
 from coop_gym.cli import SEED_LIMIT
+from coop_gym.compiled.checks import check_integer
 from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
 

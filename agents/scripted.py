@@ -37,7 +37,7 @@ from agents.belief import BeliefCaregiver
 from agents.blind import TUNED_BLIND, BlindAgent, BlindSettings, CuePhase
 from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
-from compiled.checks import check_number
+from coop_gym.compiled.checks import check_number
 from coop_gym.envs.config import LiftCriteria
 from coop_gym.envs.contract import observation_features
 from estimator.judgment import ThresholdJudgment

@@ -6,7 +6,6 @@ from typing import Any
 
 import gymnasium as gym
 
-from coop_gym.envs.arguments import EnvArguments
 from coop_gym.model.params import Timing
 
 __all__ = ["ENV_IDS", "register_envs"]
@@ -63,7 +62,6 @@ def register_envs() -> None:
     for env_id, kwargs in ENV_IDS.items():
         if env_id in gym.registry:
             continue
-        EnvArguments.from_keywords(env_id, kwargs)  # a misspelt keyword fails here, not at make()
         gym.register(
             id=env_id,
             entry_point="coop_gym.envs.sit_to_stand:SitToStandEnv",

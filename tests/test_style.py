@@ -23,7 +23,7 @@ def test_ruff_is_clean() -> None:
 def test_mypy_is_clean() -> None:
     pytest.importorskip("mypy")
     out = subprocess.run(
-        [sys.executable, "-m", "mypy", "compiled", "coop_gym", "estimator", "experiment", "agents", "train.py"],
+        [sys.executable, "-m", "mypy", "coop_gym", "estimator", "agents", "train.py"],
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -33,11 +33,11 @@ def test_mypy_is_clean() -> None:
 
 
 def test_every_kernel_uses_numpys_error_model() -> None:
-    """``compiled/__init__.py``: every project kernel is ``@njit(cache=True, error_model="numpy")``."""
+    """``coop_gym/compiled/__init__.py``: every project kernel is ``@njit(cache=True, error_model="numpy")``."""
     import re
 
     decorators = []
-    for package in ("compiled", "coop_gym", "estimator", "experiment", "agents"):
+    for package in ("coop_gym", "estimator", "agents"):
         for path in (ROOT / package).rglob("*.py"):
             for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
                 if re.match(r"\s*@(numba\.)?(njit|jit)\b", line):

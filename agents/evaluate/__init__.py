@@ -57,8 +57,8 @@ from agents.evaluate.results import (
     wilson_interval,
 )
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
-from compiled.checks import check_integer
 from coop_gym.cli import SEED_LIMIT, output_path_problem
+from coop_gym.compiled.checks import check_integer
 from coop_gym.model.personas import resolve_personas
 
 __all__ = [

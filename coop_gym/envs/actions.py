@@ -10,9 +10,9 @@ from gymnasium import spaces
 from numba import njit
 from numpy.typing import NDArray
 
-from compiled.cache import guard_kernel_cache
-from compiled.checks import is_integer
-from compiled.schema import index_table
+from coop_gym.compiled.cache import guard_kernel_cache
+from coop_gym.compiled.checks import is_integer
+from coop_gym.compiled.schema import index_table
 from coop_gym.envs.config import (
     ACTION_TYPES,
 )

@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from compiled.checks import check_choice
+from coop_gym.compiled.checks import check_choice
 from coop_gym.envs.actions import action_space_for
 from coop_gym.envs.config import (
     ACTION_TYPES,

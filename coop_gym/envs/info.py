@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from compiled.cache import guard_kernel_cache
+from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.envs.arguments import SitToStandConfig
 from coop_gym.envs.config import (
     Outcome,

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from compiled.checks import is_integer
+from coop_gym.compiled.checks import is_integer
 from coop_gym.envs.canvas import (
     ARC,
     ARC_RADIUS,

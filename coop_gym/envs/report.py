@@ -8,8 +8,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from compiled.cache import guard_kernel_cache
-from compiled.schema import index_table
+from coop_gym.compiled.cache import guard_kernel_cache
+from coop_gym.compiled.schema import index_table
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import (
     Outcome,

@@ -13,8 +13,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from compiled.cache import guard_kernel_cache
-from compiled.rng import G_STATE, integers, random, standard_normal
+from coop_gym.compiled.cache import guard_kernel_cache
+from coop_gym.compiled.rng import G_STATE, integers, random, standard_normal
 from coop_gym.envs.layout import BLOCKS, CONSTS, DRAWS, NO_OVERRIDE, PERSONA_BLOCKS
 from coop_gym.envs.report import REPORT, REPORT_COLUMNS
 from coop_gym.envs.step import observe_row

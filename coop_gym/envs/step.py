@@ -12,8 +12,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from compiled.cache import guard_kernel_cache
-from compiled.rng import G_STATE, standard_normal
+from coop_gym.compiled.cache import guard_kernel_cache
+from coop_gym.compiled.rng import G_STATE, standard_normal
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import Outcome
 from coop_gym.envs.layout import BLOCKS, CONSTS, CUE_COLUMNS, CUES

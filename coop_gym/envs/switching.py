@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from compiled.checks import check_flag, check_integer, check_number
+from coop_gym.compiled.checks import check_flag, check_integer, check_number
 from coop_gym.model.difficulty import Difficulty, get_difficulty
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,

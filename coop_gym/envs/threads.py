@@ -20,10 +20,10 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from compiled.atomics import atomic_add, atomic_cas, atomic_load
-from compiled.cache import guard_kernel_cache
-from compiled.checks import is_integer
-from compiled.rng import G_STATE
+from coop_gym.compiled.atomics import atomic_add, atomic_cas, atomic_load
+from coop_gym.compiled.cache import guard_kernel_cache
+from coop_gym.compiled.checks import is_integer
+from coop_gym.compiled.rng import G_STATE
 from coop_gym.envs.step import step_envs
 
 __all__ = [

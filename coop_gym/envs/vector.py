@@ -12,9 +12,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
-from compiled.checks import is_integer
-from compiled.rng import G_STATE
-from compiled.seeding import MAX_BATCH_SEED
+from coop_gym.compiled.checks import is_integer
+from coop_gym.compiled.rng import G_STATE
+from coop_gym.compiled.seeding import MAX_BATCH_SEED
 from coop_gym.envs.actions import CMD, ActionDecoder
 from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import check_threads

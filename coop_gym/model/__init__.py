@@ -1,6 +1,6 @@
 """The pure human model: parameters, personas and the three levels (paper §III)."""
 
-from compiled.cache import guard_kernel_cache
+from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.model.dynamics import Trajectory, pack_person, simulate
 from coop_gym.model.params import (
     Biomechanics,

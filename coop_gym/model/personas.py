@@ -44,7 +44,7 @@ class Persona:
     name: str
     description: str
     params: PersonParams
-    # Calibrated with experiment/calibrate.py (people differ by about +/-20 %).
+    # Calibrated with estimator/experiment/calibrate.py (people differ by about +/-20 %).
     variation_relative_std: float = 0.2
 
     def __post_init__(self) -> None:

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from compiled.cache import guarded_kernels, project_sources
+from coop_gym.compiled.cache import guarded_kernels, project_sources
 
 ROOT = Path(__file__).resolve().parents[2]
-KERNEL_PACKAGES = ("compiled", "coop_gym", "estimator", "experiment")
+KERNEL_PACKAGES = ("coop_gym", "estimator")
 
 
 def _relative(paths: list[Path]) -> set[str]:
@@ -33,7 +33,7 @@ def test_the_env_kernels_are_keyed_by_the_model_filter_judgment_and_rng_sources(
         "estimator/kalman.py",
         "estimator/judgment.py",
         "estimator/nominal.py",
-        "compiled/rng.py",
+        "coop_gym/compiled/rng.py",
     } <= sources
 
 
@@ -57,7 +57,9 @@ def test_every_cached_kernel_of_the_project_is_guarded() -> None:
     for name in _project_modules():
         importlib.import_module(name)
         unguarded += [f"{name}.{k.__name__}" for k in guarded_kernels(name) if not hasattr(k._cache, "source_guard")]
-    assert not unguarded, f"call compiled.cache.guard_kernel_cache(__name__) at the end of their modules: {unguarded}"
+    assert not unguarded, (
+        f"call coop_gym.compiled.cache.guard_kernel_cache(__name__) at the end of their modules: {unguarded}"
+    )
 
 
 def _run(code: str, path: Path) -> str:
@@ -71,9 +73,9 @@ def _run(code: str, path: Path) -> str:
 def test_importing_the_project_touches_no_cache_file() -> None:
     code = textwrap.dedent(
         """
-        import coop_gym, estimator.identify, estimator.multiple_model
-        from compiled.cache import guarded_kernels
-        names = ["coop_gym.envs.core", "coop_gym.model.dynamics", "estimator.identify", "compiled.rng"]
+        import coop_gym.envs, estimator.identify, estimator.multiple_model
+        from coop_gym.compiled.cache import guarded_kernels
+        names = ["coop_gym.envs.core", "coop_gym.model.dynamics", "estimator.identify", "coop_gym.compiled.rng"]
         print(any(k._cache.source_guard.checked for n in names for k in guarded_kernels(n)))
         """
     )
@@ -86,7 +88,7 @@ def test_editing_an_inlined_dependency_recompiles_the_kernel(tmp_path: Path) -> 
     (package / "__init__.py").write_text("")
     (package / "dep.py").write_text("from numba import njit\n\n@njit(inline='always')\ndef gain():\n    return 1\n")
     (package / "kern.py").write_text(
-        "from numba import njit\n\nfrom compiled.cache import guard_kernel_cache\nfrom toy.dep import gain\n\n"
+        "from numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\nfrom toy.dep import gain\n\n"
         "@njit(cache=True)\ndef kernel():\n    return 10 * gain()\n\nguard_kernel_cache(__name__)\n"
     )
     code = "from toy.kern import kernel; print(kernel(), kernel.stats.cache_hits)"
@@ -109,7 +111,7 @@ def _read_only_copy(tmp_path: Path) -> tuple[Path, dict[str, str]]:
     ``NUMBA_CACHE_DIR`` under a file.
     """
     site = tmp_path / "site"
-    for package in ("compiled", "coop_gym", "estimator"):
+    for package in ("coop_gym", "estimator"):
         shutil.copytree(ROOT / package, site / package, ignore=shutil.ignore_patterns("__pycache__"))
     for folder in [site, *(p for p in site.rglob("*") if p.is_dir())]:
         (folder / "__pycache__").write_text("")
@@ -170,7 +172,7 @@ def test_kernels_of_modules_outside_the_compiled_boundary_keep_numbas_error(tmp_
         "from numba import njit\n\n@njit(cache=True)\ndef kernel():\n    return 1\n"
     )
     out = subprocess.run(
-        [sys.executable, "-c", "import compiled.cache, plain"],
+        [sys.executable, "-c", "import coop_gym.compiled.cache, plain"],
         cwd=tmp_path,
         env=env,
         capture_output=True,
@@ -187,7 +189,7 @@ def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path:
     package.mkdir()
     (package / "__init__.py").write_text("")
     (package / "kern.py").write_text(
-        "from numba import njit\n\nfrom compiled.cache import guard_kernel_cache\n\n"
+        "from numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
         "@njit(cache=True)\ndef kernel(x):\n    return 2 * x\n\n"
         "@njit(cache=True)\ndef other(x):\n    return kernel(x) + 1\n\nguard_kernel_cache(__name__)\n"
     )

@@ -329,7 +329,7 @@ BAD_RESETS: list[tuple[str, dict[str, Any], type[Exception], str]] = [
 # Issue #13: a NumPy array or bool as initial_xi. The reset options are checked in coop_gym.envs
 # (parse_reset_options), where `xi not in (-1, 0, 1)` lets np.True_ through and np.array([1]) fails
 # with NumPy's TypeError, naming nothing. The fix is one call there to
-# compiled.checks.check_choice("reset option initial_xi", xi, (-1, 0, 1)) (as simulate() and
+# coop_gym.compiled.checks.check_choice("reset option initial_xi", xi, (-1, 0, 1)) (as simulate() and
 # Cooperativeness.baseline do), left to the envs' owner; these flip to passing with it.
 PENDING_RESETS: list[tuple[str, dict[str, Any], str]] = [
     ("initial_xi array", {"options": {"initial_xi": np.array([1])}}, r"initial_xi must be -1, 0 or 1, got array"),

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from compiled.schema import field_values
+from coop_gym.compiled.schema import field_values
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,

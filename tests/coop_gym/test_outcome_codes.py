@@ -59,8 +59,7 @@ def test_outcome_codes_that_are_not_consecutive_are_refused() -> None:
 
 def test_the_package_imports_and_checks_under_python_optimize() -> None:
     code = (
-        "import coop_gym.envs.step as c, coop_gym.envs.report as k; k.check_outcome_codes(k.Outcome); "
-        "print(c._SUCCESS)"
+        "import coop_gym.envs.step as c, coop_gym.envs.report as k; k.check_outcome_codes(k.Outcome); print(c._SUCCESS)"
     )
     out = subprocess.run([sys.executable, "-O", "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr

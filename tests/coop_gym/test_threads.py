@@ -13,7 +13,7 @@ from gymnasium.vector import AutoresetMode
 from numpy.typing import NDArray
 
 import coop_gym
-from compiled.rng import G_STATE
+from coop_gym.compiled.rng import G_STATE
 from coop_gym.envs import threads as threads_module
 from coop_gym.envs.contract import CMD
 from coop_gym.envs.vector import SitToStandVectorEnv

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from compiled.schema import field_values
+from coop_gym.compiled.schema import field_values
 from coop_gym.envs.core import nominal_model_for
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import PersonParams, Timing

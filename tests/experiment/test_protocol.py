@@ -10,11 +10,8 @@ import pytest
 
 from coop_gym.envs.core import nominal_model_for
 from estimator import metrics
-from estimator.judgment import JUDGMENT_COLUMNS, judgment_substep
-from estimator.kalman import PaperKalmanFilter
-from estimator.nominal import NominalModel
-from experiment import calibrate, protocol
-from experiment.protocol import (
+from estimator.experiment import calibrate, protocol
+from estimator.experiment.protocol import (
     PAPER_RESULTS,
     ProtocolConfig,
     TrialSpec,
@@ -24,6 +21,9 @@ from experiment.protocol import (
     run_experiment,
     run_protocol,
 )
+from estimator.judgment import JUDGMENT_COLUMNS, judgment_substep
+from estimator.kalman import PaperKalmanFilter
+from estimator.nominal import NominalModel
 
 SMALL = ProtocolConfig(n_subjects=2, n_trials=9)
 

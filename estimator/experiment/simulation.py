@@ -30,8 +30,8 @@ from numpy.typing import NDArray
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas, sample_person
+from estimator.experiment.paper import PAPER_RESULTS, XI_VALUES
 from estimator.judgment import JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
-from experiment.paper import PAPER_RESULTS, XI_VALUES
 
 __all__ = [
     "ExperimentData",

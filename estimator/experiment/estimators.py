@@ -27,7 +27,7 @@ when confident:
 * ``oracle`` -- the bank on each subject's *true* parameters: not an estimator but the
   information bound of linear delay-aware filters at the judgment instant.
 
-``python -m experiment.calibrate`` reports all of them over 20 seeds. In short, on the
+``python -m estimator.experiment.calibrate`` reports all of them over 20 seeds. In short, on the
 calibrated defaults: the thresholded KF lands near the paper's Table I; MMAE and IMM on
 the paper's nominal model do *worse* than the thresholded KF (MAP needs more evidence
 than the 0.3 threshold, and the nominal model misses the reaction delay); the delay-aware
@@ -49,12 +49,12 @@ from scipy.special import ndtr
 
 from coop_gym.envs.core import nominal_model_for
 from coop_gym.model.params import PersonParams, Timing
+from estimator.experiment.paper import XI_VALUES
+from estimator.experiment.simulation import ExperimentData, judgment_step
 from estimator.identify import Trial, identify
 from estimator.kalman import NOMINAL_COLUMNS, FastKalmanFilter, nominal_row
 from estimator.multiple_model import IMMEstimator, MultipleModelEstimator, map_judgment, sequential_judgment
 from estimator.nominal import NominalModel
-from experiment.paper import XI_VALUES
-from experiment.simulation import ExperimentData, judgment_step
 
 __all__ = [
     "ESTIMATORS",

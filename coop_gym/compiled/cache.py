@@ -172,11 +172,15 @@ def _warn_uncached(reason: str, filename: str = __file__, lineno: int = 1) -> No
     )
 
 
+_PACKAGE = __name__.rpartition(".")[0]
+"""``coop_gym.compiled``: a kernel module built on it imports something from it."""
+
+
 def _built_on_compiled(py_func: Any) -> bool:
     """Whether the (still executing) module of ``py_func`` has imported anything from ``compiled``."""
     for value in list(getattr(py_func, "__globals__", {}).values()):
         name = value.__name__ if isinstance(value, ModuleType) else getattr(value, "__module__", None)
-        if isinstance(name, str) and name.partition(".")[0] == __name__.partition(".")[0]:
+        if isinstance(name, str) and (name == _PACKAGE or name.startswith(_PACKAGE + ".")):
             return True
     return False
 

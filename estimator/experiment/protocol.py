@@ -1,9 +1,9 @@
 """The paper's experiment (§V) as a reproducible protocol, and better estimators on it.
 
-``python -m experiment.protocol --help``. The parts: the trial design and the simulated
-subjects (:mod:`experiment.simulation`), the registry of estimators
-(:mod:`experiment.estimators`), scores and the paper's tables (:mod:`experiment.tables`),
-figures (:mod:`experiment.plots`); this module runs them from the command line and
+``python -m estimator.experiment.protocol --help``. The parts: the trial design and the simulated
+subjects (:mod:`estimator.experiment.simulation`), the registry of estimators
+(:mod:`estimator.experiment.estimators`), scores and the paper's tables (:mod:`estimator.experiment.tables`),
+figures (:mod:`estimator.experiment.plots`); this module runs them from the command line and
 re-exports their public names.
 """
 
@@ -21,7 +21,7 @@ from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
 from coop_gym.model.difficulty import DIFFICULTIES
 from coop_gym.model.personas import resolve_personas
-from experiment.estimators import (
+from estimator.experiment.estimators import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
     EstimateResult,
@@ -31,10 +31,10 @@ from experiment.estimators import (
     identified_banks,
     intention_drive,
 )
-from experiment.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
-from experiment.plots import plot_confusion, plot_trial
-from experiment.simulation import ExperimentData, ProtocolConfig, TrialSpec, draw_trials, run_experiment
-from experiment.tables import aggregate, format_aggregate, format_tables, summarize
+from estimator.experiment.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
+from estimator.experiment.plots import plot_confusion, plot_trial
+from estimator.experiment.simulation import ExperimentData, ProtocolConfig, TrialSpec, draw_trials, run_experiment
+from estimator.experiment.tables import aggregate, format_aggregate, format_tables, summarize
 
 __all__ = [
     "ESTIMATORS",
@@ -88,9 +88,9 @@ def run_protocol(
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``python -m experiment.protocol`` argument parser."""
+    """The ``python -m estimator.experiment.protocol`` argument parser."""
     parser = argparse.ArgumentParser(
-        prog="python -m experiment.protocol",
+        prog="python -m estimator.experiment.protocol",
         description="Bell & Asada's cooperativeness-judgment experiment on simulated subjects: the paper's "
         "three tables side by side with its numbers on real people.",
     )

@@ -7,10 +7,17 @@ from typing import Any
 import numpy as np
 
 from coop_gym.io import save_figure
-from experiment.estimators import EstimateResult, estimate
-from experiment.paper import PAPER_RESULTS, XI_NAMES, XI_SHORT, PaperResults, balanced_accuracy, conditional_tables
-from experiment.simulation import ExperimentData
-from experiment.tables import _pct
+from estimator.experiment.estimators import EstimateResult, estimate
+from estimator.experiment.paper import (
+    PAPER_RESULTS,
+    XI_NAMES,
+    XI_SHORT,
+    PaperResults,
+    balanced_accuracy,
+    conditional_tables,
+)
+from estimator.experiment.simulation import ExperimentData
+from estimator.experiment.tables import _pct
 
 __all__ = ["plot_confusion", "plot_trial"]
 

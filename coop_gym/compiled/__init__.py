@@ -1,14 +1,14 @@
 """The compiled boundary: what every Numba kernel of the project relies on (the lowest layer).
 
-- :mod:`compiled.cache`: Numba's on-disk cache keyed by every project source a kernel
-  compiles in (:func:`~compiled.cache.guard_kernel_cache`).
-- :mod:`compiled.checks`: what counts as a number (NumPy scalars yes, bools and arrays no) for
+- :mod:`coop_gym.compiled.cache`: Numba's on-disk cache keyed by every project source a kernel
+  compiles in (:func:`~coop_gym.compiled.cache.guard_kernel_cache`).
+- :mod:`coop_gym.compiled.checks`: what counts as a number (NumPy scalars yes, bools and arrays no) for
   every validator of the project.
-- :mod:`compiled.rng`: NumPy's random streams inside kernels, number for number the
+- :mod:`coop_gym.compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
-- :mod:`compiled.seeding`: ``PCG64(seed)`` of many envs in one call (NumPy's seeding repeated
+- :mod:`coop_gym.compiled.seeding`: ``PCG64(seed)`` of many envs in one call (NumPy's seeding repeated
   step for step), their states kept in arrays until a ``Generator`` object is asked for.
-- :mod:`compiled.atomics`: atomic loads, compare-and-swap and add on int64 array elements (how
+- :mod:`coop_gym.compiled.atomics`: atomic loads, compare-and-swap and add on int64 array elements (how
   the threaded step shares work without the GIL).
 
 Every kernel is ``@njit(cache=True, error_model="numpy")``: NumPy's error model leaves out the
@@ -21,6 +21,6 @@ Imports nothing of ``coop_gym``, ``estimator`` or ``agents``; both the model/env
 the filters may import it.
 """
 
-from compiled.cache import guard_kernel_cache
+from coop_gym.compiled.cache import guard_kernel_cache
 
 __all__ = ["guard_kernel_cache"]

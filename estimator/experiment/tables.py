@@ -11,8 +11,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from estimator import metrics
-from experiment.estimators import EstimateResult
-from experiment.paper import (
+from estimator.experiment.estimators import EstimateResult
+from estimator.experiment.paper import (
     PAPER_RESULTS,
     XI_NAMES,
     XI_SHORT,
@@ -22,7 +22,7 @@ from experiment.paper import (
     conditional_tables,
     confusion_matrix,
 )
-from experiment.simulation import ExperimentData
+from estimator.experiment.simulation import ExperimentData
 
 __all__ = [
     "aggregate",

@@ -34,7 +34,7 @@ from numba.core.extending import intrinsic
 from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 from numpy.typing import NDArray
 
-from compiled.cache import guard_kernel_cache
+from coop_gym.compiled.cache import guard_kernel_cache
 
 __all__ = [
     "G_NEXT_DOUBLE",
