@@ -314,65 +314,90 @@ def plot_timeline(
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
     for name, value in (("width_px", width_px), ("height_px", height_px), ("dpi", dpi)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 10:
             raise ValueError(f"plot_timeline {name} must be an int >= 10, got {value!r}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    t = trace.time_s
-    end_s = float(t[-1])
-    t_max = max(end_s, 1.0)
 
     fig = Figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(4, 1, sharex=True, height_ratios=[0.8, 1.1, 1.0, 1.5])
     ax_cue, ax_x, ax_eta, ax_xi = axes
-    small = {"fontsize": 8}
+    _draw_cues(ax_cue, trace)
+    _draw_shoulder(ax_x, trace)
+    _draw_intention(ax_eta, trace)
+    for ax in (ax_x, ax_eta):
+        low, high = ax.get_ylim()
+        ax.set_ylim(low, high + 0.35 * (high - low))  # room for the legend
+    _draw_cooperativeness(ax_xi, trace)
+    _mark_episode_end(axes, trace)
+    for ax in axes:
+        ax.grid(True, color="#e4e6ea", lw=0.6)
+        ax.tick_params(labelsize=8)
+    fig.suptitle(title if title is not None else _default_title(trace), fontsize=10)
+    save_figure(fig, path, dpi=dpi, facecolor="white")
+    return path
 
-    # 1. Cues: the push as a filled step, the verbal cue as shaded spans behind it.
-    ax_cue.fill_between(t, trace.push_force_n, step="pre", color=_PUSH_COLOUR, alpha=0.35, lw=0)
-    ax_cue.step(t, trace.push_force_n, where="pre", color=_PUSH_COLOUR, lw=1.5, label="push [N]")
+
+_SMALL = {"fontsize": 8}
+"""Panel titles and legends."""
+
+
+def _draw_cues(ax: Any, trace: Trace) -> None:
+    """Panel 1: the push as a filled step, the verbal cue as shaded spans behind it."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    t = trace.time_s
+    ax.fill_between(t, trace.push_force_n, step="pre", color=_PUSH_COLOUR, alpha=0.35, lw=0)
+    ax.step(t, trace.push_force_n, where="pre", color=_PUSH_COLOUR, lw=1.5, label="push [N]")
     for value in (1, -1):
         for start, stop in _spans(trace.verbal_cue == value, t):
-            ax_cue.axvspan(start, stop, color=_VERBAL_COLOURS[value], alpha=0.18, lw=0)
-    ax_cue.set_ylabel("push [N]")
-    ax_cue.set_ylim(0.0, max(45.0, float(np.nanmax(trace.push_force_n)) * 1.5))  # room for the legend
-    ax_cue.set_title("robot's cues", loc="left", **small)
+            ax.axvspan(start, stop, color=_VERBAL_COLOURS[value], alpha=0.18, lw=0)
+    ax.set_ylabel("push [N]")
+    ax.set_ylim(0.0, max(45.0, float(np.nanmax(trace.push_force_n)) * 1.5))  # room for the legend
+    ax.set_title("robot's cues", loc="left", **_SMALL)
     handles: list[Any] = [Line2D([], [], color=_PUSH_COLOUR, lw=1.5, label="push force")]
     handles += [
         Patch(color=_VERBAL_COLOURS[v], alpha=0.3, label=f"says {_VERBAL_NAMES[v]}")
         for v in (1, -1)
         if np.any(trace.verbal_cue == v)
     ]
-    ax_cue.legend(handles=handles, loc="upper left", ncols=3, **small)
+    ax.legend(handles=handles, loc="upper left", ncols=3, **_SMALL)
 
-    # 2. Shoulder: truth, camera, filter; the lean a safe lift needs.
-    ax_x.plot(t, trace.measured_position_m, ".", color="#9aa0aa", ms=2.5, label="measured (camera)")
-    ax_x.plot(t, trace.true_x_m, color="black", lw=1.6, label="true")
-    ax_x.plot(t, trace.x_hat_m, "--", color=_ESTIMATE_COLOUR, lw=1.2, label="Kalman estimate")
-    ax_x.axhline(trace.success_lean_m, color=OUTCOME_COLOURS["success"], ls=":", lw=1.2, label="lean for a safe lift")
-    ax_x.set_ylabel("shoulder x [m]")
-    ax_x.set_title("body: shoulder displacement (forward +)", loc="left", **small)
-    ax_x.legend(loc="upper left", ncols=4, **small)
 
-    # 3. Intention.
-    ax_eta.plot(t, trace.true_eta_m, color="black", lw=1.6, label="true")
-    ax_eta.plot(t, trace.eta_hat_m, "--", color=_ESTIMATE_COLOUR, lw=1.2, label="Kalman estimate")
-    ax_eta.set_ylabel("eta [m]")
-    ax_eta.set_title("intention: where the person means to be", loc="left", **small)
-    ax_eta.legend(loc="upper left", ncols=2, **small)
-    for ax in (ax_x, ax_eta):
-        low, high = ax.get_ylim()
-        ax.set_ylim(low, high + 0.35 * (high - low))  # room for the legend
+def _draw_shoulder(ax: Any, trace: Trace) -> None:
+    """Panel 2: the shoulder's truth, camera and filter; the lean a safe lift needs."""
+    t = trace.time_s
+    ax.plot(t, trace.measured_position_m, ".", color="#9aa0aa", ms=2.5, label="measured (camera)")
+    ax.plot(t, trace.true_x_m, color="black", lw=1.6, label="true")
+    ax.plot(t, trace.x_hat_m, "--", color=_ESTIMATE_COLOUR, lw=1.2, label="Kalman estimate")
+    ax.axhline(trace.success_lean_m, color=OUTCOME_COLOURS["success"], ls=":", lw=1.2, label="lean for a safe lift")
+    ax.set_ylabel("shoulder x [m]")
+    ax.set_title("body: shoulder displacement (forward +)", loc="left", **_SMALL)
+    ax.legend(loc="upper left", ncols=4, **_SMALL)
 
-    # 4. Cooperativeness: estimate ± std, threshold band, truth, judgments.
+
+def _draw_intention(ax: Any, trace: Trace) -> None:
+    """Panel 3: the intention, true and estimated."""
+    t = trace.time_s
+    ax.plot(t, trace.true_eta_m, color="black", lw=1.6, label="true")
+    ax.plot(t, trace.eta_hat_m, "--", color=_ESTIMATE_COLOUR, lw=1.2, label="Kalman estimate")
+    ax.set_ylabel("eta [m]")
+    ax.set_title("intention: where the person means to be", loc="left", **_SMALL)
+    ax.legend(loc="upper left", ncols=2, **_SMALL)
+
+
+def _draw_cooperativeness(ax: Any, trace: Trace) -> None:
+    """Panel 4: the estimate +/- its std, the threshold band, the truth and each judgment."""
+    t = trace.time_s
+    t_max = max(float(t[-1]), 1.0)
     band = trace.threshold
-    ax_xi.axhspan(-band, band, color="#8c8c8c", alpha=0.15, lw=0, label=f"±{band:g} threshold band")
+    ax.axhspan(-band, band, color="#8c8c8c", alpha=0.15, lw=0, label=f"±{band:g} threshold band")
     xi_hat = np.clip(trace.xi_hat, -1.9, 1.9)
-    ax_xi.fill_between(
+    ax.fill_between(
         t,
         np.clip(trace.xi_hat - trace.xi_std, -1.9, 1.9),
         np.clip(trace.xi_hat + trace.xi_std, -1.9, 1.9),
@@ -381,13 +406,13 @@ def plot_timeline(
         lw=0,
         label="estimate ±1 std",
     )
-    ax_xi.plot(t, xi_hat, color=_ESTIMATE_COLOUR, lw=1.4, label="Kalman estimate")
-    ax_xi.step(t, trace.true_xi, where="pre", color="black", lw=2.0, label="true xi")
+    ax.plot(t, xi_hat, color=_ESTIMATE_COLOUR, lw=1.4, label="Kalman estimate")
+    ax.step(t, trace.true_xi, where="pre", color="black", lw=2.0, label="true xi")
     times, values = judgment_events(trace)
     for value in (-1, 0, 1):
         chosen = values == value
         if np.any(chosen):
-            ax_xi.plot(
+            ax.plot(
                 times[chosen],
                 np.full(int(chosen.sum()), float(value)),
                 "D",
@@ -396,44 +421,45 @@ def plot_timeline(
                 ms=7,
                 label=f"judged {_XI_NAMES[value]}",
             )
-    ax_xi.set_ylim(-1.9, 2.3)
-    ax_xi.set_yticks([-1, 0, 1], ["-1 uncoop.", "0 unresp.", "+1 coop."])
-    ax_xi.set_ylabel("xi")
-    ax_xi.set_title("mind: cooperativeness and the filter's judgment", loc="left", **small)
-    ax_xi.legend(loc="upper left", ncols=4, **small)
-    ax_xi.set_xlabel("time [s]")
-    ax_xi.set_xlim(0.0, t_max + max(0.2, 0.02 * t_max))  # keep the lift line off the frame
+    ax.set_ylim(-1.9, 2.3)
+    ax.set_yticks([-1, 0, 1], ["-1 uncoop.", "0 unresp.", "+1 coop."])
+    ax.set_ylabel("xi")
+    ax.set_title("mind: cooperativeness and the filter's judgment", loc="left", **_SMALL)
+    ax.legend(loc="upper left", ncols=4, **_SMALL)
+    ax.set_xlabel("time [s]")
+    ax.set_xlim(0.0, t_max + max(0.2, 0.02 * t_max))  # keep the lift line off the frame
 
-    # The lift (or the end) across all panels.
+
+def _mark_episode_end(axes: Sequence[Any], trace: Trace) -> None:
+    """The lift (or the end) as a line across every panel, labelled over the first."""
+    if trace.outcome == "none":
+        return
+    end_s = float(trace.time_s[-1])
     colour = OUTCOME_COLOURS.get(trace.outcome, OUTCOME_COLOURS["none"])
-    if trace.outcome != "none":
-        for ax in axes:
-            ax.axvline(end_s, color=colour, lw=2.0, alpha=0.85)
-        label = f"lift at {end_s:.1f} s: {trace.outcome}" if trace.lifted else f"{trace.outcome} at {end_s:.1f} s"
-        # Top right of the first panel, clear of its title whatever the lift time; the line marks the time.
-        ax_cue.annotate(
-            label,
-            (1.0, 1.0),
-            xycoords="axes fraction",
-            xytext=(0, 3),
-            textcoords="offset points",
-            ha="right",
-            va="bottom",
-            color="white",
-            fontsize=9,
-            fontweight="bold",
-            bbox={"boxstyle": "round,pad=0.25", "fc": colour, "ec": "none"},
-        )
     for ax in axes:
-        ax.grid(True, color="#e4e6ea", lw=0.6)
-        ax.tick_params(labelsize=8)
+        ax.axvline(end_s, color=colour, lw=2.0, alpha=0.85)
+    label = f"lift at {end_s:.1f} s: {trace.outcome}" if trace.lifted else f"{trace.outcome} at {end_s:.1f} s"
+    # Top right of the first panel, clear of its title whatever the lift time; the line marks the time.
+    axes[0].annotate(
+        label,
+        (1.0, 1.0),
+        xycoords="axes fraction",
+        xytext=(0, 3),
+        textcoords="offset points",
+        ha="right",
+        va="bottom",
+        color="white",
+        fontsize=9,
+        fontweight="bold",
+        bbox={"boxstyle": "round,pad=0.25", "fc": colour, "ec": "none"},
+    )
 
-    if title is None:
-        who = trace.agent or "agent"
-        where = f" on {trace.env_id}" if trace.env_id else ""
-        seed = f", seed {trace.seed}" if trace.seed is not None else ""
-        persona = f", persona {trace.persona}" if trace.persona else ""
-        title = f"{who}{where}{seed}{persona}: {trace.outcome} after {end_s:.1f} s, return {trace.episode_return:+.2f}"
-    fig.suptitle(title, fontsize=10)
-    save_figure(fig, path, dpi=dpi, facecolor="white")
-    return path
+
+def _default_title(trace: Trace) -> str:
+    """The agent, env, seed, persona, outcome and return of ``trace`` in one line."""
+    end_s = float(trace.time_s[-1])
+    who = trace.agent or "agent"
+    where = f" on {trace.env_id}" if trace.env_id else ""
+    seed = f", seed {trace.seed}" if trace.seed is not None else ""
+    persona = f", persona {trace.persona}" if trace.persona else ""
+    return f"{who}{where}{seed}{persona}: {trace.outcome} after {end_s:.1f} s, return {trace.episode_return:+.2f}"
