@@ -13,7 +13,8 @@ Reported: median and range of the time from the first ``gym.make``/``make_vec`` 
 end of the first step (the import of coop_gym is timed on its own), with the load average, and
 each as a ratio to a reference timed the same way in the same run, alternating with it: a fresh
 process that imports gymnasium and makes, resets and steps ``CartPole-v1`` (import included in
-both: what a user waits for before the first step).
+both: what a user waits for before the first step). ``--save`` also writes the report to
+``bench/results/cold_start.json`` (``bench/result_files.py``).
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ import sys
 import tempfile
 from pathlib import Path
 from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+from result_files import add_save_argument, save, summary
 
 _REFERENCE = r"""
 import json, time
@@ -83,7 +87,7 @@ def _reference() -> float:
     return float(json.loads(out.stdout.strip().splitlines()[-1])["total_s"])
 
 
-def _summary(values: list[float]) -> str:
+def _seconds(values: list[float]) -> str:
     return f"{statistics.median(values):6.2f} s ({min(values):.2f}..{max(values):.2f})"
 
 
@@ -93,7 +97,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--num-envs", type=int, nargs="*", default=[0, 1024], help="0 = gym.make; N = make_vec xN")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--kernels", action="store_true", help="list the cold run's compilations")
-    parser.add_argument("--json", type=Path, help="also write the measurements here")
+    add_save_argument(parser, "cold_start.json")
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error(f"--repeats: must be a positive integer, got {args.repeats}")
@@ -104,7 +108,12 @@ def main(argv: list[str] | None = None) -> None:
     if args.env not in coop_gym.ENV_IDS:
         parser.error(f"--env: unknown env id {args.env!r}")
 
-    results: dict[str, Any] = {"env_id": args.env, "load_start": os.getloadavg()[0], "runs": {}}
+    results: dict[str, Any] = {
+        "env_id": args.env,
+        "repeats": args.repeats,
+        "load_start": os.getloadavg()[0],
+        "runs": {},
+    }
     for n in args.num_envs:
         label = "gym.make" if n == 0 else f"make_vec x{n}"
         cold, warm, imports, cold_ratio, warm_ratio, reference = [], [], [], [], [], []
@@ -128,25 +137,23 @@ def main(argv: list[str] | None = None) -> None:
                     if seconds >= 0.1:
                         print(f"  {'  ' * depth}{seconds:6.2f} {name}")
         results["runs"][label] = {
-            "cold_s": cold,
-            "warm_s": warm,
-            "import_s": imports,
-            "reference_s": reference,
-            "cold_ratio": cold_ratio,
-            "warm_ratio": warm_ratio,
+            "cold_s": summary(cold),
+            "warm_s": summary(warm),
+            "import_s": summary(imports),
+            "reference_s": summary(reference),
+            "cold_ratio": summary(cold_ratio),
+            "warm_ratio": summary(warm_ratio),
         }
-        print(f"{label:>14}: cold {_summary(cold)}  warm {_summary(warm)}  import {_summary(imports)}")
+        print(f"{label:>14}: cold {_seconds(cold)}  warm {_seconds(warm)}  import {_seconds(imports)}")
         print(
-            f"{'':>14}  import+first step / CartPole-v1's ({_summary(reference).strip()}): "
+            f"{'':>14}  import+first step / CartPole-v1's ({_seconds(reference).strip()}): "
             f"cold {statistics.median(cold_ratio):.1f}x ({min(cold_ratio):.1f}..{max(cold_ratio):.1f}), "
             f"warm {statistics.median(warm_ratio):.1f}x ({min(warm_ratio):.1f}..{max(warm_ratio):.1f})"
         )
     results["load_end"] = os.getloadavg()[0]
     print(f"load average {results['load_start']:.1f} -> {results['load_end']:.1f}")
-    if args.json:
-        from coop_gym.io import write_json
-
-        write_json(args.json, results)
+    if args.save:
+        save(args.save, "cold_start", argv, results)
 
 
 if __name__ == "__main__":

@@ -9,30 +9,29 @@ own time is measured apart and taken out) in alternating blocks of 10, so a chan
 machine load hits both. Reports each renderer's milliseconds per frame and the ratio
 ours / CartPole's: the median over repeats with its min..max. Our frame is 600 x 400 with
 the person, the robot, the cue, the gauge and the face; CartPole's 600 x 400 with a cart and
-a pole.
+a pole. ``--save`` also writes the report to ``bench/results/render.json``
+(``bench/result_files.py``).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+from result_files import add_save_argument, save, summary
+
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # no screen needed for rgb_array frames
 os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
-HERE = Path(__file__).resolve().parent
-if str(HERE.parent) not in sys.path:  # run as a script from a checkout
-    sys.path.insert(0, str(HERE.parent))
+import gymnasium as gym
 
-import gymnasium as gym  # noqa: E402
-
-import coop_gym  # noqa: E402, F401  (registers the ids)
-from coop_gym.cli import positive_int  # noqa: E402
+import coop_gym  # noqa: F401  (registers the ids)
+from coop_gym.cli import positive_int
 
 ENV_ID = "CoopGym/SitToStand-v0"
 CARTPOLE_ID = "CartPole-v1"
@@ -85,11 +84,9 @@ def measure(repeats: int, frames: int) -> dict[str, Any]:
             timer.close()
         print(f"  [{r + 1}/{repeats}] ours {ours_ms[-1]:.2f} ms  CartPole {cartpole_ms[-1]:.2f} ms", file=sys.stderr)
     ratios = [a / b for a, b in zip(ours_ms, cartpole_ms, strict=True)]
-
-    def summary(values: list[float]) -> dict[str, float]:
-        return {"median": statistics.median(values), "min": min(values), "max": max(values)}
-
     return {
+        "repeats": repeats,
+        "frames_per_repeat": frames,
         "ours_ms_per_frame": summary(ours_ms),
         "cartpole_ms_per_frame": summary(cartpole_ms),
         "ratio": summary(ratios),
@@ -101,6 +98,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python bench/render.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=positive_int, default=5, help="repeats (default 5)")
     parser.add_argument("--frames", type=positive_int, default=200, help="frames per renderer per repeat (default 200)")
+    add_save_argument(parser, "render.json")
     args = parser.parse_args(argv)
     report = measure(args.repeats, args.frames)
     ours, cartpole, ratio = report["ours_ms_per_frame"], report["cartpole_ms_per_frame"], report["ratio"]
@@ -109,6 +107,8 @@ def main(argv: list[str] | None = None) -> None:
         f"CartPole {cartpole['median']:.2f} ms ({cartpole['min']:.2f}..{cartpole['max']:.2f}); "
         f"ratio {ratio['median']:.2f}x ({ratio['min']:.2f}..{ratio['max']:.2f})"
     )
+    if args.save:
+        save(args.save, "render", argv, report)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Speed of the envs, measured against CartPole in the same run (ratios, not absolute times).
 
-    python bench/run.py [--json] [--repeats N] [--quick]
+    python bench/run.py [--json] [--repeats N] [--quick] [--save [PATH]]
 
 Three comparisons. In each repeat the contenders run in alternating blocks (4 each) so a
 change in machine load hits all of them; a repeat gives one rate per contender and one
@@ -27,6 +27,8 @@ ratio. Every figure is the median over ``--repeats`` repeats with its min..max s
 Random actions lift half the time, so the single- and batched-env figures include a reset
 about every second step (CartPole's random episodes last ~22 steps).
 Torch runs on one thread. ``--quick`` shrinks every run (for a smoke test, not for numbers).
+``--save`` also writes the report to ``bench/results/run.json`` (``bench/result_files.py``), from
+which ``python bench/report.py`` renders ``docs/BENCHMARKS.md``.
 JSON keys: ``single_ratio_vs_cartpole``, ``vector_ratio_vs_cartpole_vector`` (our env on as
 many threads as the machine has cores, :func:`coop_gym.envs.core.available_threads`),
 ``vector_ratio_vs_cartpole_vector_threads1`` / ``_threads2``, ``vector_thread_scaling`` (2 threads
@@ -40,17 +42,17 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
-import statistics
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 import gymnasium as gym
 import numpy as np
+from result_files import add_save_argument, save, summary
 
-import coop_gym
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.envs.core import available_threads
 
@@ -207,16 +209,6 @@ def _ppo_runners(setting: str, block: int) -> Callable[[int], list[Callable[[], 
     return lambda r: [PPORunner(backend, setting, block, r) for backend in ("adapter", "dummy", "null")]
 
 
-def summary(values: list[float]) -> dict[str, Any]:
-    """Median and min..max of repeated measurements."""
-    return {
-        "median": statistics.median(values),
-        "min": min(values),
-        "max": max(values),
-        "values": values,
-    }
-
-
 def run(repeats: int, quick: bool) -> dict[str, Any]:
     """All measurements; returns the JSON-ready report."""
     import torch
@@ -307,14 +299,10 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
             "ppo_settings": PPO_SETTINGS,
             "torch_threads": 1,
         },
-        "machine": {
-            "python": platform.python_version(),
-            "cpu_count": os.cpu_count(),
+        "load": {
             "load_average_1min_at_end": os.getloadavg()[0],
             "load_average_1min_at_start": load_at_start,
-            "coop_gym": coop_gym.__version__,
-            "gymnasium": gym.__version__,
-            "numpy": np.__version__,
+            "cpu_count": os.cpu_count(),
         },
     }
 
@@ -359,7 +347,7 @@ def _table(report: dict[str, Any]) -> str:
             f"{fmt(m[f'ppo_null_env_timesteps_per_s{suffix}'])}",
             f"  bound ppo_speedup_upper_bound{suffix:<18}{rfmt(r[f'ppo_speedup_upper_bound{suffix}'])}",
         ]
-    machine = report["machine"]
+    machine = report["load"]
     lines.append(
         f"load average (1 min) at the start: {machine['load_average_1min_at_start']:.2f}, "
         f"at the end: {machine['load_average_1min_at_end']:.2f} (on {machine['cpu_count']} cores)"
@@ -373,9 +361,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     parser.add_argument("--repeats", type=_positive_int, default=5, help="repeats of each measurement (default 5)")
     parser.add_argument("--quick", action="store_true", help="small runs: a smoke test, not numbers")
+    add_save_argument(parser, "run.json")
     args = parser.parse_args(argv)
     report = run(args.repeats, args.quick)
     print(json.dumps(report, indent=2) if args.json else _table(report))
+    if args.save:
+        save(args.save, "run", argv, report)
     return 0
 
 

@@ -1,6 +1,6 @@
 """Soak test: step the env for a long time with random actions and look for slow failures.
 
-    python bench/soak.py [--steps 10000000] [--num-envs 1024] [--seed 0] [--json]
+    python bench/soak.py [--steps 10000000] [--num-envs 1024] [--seed 0] [--json] [--save [PATH]]
 
 Steps ``gymnasium.make_vec("CoopGym/SitToStand-v0", num_envs=N)`` (the natively batched
 vector env, ``coop_gym.envs.vector``) until ``--steps`` env-steps have run, with random
@@ -17,6 +17,7 @@ Reports: env-steps, wall time, env-steps/s, resident memory (VmRSS) at the start
 of the run (past compilation and warm-up: growth after it would be a leak) and at the end, its
 peak (VmHWM), and the largest covariance entries. Exit status 1 if a check failed.
 Not part of the test run (it takes minutes); run it after changing the core or the filter.
+``--save`` also writes the report to ``bench/results/soak.json`` (``bench/result_files.py``).
 """
 
 from __future__ import annotations
@@ -27,10 +28,13 @@ import math
 import resource
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 import gymnasium as gym
 import numpy as np
+from result_files import add_save_argument, save
 
 import coop_gym  # noqa: F401 -- registers the ids
 
@@ -116,6 +120,36 @@ def find_core(env: Any) -> Any:
     return None
 
 
+def _finish(
+    env: Any,
+    mode: str,
+    env_steps: int,
+    episodes: int,
+    wall: float,
+    start_rss: dict[str, float],
+    warm_rss: float | None,
+    bad: list[str],
+) -> dict[str, Any]:
+    """The report of a finished soak, with the end-of-run covariance checks; closes ``env``."""
+    end_rss = rss_mb()
+    result = {
+        "mode": mode,
+        "env_steps": env_steps,
+        "episodes_ended": episodes,
+        "wall_s": wall,
+        "env_steps_per_s": env_steps / wall,
+        "rss_start_mb": start_rss.get("VmRSS"),
+        "rss_after_10pct_mb": warm_rss,
+        "rss_end_mb": end_rss.get("VmRSS"),
+        "rss_peak_mb": end_rss.get("VmHWM"),
+        "failures": bad,
+    }
+    core = find_core(env)
+    result["covariances"] = covariance_report(core) if core is not None else "no core found"
+    env.close()
+    return result
+
+
 def soak_vector(num_envs: int, steps: int, seed: int, info_every: int) -> dict[str, Any]:
     env = gym.make_vec(ENV_ID, num_envs=num_envs)
     rng = np.random.default_rng(seed)
@@ -141,23 +175,8 @@ def soak_vector(num_envs: int, steps: int, seed: int, info_every: int) -> dict[s
                 bad.append(f"non-finite info at iteration {done + k}")
                 break
         done += chunk
-    wall = time.perf_counter() - t0
-    result = {
-        "mode": f"vector env ({type(env.unwrapped).__name__}), num_envs={num_envs}",
-        "env_steps": done * num_envs,
-        "episodes_ended": episodes,
-        "wall_s": wall,
-        "env_steps_per_s": done * num_envs / wall,
-        "rss_start_mb": start_rss.get("VmRSS"),
-        "rss_after_10pct_mb": warm_rss,
-        "rss_end_mb": rss_mb().get("VmRSS"),
-        "rss_peak_mb": rss_mb().get("VmHWM"),
-        "failures": bad,
-    }
-    core = find_core(env)
-    result["covariances"] = covariance_report(core) if core is not None else "no core found"
-    env.close()
-    return result
+    mode = f"vector env ({type(env.unwrapped).__name__}), num_envs={num_envs}"
+    return _finish(env, mode, done * num_envs, episodes, time.perf_counter() - t0, start_rss, warm_rss, bad)
 
 
 def soak_single(steps: int, seed: int, info_every: int) -> dict[str, Any]:
@@ -186,23 +205,8 @@ def soak_single(steps: int, seed: int, info_every: int) -> dict[str, Any]:
                 episodes += 1
                 env.reset()
         done += chunk
-    wall = time.perf_counter() - t0
-    result = {
-        "mode": "single env (gymnasium.make)",
-        "env_steps": done,
-        "episodes_ended": episodes,
-        "wall_s": wall,
-        "env_steps_per_s": done / wall,
-        "rss_start_mb": start_rss.get("VmRSS"),
-        "rss_after_10pct_mb": warm_rss,
-        "rss_end_mb": rss_mb().get("VmRSS"),
-        "rss_peak_mb": rss_mb().get("VmHWM"),
-        "failures": bad,
-    }
-    core = find_core(env)
-    result["covariances"] = covariance_report(core) if core is not None else "no core found"
-    env.close()
-    return result
+    mode = "single env (gymnasium.make)"
+    return _finish(env, mode, done, episodes, time.perf_counter() - t0, start_rss, warm_rss, bad)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -213,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--single", action="store_true", help="step one single env instead of the vector env")
     parser.add_argument("--info-every", type=int, default=97, help="check info values every this many steps")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_save_argument(parser, "soak.json")
     args = parser.parse_args(argv)
     if args.steps < 1 or args.num_envs < 1 or args.info_every < 1:
         parser.error("--steps, --num-envs and --info-every must be positive")
@@ -232,6 +237,8 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"  {k}: {v}")
             else:
                 print(f"{key}: {value}")
+    if args.save:
+        save(args.save, "soak", argv, result)
     return 0 if result["ok"] else 1
 
 

@@ -1,7 +1,7 @@
 """Time to a good caregiver: held-out success against training wall-clock seconds.
 
     python bench/time_to_quality.py [--env ID] [--budget-s S] [--eval-every-s S] [--episodes N]
-                                    [--seed S] [--out DIR] [--contenders a,b]
+                                    [--seed S] [--out DIR] [--contenders a,b] [--save [PATH]]
 
 What a user waits for is wall-clock time from starting to train to a policy that beats
 the handbook caregiver. In one run, one after the other, this trains
@@ -30,7 +30,9 @@ the first script never got there). Torch uses one thread; both contenders train 
 same machine in the same process, so a change of load between them is the main source of
 error -- the report records the load average before and after each.
 
-Writes ``time_to_quality.json`` and ``time_to_quality.png`` (the curves) into ``--out``.
+Writes ``time_to_quality_<env>.json`` and ``time_to_quality_<env>.png`` (the curves) into
+``--out``; ``--save`` also writes the report to ``bench/results/time_to_quality_<env>.json``
+(``bench/result_files.py``; ``<env>`` is the id with ``/`` as ``-``).
 """
 
 from __future__ import annotations
@@ -42,11 +44,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-HERE = Path(__file__).resolve().parent
-if str(HERE.parent) not in sys.path:  # run as a script from a checkout
-    sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+from result_files import add_save_argument, save
 
-from coop_gym.cli import output_path_problem, positive_int  # noqa: E402
+from coop_gym.cli import output_path_problem, positive_int
 
 CONTENDERS: tuple[str, ...] = ("default", "first_script")
 
@@ -267,6 +268,7 @@ def main(argv: list[str] | None = None) -> int:
         "the same samples per update)",
     )
     parser.add_argument("--stop-at-target", action="store_true", help="stop a contender once it reaches the target")
+    add_save_argument(parser, "time_to_quality_<env>.json")
     args = parser.parse_args(argv)
     contenders = tuple(c for c in args.contenders.split(",") if c)
     if not contenders:
@@ -305,6 +307,8 @@ def main(argv: list[str] | None = None) -> int:
     ratio = report["time_ratio_default_vs_first_script"]
     if ratio is not None:
         print(f"time ratio default / first script: {ratio['value']:.3f} ({ratio['bound']})")
+    if args.save:
+        save(args.save.replace("<env>", stem), "time_to_quality", argv, report)
     return 0
 
 

@@ -1,0 +1,106 @@
+"""Where a benchmark's figures live: one JSON file per measurement under ``bench/results/``.
+
+Every bench script takes ``--save [PATH]``: without it the script only prints; with it the
+script also writes its report to ``PATH`` (default ``bench/results/<name>.json``, the file
+``python bench/report.py`` renders ``docs/BENCHMARKS.md`` from). A results file holds
+
+- ``benchmark``: the script's name (``run``, ``cold_start``, ...);
+- ``command``: the command line that produced it, to rerun it;
+- ``date``: when it finished (UTC);
+- ``machine``: core count, load average at the end, and the versions of Python, NumPy, numba,
+  Gymnasium, coop_gym (and of torch and SB3 when the run used them);
+- ``results``: the script's own report.
+
+The figures quoted in ``docs/BENCHMARKS.md`` come only from these files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import shlex
+import statistics
+import sys
+from collections.abc import Sequence
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+BENCH = Path(__file__).resolve().parent
+ROOT = BENCH.parent
+RESULTS = BENCH / "results"
+if str(ROOT) not in sys.path:  # run as a script from a checkout: import coop_gym and agents from it
+    sys.path.insert(0, str(ROOT))
+
+
+def add_save_argument(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--save [PATH]``: also write the report as JSON (``default`` under ``bench/results/``)."""
+    parser.add_argument(
+        "--save",
+        nargs="?",
+        const=str(RESULTS / default),
+        metavar="PATH",
+        help=f"also write the report as JSON to PATH (default without PATH: bench/results/{default}, "
+        "what docs/BENCHMARKS.md is rendered from)",
+    )
+
+
+def summary(values: Sequence[float]) -> dict[str, Any]:
+    """Median and min..max of repeated measurements, with the values themselves."""
+    return {"median": statistics.median(values), "min": min(values), "max": max(values), "values": list(values)}
+
+
+def _version(package: str) -> str | None:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def machine() -> dict[str, Any]:
+    """What the figures were measured on: cores, load and the versions that set the speed."""
+    info: dict[str, Any] = {
+        "cpu_count": os.cpu_count(),
+        "load_average_1min": os.getloadavg()[0],
+        "platform": f"{platform.system()} {platform.machine()}",
+        "python": platform.python_version(),
+    }
+    for package in ("numpy", "numba", "gymnasium", "coop_gym"):
+        info[package] = _version(package)
+    # torch and SB3 only where the run imported them (their version changes learning speed).
+    for module, package in (("torch", "torch"), ("stable_baselines3", "stable_baselines3")):
+        if module in sys.modules:
+            info[package] = _version(package)
+    return info
+
+
+def command_line(script: str, argv: Sequence[str] | None) -> str:
+    """The command that reruns this measurement (``argv``: the flags; None = ``sys.argv[1:]``)."""
+    flags = list(sys.argv[1:] if argv is None else argv)
+    return shlex.join(["python", f"bench/{script}.py", *flags])
+
+
+def save(path: str | Path, benchmark: str, argv: Sequence[str] | None, results: dict[str, Any]) -> Path:
+    """Write ``results`` with the command, the date and the machine to ``path``; returns it."""
+    from coop_gym.io import write_json
+
+    record = {
+        "benchmark": benchmark,
+        "command": command_line(benchmark, argv),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": machine(),
+        "results": results,
+    }
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    write_json(target, record)
+    print(f"wrote {target}", file=sys.stderr)
+    return target
+
+
+def load_all(folder: Path = RESULTS) -> dict[str, dict[str, Any]]:
+    """Every results file in ``folder``, by file stem."""
+    return {path.stem: json.loads(path.read_text(encoding="utf-8")) for path in sorted(folder.glob("*.json"))}
