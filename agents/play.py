@@ -164,14 +164,64 @@ class _Episode:
     outcome: str = "none"
     lift_time_s: float | None = None
 
+    def played(self, env_id: str, personas: str) -> PlayedEpisode:
+        """The finished episode as a line of the played-episodes CSV."""
+        return PlayedEpisode(
+            env_id,
+            self.seed,
+            personas,
+            self.persona,
+            self.outcome,
+            self.lift_time_s,
+            self.episode_return,
+            tuple(self.actions),
+        )
 
-def _step(
-    env: gym.Env[Any, Any], episode: _Episode, controls: Controls, action_type: str
-) -> tuple[bool, NDArray[np.uint8]]:
+
+@dataclass
+class _Table:
+    """What every episode of a session is played with: the env, the window, the keys and the clock."""
+
+    env_id: str
+    personas: list[str]
+    env: gym.Env[Any, Any]
+    keys: KeySource
+    pace: str
+    fps: int
+    window: bool
+    on_frame: Callable[[NDArray[np.uint8]], None] | None
+    view: Any = None  # agents.play_view.PlayView, opened on the first frame (it takes the frame's size)
+    clock: Any = None  # pygame.time.Clock
+
+    def open_view(self, frame: NDArray[np.uint8]) -> None:
+        """Open the window (or the off-screen surface) around the env's frame, once."""
+        if self.view is None:
+            import pygame
+
+            from agents.play_view import PlayView
+
+            self.view = PlayView((frame.shape[1], frame.shape[0]), window=self.window)
+            self.clock = pygame.time.Clock()
+
+    def show(self, advanced: bool = True) -> None:
+        """Put the composed image on the screen, and hand it to ``on_frame`` when something changed."""
+        self.view.present()
+        if self.on_frame is not None and advanced:
+            self.on_frame(self.view.pixels())
+
+    def close(self) -> None:
+        """Close the env and the window."""
+        self.env.close()
+        if self.view is not None:
+            self.view.close()
+
+
+def _step(table: _Table, episode: _Episode, controls: Controls) -> tuple[bool, NDArray[np.uint8]]:
     """One env step with the held controls; returns ``(done, frame)``."""
     push, verbal, lift = controls.take()
+    action_type = action_type_of(table.env)
     action = encode_actions(np.array([push]), np.array([verbal]), np.array([lift]), action_type)[0]
-    _, reward, terminated, truncated, info = env.step(action)
+    _, reward, terminated, truncated, info = table.env.step(action)
     episode.actions.append((push, verbal, lift))
     episode.episode_return += float(reward)
     episode.times_s.append(float(info["elapsed_s"]))
@@ -179,7 +229,7 @@ def _step(
     episode.outcome = str(info["outcome"])
     if lift:
         episode.lift_time_s = float(info["elapsed_s"])
-    return bool(terminated or truncated), env.render()  # type: ignore[return-value]
+    return bool(terminated or truncated), table.env.render()  # type: ignore[return-value]
 
 
 def _compared(env_id: str, personas: list[str], seed: int) -> list[tuple[str, str, float | None]]:
@@ -189,6 +239,69 @@ def _compared(env_id: str, personas: list[str], seed: int) -> list[tuple[str, st
         record = evaluate(name, env_id, personas, episodes=1, seed=seed, n_envs=1, backend="single").records[0]
         out.append((name, record.outcome, record.duration_s if record.lifted else None))
     return out
+
+
+def _play_episode(table: _Table, seed: int) -> tuple[_Episode, NDArray[np.uint8] | None]:
+    """Reset to ``seed`` and step under the player's keys until the episode ends.
+
+    Returns:
+        The episode and its last frame; the frame is None if the player quit.
+    """
+    _, info = table.env.reset(seed=seed)
+    frame: NDArray[np.uint8] = table.env.render()  # type: ignore[assignment]
+    table.open_view(frame)
+    episode = _Episode(seed, str(info["persona"]), [0.0], [int(info["true_xi"])])
+    # Real time waits for the first Space, so the player sees the person before the clock runs.
+    controls, paused, done, stepped = Controls(), table.pace == "realtime", False, True
+    while not done:
+        commands = [controls.press(k) for k in table.keys()]
+        if "quit" in commands:
+            return episode, None
+        if table.pace == "realtime":
+            paused ^= commands.count("space") % 2 == 1
+            advance = not paused
+        else:
+            advance = "space" in commands or "act" in commands
+        if advance:
+            done, frame = _step(table, episode, controls)
+        status = ("your move" if table.pace == "turns" else "") if not paused else "PAUSED: Space to run"
+        table.view.show_playing(frame, controls.push, controls.said, episode.times_s[-1], seed, status)
+        table.show(advance or stepped)
+        stepped = False
+        table.clock.tick(table.fps if table.pace == "realtime" else 30)
+    return episode, frame
+
+
+def _summary(table: _Table, episode: _Episode, note: str) -> Any:
+    """The after-episode panel: the outcome, the mental state under the player's cues, the scripted agents' runs."""
+    from agents.play_view import Summary
+
+    timing = getattr(table.env.unwrapped, "timing", None)  # the env's clock sets the summary's time axis
+    return Summary(
+        episode.outcome,
+        episode.lift_time_s,
+        episode.episode_return,
+        episode.persona,
+        episode.times_s,
+        episode.true_xi,
+        episode.actions,
+        _compared(table.env_id, table.personas, episode.seed),
+        float(timing.episode_s) if timing is not None else 30.0,
+        note,
+    )
+
+
+def _wait_for_next(table: _Table, last: bool) -> bool:
+    """After the summary: True when the player asks for the next person, False when they quit."""
+    controls = Controls()
+    while True:
+        commands = [controls.press(k) for k in table.keys()]
+        if "quit" in commands or (last and "next" in commands):
+            return False
+        if "next" in commands:
+            return True
+        table.view.present()
+        table.clock.tick(30)
 
 
 def play(
@@ -221,93 +334,32 @@ def play(
     Returns:
         The finished episodes, as appended.
     """
-    import pygame
-
     if pace not in ("realtime", "turns"):
         raise ValueError(f"pace must be 'realtime' or 'turns', got {pace!r}")
     names = [p.name for p in resolve_personas(personas if "," not in personas else personas.split(","))]
     if Path(csv_path).exists() and Path(csv_path).stat().st_size:
         read_played(csv_path)  # a foreign or corrupt CSV is refused before anyone plays
     seed = next_seed(csv_path, env_id) if seed is None else seed
-    keys = keys or pygame_keys
     env = gym.make(env_id, personas=names, render_mode="rgb_array")
-    action_type = action_type_of(env)
-    timing = getattr(env.unwrapped, "timing", None)  # the env's clock sets the summary's time axis
-    episode_s = float(timing.episode_s) if timing is not None else 30.0
-    from agents.play_view import PlayView, Summary
-
-    view: PlayView | None = None
-    clock = pygame.time.Clock()
+    table = _Table(env_id, names, env, keys or pygame_keys, pace, fps, window, on_frame)
     played: list[PlayedEpisode] = []
     try:
         while True:
-            _, info = env.reset(seed=seed)
-            frame: NDArray[np.uint8] = env.render()  # type: ignore[assignment]
-            view = view or PlayView((frame.shape[1], frame.shape[0]), window=window)
-            episode = _Episode(seed, str(info["persona"]), [0.0], [int(info["true_xi"])])
-            # Real time waits for the first Space, so the player sees the person before the clock runs.
-            controls, paused, done, stepped = Controls(), pace == "realtime", False, True
-            while not done:
-                commands = [controls.press(k) for k in keys()]
-                if "quit" in commands:
-                    return played
-                if pace == "realtime":
-                    paused ^= commands.count("space") % 2 == 1
-                    advance = not paused
-                else:
-                    advance = "space" in commands or "act" in commands
-                if advance:
-                    done, frame = _step(env, episode, controls, action_type)
-                status = ("your move" if pace == "turns" else "") if not paused else "PAUSED: Space to run"
-                view.show_playing(frame, controls.push, controls.said, episode.times_s[-1], seed, status)
-                view.present()
-                if on_frame is not None and (advance or stepped):
-                    on_frame(view.pixels())
-                stepped = False
-                clock.tick(fps if pace == "realtime" else 30)
-            record = PlayedEpisode(
-                env_id,
-                seed,
-                personas,
-                episode.persona,
-                episode.outcome,
-                episode.lift_time_s,
-                episode.episode_return,
-                tuple(episode.actions),
-            )
+            episode, frame = _play_episode(table, seed)
+            if frame is None:
+                return played
+            record = episode.played(env_id, personas)
             append_played(csv_path, record)
             played.append(record)
-            last = episodes and len(played) >= episodes
+            last = bool(episodes and len(played) >= episodes)
             hint = "Esc: quit" if last else f"Enter: next person (seed {seed + 1})   Esc: quit"
-            summary = Summary(
-                episode.outcome,
-                episode.lift_time_s,
-                episode.episode_return,
-                episode.persona,
-                episode.times_s,
-                episode.true_xi,
-                episode.actions,
-                _compared(env_id, names, seed),
-                episode_s,
-                f"saved to {csv_path}.   {hint}",
-            )
-            view.show_summary(frame, summary)
-            view.present()
-            if on_frame is not None:
-                on_frame(view.pixels())
-            while True:
-                commands = [controls.press(k) for k in keys()]
-                if "quit" in commands or (last and "next" in commands):
-                    return played
-                if "next" in commands:
-                    break
-                view.present()
-                clock.tick(30)
+            table.view.show_summary(frame, _summary(table, episode, f"saved to {csv_path}.   {hint}"))
+            table.show()
+            if not _wait_for_next(table, last):
+                return played
             seed += 1
     finally:
-        env.close()
-        if view is not None:
-            view.close()
+        table.close()
 
 
 def _parser() -> argparse.ArgumentParser:
