@@ -112,6 +112,24 @@ def _draw_cues(
     return cp, cv
 
 
+def _draw_xi(rng: np.random.Generator, n_trials: int, xi: int | Sequence[int] | None) -> NDArray[np.int64]:
+    """Each trial's cooperativeness: ``xi`` given (one, or one per trial), or uniform draws in {-1, 0, +1}."""
+    if xi is None:
+        return rng.integers(-1, 2, n_trials)
+    xis = np.broadcast_to(np.asarray(xi, dtype=np.int64), (n_trials,))
+    if not np.all(np.isin(xis, (-1, 0, 1))):
+        raise ValueError(f"xi must be in {{-1, 0, +1}}, got {xi!r}")
+    return xis
+
+
+def _draw_start(model: NominalModel, rng: np.random.Generator, n_trials: int) -> NDArray[np.float64]:
+    """Each trial's ``[x, xdot, eta]`` drawn from the filter's prior around ``x = 0``."""
+    start = np.zeros((n_trials, 3))
+    start[:, 1] = rng.normal(0.0, model.initial_velocity_std_m_per_s, n_trials)
+    start[:, 2] = rng.normal(0.0, model.initial_intention_std_m, n_trials)
+    return start
+
+
 def simulate_nominal_trials(
     model: NominalModel,
     n_trials: int,
@@ -157,23 +175,16 @@ def simulate_nominal_trials(
     rng = rng if rng is not None else np.random.default_rng(0)
     if n_trials < 1 or n_steps < 2:
         raise ValueError(f"need n_trials >= 1 and n_steps >= 2, got {n_trials!r}, {n_steps!r}")
+    if initial_state not in ("prior", "rest"):
+        raise ValueError(f"initial_state must be 'prior' or 'rest', got {initial_state!r}")
     dt = model.dt_s
     duration = max(1, round(cue_duration_s / dt))
     margin = round(0.5 / dt)
     last_onset = max(1, n_steps - duration - margin)
-    if xi is None:
-        xis = rng.integers(-1, 2, n_trials)
-    else:
-        xis = np.broadcast_to(np.asarray(xi, dtype=np.int64), (n_trials,))
-        if not np.all(np.isin(xis, (-1, 0, 1))):
-            raise ValueError(f"xi must be in {{-1, 0, +1}}, got {xi!r}")
+    # The draws in a fixed order (xi, cues, start, noise), so a seed gives the same trials.
+    xis = _draw_xi(rng, n_trials, xi)
     cp, cv = _draw_cues(rng, n_trials, n_steps, push_levels_n, allow_no_cue, duration, (margin, last_onset))
     xi_steps = np.repeat(xis.astype(np.float64)[:, None], n_steps, axis=1)
-    start = np.zeros((n_trials, 3))
-    if initial_state == "prior":
-        start[:, 1] = rng.normal(0.0, model.initial_velocity_std_m_per_s, n_trials)
-        start[:, 2] = rng.normal(0.0, model.initial_intention_std_m, n_trials)
-    elif initial_state != "rest":
-        raise ValueError(f"initial_state must be 'prior' or 'rest', got {initial_state!r}")
+    start = _draw_start(model, rng, n_trials) if initial_state == "prior" else np.zeros((n_trials, 3))
     measured, _ = _simulate_batch(model, cp, cv, xi_steps, rng, start)
     return [Trial(cp[i], cv[i], measured[i], xi=int(xis[i]), dt_s=dt) for i in range(n_trials)]

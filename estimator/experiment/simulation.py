@@ -296,6 +296,41 @@ def _simulate_session(
     return force, position, state
 
 
+def _draw_subjects(
+    config: ProtocolConfig, rng: np.random.Generator
+) -> tuple[tuple[Persona, ...], tuple[PersonParams, ...]]:
+    """The subjects: each a persona drawn from the pool, then a person around it, then the realism switches."""
+    pool = resolve_personas(config.personas)
+    personas, subjects = [], []
+    for _ in range(config.n_subjects):
+        persona = pool[int(rng.integers(len(pool)))]
+        person = sample_person(persona, rng, vary=config.realism.person_variation)
+        personas.append(persona)
+        subjects.append(person.with_realism(config.realism))
+    return tuple(personas), tuple(subjects)
+
+
+def _calibration_sessions(
+    config: ProtocolConfig, subjects: Sequence[PersonParams], seeds: np.random.SeedSequence
+) -> tuple[dict[str, Any], ...]:
+    """Each subject's labelled calibration session: ``calibration_trials`` trials of a balanced mix."""
+    calib_config = dataclasses.replace(config, n_trials=config.calibration_trials, requested_mix="balanced")
+    sessions = []
+    for person, ss in zip(subjects, seeds.spawn(len(subjects)), strict=True):
+        spec_ss, sim_ss = ss.spawn(2)
+        specs = draw_trials(calib_config, np.random.default_rng(spec_ss))
+        force, position, _ = _simulate_session(config, person, specs, sim_ss.spawn(len(specs)))
+        sessions.append(
+            {
+                "trials": specs,
+                "measured_force_n": force,
+                "verbal_cue": np.stack([sp.cues(config)[1] for sp in specs]),
+                "measured_position_m": position,
+            }
+        )
+    return tuple(sessions)
+
+
 def run_experiment(config: ProtocolConfig, seed: int, *, with_calibration: bool = False) -> ExperimentData:
     """Simulate the experiment: draw trials and subjects from ``seed``, then every trial.
 
@@ -313,14 +348,7 @@ def run_experiment(config: ProtocolConfig, seed: int, *, with_calibration: bool 
     root = np.random.SeedSequence(int(seed))
     trial_ss, subject_ss, data_ss, calib_ss = root.spawn(4)
     trials = draw_trials(config, np.random.default_rng(trial_ss))
-    pool = resolve_personas(config.personas)
-    subject_rng = np.random.default_rng(subject_ss)
-    personas, subjects = [], []
-    for _ in range(config.n_subjects):
-        persona = pool[int(subject_rng.integers(len(pool)))]
-        person = sample_person(persona, subject_rng, vary=config.realism.person_variation)
-        personas.append(persona)
-        subjects.append(person.with_realism(config.realism))
+    personas, subjects = _draw_subjects(config, np.random.default_rng(subject_ss))
     cues = [spec.cues(config) for spec in trials]
     push = np.stack([c[0] for c in cues])
     verbal = np.stack([c[1] for c in cues])
@@ -330,30 +358,14 @@ def run_experiment(config: ProtocolConfig, seed: int, *, with_calibration: bool 
     state = np.empty((s, n, t, 4))
     for i, (person, ss) in enumerate(zip(subjects, data_ss.spawn(s), strict=True)):
         force[i], position[i], state[i] = _simulate_session(config, person, trials, ss.spawn(n))
-    calibration = None
-    if with_calibration:
-        sessions = []
-        for person, ss in zip(subjects, calib_ss.spawn(s), strict=True):
-            spec_ss, sim_ss = ss.spawn(2)
-            calib_config = dataclasses.replace(config, n_trials=config.calibration_trials, requested_mix="balanced")
-            specs = draw_trials(calib_config, np.random.default_rng(spec_ss))
-            c_force, c_position, _ = _simulate_session(config, person, specs, sim_ss.spawn(len(specs)))
-            sessions.append(
-                {
-                    "trials": specs,
-                    "measured_force_n": c_force,
-                    "verbal_cue": np.stack([sp.cues(config)[1] for sp in specs]),
-                    "measured_position_m": c_position,
-                }
-            )
-        calibration = tuple(sessions)
+    calibration = _calibration_sessions(config, subjects, calib_ss) if with_calibration else None
     steps = np.array([judgment_step(config, push[k], verbal[k]) for k in range(n)], dtype=np.int64)
     return ExperimentData(
         config=config,
         seed=int(seed),
         trials=trials,
-        personas=tuple(personas),
-        subjects=tuple(subjects),
+        personas=personas,
+        subjects=subjects,
         push_force_n=push,
         verbal_cue=verbal,
         measured_force_n=force,
