@@ -2,7 +2,8 @@
 
 ``python -m estimator.experiment.protocol --help``. The parts: the trial design and the simulated
 subjects (:mod:`estimator.experiment.simulation`), the registry of estimators
-(:mod:`estimator.experiment.estimators`), scores and the paper's tables (:mod:`estimator.experiment.tables`),
+(:mod:`estimator.experiment.estimators`) and the subject models they read
+(:mod:`estimator.experiment.banks`), scores and the paper's tables (:mod:`estimator.experiment.tables`),
 figures (:mod:`estimator.experiment.plots`); this module runs them from the command line and
 re-exports their public names.
 """
@@ -21,6 +22,7 @@ from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
 from coop_gym.model.difficulty import DIFFICULTIES
 from coop_gym.model.personas import resolve_personas
+from estimator.experiment.banks import identified_banks, intention_drive
 from estimator.experiment.estimators import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
@@ -28,8 +30,6 @@ from estimator.experiment.estimators import (
     estimate,
     fit_recalibration,
     gaussian_xi_probabilities,
-    identified_banks,
-    intention_drive,
 )
 from estimator.experiment.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
 from estimator.experiment.plots import plot_confusion, plot_trial
