@@ -14,25 +14,28 @@ needs ``pip install tyro``)::
 
 The id is handed to the script as ``coop_gym:<id>``, so ``gym.make`` imports coop_gym (and so
 registers the ids) before it makes the env. The JSON written to ``--out`` holds the command,
-the wall time and both evaluations.
+the wall time, both evaluations and the handbook caregiver's on the same episodes
+(``bench/held_out.py``). ``--save`` also writes it to
+``bench/results/cleanrl_defaults_<script>_<env>_<timesteps>.json`` (``bench/result_files.py``).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import runpy
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 import numpy as np
 import torch
+from held_out import held_out_report
 from numpy.typing import NDArray
+from result_files import add_save_argument, save
 
 import coop_gym
-from agents.evaluate import evaluate
 from coop_gym.io import save_with, write_json
 
 
@@ -44,12 +47,9 @@ class ScriptAgent:
         self.name = name
 
     def predict(
-        self,
-        observation: NDArray[np.floating[Any]],
-        state: Any = None,
-        episode_start: NDArray[np.bool_] | None = None,
-        deterministic: bool = True,
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
     ) -> tuple[NDArray[np.int64], Any]:
+        """SB3's protocol (``agents.base.Agent``); the script's agent keeps no state."""
         with torch.no_grad():
             logits = self.module.actor(torch.as_tensor(np.asarray(observation), dtype=torch.float32))
             if deterministic:
@@ -67,6 +67,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=1, help="the script's --seed (CleanRL's default is 1)")
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--out", default="runs/cleanrl")
+    add_save_argument(parser, "cleanrl_defaults_<script>_<env>_<timesteps>.json")
     args = parser.parse_args(argv)
     script = Path(args.script)
     if not script.is_file():
@@ -93,17 +94,18 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"{script} defined no `agent` to evaluate")
     name = f"cleanrl_{script.stem}_{args.total_timesteps}"
     agent = ScriptAgent(namespace["agent"].cpu().eval(), name)
-    results = {}
-    for mode, deterministic in (("greedy", True), ("sampled", False)):
-        result = evaluate(
-            agent, args.env_id, personas="test", episodes=args.episodes, seed=0, deterministic=deterministic
-        )
-        results[mode] = result.summary()
-        print(mode, json.dumps(result.summary()))
+    run = {"script_command": ["python", *command], "timesteps": args.total_timesteps, "seed": args.seed}
+    run["wall_time_s"] = wall
+    # Greedy (argmax, SB3's deterministic=True) and sampled (how the script acts while it trains).
+    agents = {"greedy": (agent, True), "sampled": (agent, False)}
+    report = held_out_report(run, agents, args.env_id, args.episodes)
     path = out / f"{name}_{args.env_id.split('/')[-1]}_seed{args.seed}.json"
-    write_json(path, {"command": ["python", *command], "wall_time_s": wall, "evaluation": results})
+    write_json(path, report)
     save_with(path.with_suffix(".pt"), lambda temp: torch.save(agent.module.state_dict(), temp))
     print(f"wrote {path}")
+    if args.save:
+        stem = f"{script.stem}_{args.env_id.split('/')[-1]}_{args.total_timesteps}"
+        save(args.save.replace("<script>_<env>_<timesteps>", stem), "cleanrl_defaults", argv, report)
 
 
 if __name__ == "__main__":

@@ -2,34 +2,44 @@
 
 Trains ``PPO("MlpPolicy", "CoopGym/SitToStand-v0")`` or
 ``DQN("MlpPolicy", "CoopGym/SitToStandDiscrete-v0")`` exactly as a user would write it
-(one env, SB3's defaults, no normalisation), saves the model, and prints the command that
-scores it on the held-out personas with the common evaluation path::
+(one env, SB3's defaults, no normalisation), saves the model and scores it with the common
+evaluation path (:func:`agents.evaluate.evaluate`) on ``--episodes`` held-out episodes
+(seeds 0..N-1), beside the handbook caregiver on the same episodes of ``CoopGym/SitToStand-v0``
+(the same model and people; the reference of every score)::
 
     nice python bench/library_defaults.py --algo ppo --timesteps 300000 --out runs/defaults
-    python -m agents.evaluate --model runs/defaults/ppo_300000.zip --personas test --episodes 1000
 
 ``--env ID`` trains on another registered id, e.g. the unit-scaled ``CoopGym/SitToStandUnit-v0``
-(the model is saved as ``{algo}_{name}_{timesteps}.zip`` and scored with ``--env ID``).
+(the model is saved as ``{algo}_{name}_{timesteps}.zip``).
 
-``--snapshot-at 300000`` also saves the model when training first passes 300k steps, as
-``{algo}_{name}_300000.zip``. With PPO's defaults (constant learning rate and clip range)
-that model is the one a 300k-step run gives; DQN's exploration schedule spans the whole
+``--snapshot-at 300000`` also saves (and scores) the model when training first passes 300k
+steps, as ``{algo}_{name}_300000.zip``. With PPO's defaults (constant learning rate and clip
+range) that model is the one a 300k-step run gives; DQN's exploration schedule spans the whole
 run, so for DQN train a separate 300k run instead.
+
+``--save`` also writes the report to ``bench/results/library_defaults_<algo>_<env>_<timesteps>.json``
+(``bench/result_files.py``; ``<env>`` is the id's name after ``CoopGym/``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 import torch
+from held_out import held_out_report
+from result_files import add_save_argument, save
 from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
 import coop_gym  # registers the ids
+from agents.rl import SB3Agent
+from coop_gym.cli import positive_int
 
 ENV_IDS = {"ppo": "CoopGym/SitToStand-v0", "dqn": "CoopGym/SitToStandDiscrete-v0"}
 
@@ -60,15 +70,17 @@ class _Snapshots(BaseCallback):
         return True
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--algo", choices=sorted(ENV_IDS), required=True)
-    parser.add_argument("--timesteps", type=int, default=300_000)
+    parser.add_argument("--timesteps", type=positive_int, default=300_000)
     parser.add_argument("--env", choices=sorted(coop_gym.ENV_IDS), help="default: the algorithm's id in ENV_IDS")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--episodes", type=positive_int, default=1000, help="held-out episodes per score")
     parser.add_argument("--out", default="runs/defaults")
     parser.add_argument("--snapshot-at", type=int, nargs="*", default=[], help="also save at these step counts")
-    args = parser.parse_args()
+    add_save_argument(parser, "library_defaults_<algo>_<env>_<timesteps>.json")
+    args = parser.parse_args(argv)
     if any(n < 1 or n >= args.timesteps for n in args.snapshot_at):
         parser.error(f"--snapshot-at: each must be in [1, --timesteps), got {args.snapshot_at}")
     torch.set_num_threads(1)
@@ -88,10 +100,15 @@ def main() -> None:
     wall = time.perf_counter() - started
     path = path_for(args.timesteps)
     model.save(path)
-    info = {"algo": args.algo, "env_id": env_id, "timesteps": args.timesteps, "wall_time_s": wall}
-    path.with_suffix(".json").write_text(json.dumps(info, indent=2) + "\n")
-    print(json.dumps(info))
-    print(f"python -m agents.evaluate --model {path} --personas test --episodes 1000 --env {env_id}")
+    models = {steps: cls.load(path_for(steps), device="cpu") for steps in args.snapshot_at}
+    models[args.timesteps] = model
+    agents = {str(n): (SB3Agent(m, args.algo, env_id, name=f"{args.algo} {n}"), True) for n, m in models.items()}
+    run = {"algo": args.algo, "timesteps": args.timesteps, "seed": args.seed, "wall_time_s": wall}
+    report = held_out_report(run, agents, env_id, args.episodes)
+    path.with_suffix(".json").write_text(json.dumps(report, indent=2) + "\n")
+    if args.save:
+        stem = f"{args.algo}_{env_id.split('/')[-1]}_{args.timesteps}"
+        save(args.save.replace("<algo>_<env>_<timesteps>", stem), "library_defaults", argv, report)
 
 
 if __name__ == "__main__":
