@@ -82,10 +82,56 @@ def _counts(result: Any) -> dict[str, Any]:
     }
 
 
+def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, Any]:
+    """The card's training section, from the training summary (train.py's or the script's)."""
+    return {
+        "command": args.command,
+        "seed": training.get("seed", 0),
+        "timesteps": training["timesteps"],
+        "n_envs": training.get("n_envs"),
+        "personas": training.get("personas"),
+        "wall_time_s": round(float(training["wall_time_s"]), 1),
+        "hyperparams": f"agents/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']",
+    }
+
+
+def _evaluation(args: Args, label: str, results: list[Any]) -> dict[str, Any]:
+    """The card's held-out table: the model and :data:`BASELINES` on the same episodes."""
+    from agents.evaluate import headroom
+
+    room = headroom(results)
+    if room is None:
+        raise ValueError("the held-out table needs the oracle and a non-oracle agent")
+    return {
+        "command": (
+            f"python -m agents.evaluate --model {label} --compare {','.join(BASELINES)} "
+            f"--personas test --episodes {args.episodes} --seed {args.seed}"
+        ),
+        "personas": "test",
+        "episodes": args.episodes,
+        "seed": args.seed,
+        "n_envs": args.n_envs,
+        "best_blind_agent": room.best_blind_agent,
+        "table": [_row(r, room.score_of(r.agent)) for r in results],
+    }
+
+
+def _check(args: Args, model_result: Any, check: Any) -> dict[str, Any]:
+    """The card's check section: the model alone on the evaluation's first ``check_episodes``."""
+    first = model_result.records[: args.check_episodes]
+    same = [(r.outcome, r.episode_return) for r in first] == [(r.outcome, r.episode_return) for r in check.records]
+    return {
+        "what": f"the model alone on the first {args.check_episodes} episodes of the evaluation "
+        "(tests/agents/test_pretrained.py reproduces these exactly)",
+        **_counts(check),
+        "same_as_the_evaluations_first_episodes": same,
+    }
+
+
 def main() -> None:
     """Copy the model, evaluate it and the baselines, write the card."""
     args = tyro.cli(Args)
-    from agents.evaluate import evaluate, headroom, print_table
+    from agents.evaluate import evaluate, print_table
     from agents.rl import load_agent
 
     env_kwargs = json.loads(args.env_kwargs)
@@ -94,19 +140,17 @@ def main() -> None:
     target = PRETRAINED / f"{args.name}.zip"
     shutil.copyfile(args.model, target)
     agent = load_agent(target)
-    assert agent.env_id is not None
+    if agent.env_id is None:
+        raise ValueError(f"{args.model} does not record the env it was trained on")
     env_id = agent.env_id
     label = f"pretrained:{args.name}"
     common: dict[str, Any] = {"personas": "test", "seed": args.seed, "n_envs": args.n_envs}
 
     model_result = evaluate(agent, env_id, episodes=args.episodes, env_kwargs=env_kwargs, name=label, **common)
     results = [model_result] + [evaluate(b, env_id, episodes=args.episodes, **common) for b in BASELINES]
-    room = headroom(results)
-    assert room is not None
+    evaluation = _evaluation(args, label, results)
     print_table(results)
     check = evaluate(agent, env_id, episodes=args.check_episodes, env_kwargs=env_kwargs, name=label, **common)
-    first = model_result.records[: args.check_episodes]
-    same = [(r.outcome, r.episode_return) for r in first] == [(r.outcome, r.episode_return) for r in check.records]
 
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False)
     card = {
@@ -116,33 +160,9 @@ def main() -> None:
         "env_id": env_id,
         "env_kwargs": env_kwargs,
         "features": list(agent.features or ()),
-        "training": {
-            "command": args.command,
-            "seed": training.get("seed", 0),
-            "timesteps": training["timesteps"],
-            "n_envs": training.get("n_envs"),
-            "personas": training.get("personas"),
-            "wall_time_s": round(float(training["wall_time_s"]), 1),
-            "hyperparams": f"agents/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']",
-        },
-        "evaluation": {
-            "command": (
-                f"python -m agents.evaluate --model {label} --compare {','.join(BASELINES)} "
-                f"--personas test --episodes {args.episodes} --seed {args.seed}"
-            ),
-            "personas": "test",
-            "episodes": args.episodes,
-            "seed": args.seed,
-            "n_envs": args.n_envs,
-            "best_blind_agent": room.best_blind_agent,
-            "table": [_row(r, room.score_of(r.agent)) for r in results],
-        },
-        "check": {
-            "what": f"the model alone on the first {args.check_episodes} episodes of the evaluation "
-            "(tests/agents/test_pretrained.py reproduces these exactly)",
-            **_counts(check),
-            "same_as_the_evaluations_first_episodes": same,
-        },
+        "training": _training(args, training, env_id),
+        "evaluation": evaluation,
+        "check": _check(args, model_result, check),
         "carded_at_commit": commit.stdout.strip(),
         "notes": args.notes,
     }
