@@ -38,6 +38,7 @@ from types import ModuleType
 from typing import Any
 
 from numba.core.caching import CacheImpl, FunctionCache, NullCache, _CacheLocator
+from numba.core.runtime import rtsys
 
 __all__ = ["KernelCacheWarning", "guard_kernel_cache", "guarded_kernels", "project_sources", "source_digest"]
 
@@ -99,11 +100,11 @@ def project_sources(module_name: str) -> list[Path]:
     return sorted(seen.values())
 
 
-def source_digest(module_name: str) -> str:
-    """SHA-256 over the relative paths and contents of :func:`project_sources`."""
+def source_digest(module_name: str, sources: list[Path] | None = None) -> str:
+    """SHA-256 over the relative paths and contents of :func:`project_sources` (or of ``sources``)."""
     root = _project_root(module_name)
     digest = hashlib.sha256()
-    for path in project_sources(module_name):
+    for path in project_sources(module_name) if sources is None else sources:
         digest.update(path.relative_to(root).as_posix().encode())
         digest.update(b"\0")
         digest.update(path.read_bytes())
@@ -137,18 +138,42 @@ class _SourceGuard:
             if self.checked:
                 return
             self.checked = True
-            digest = source_digest(self.module_name)
             try:
                 stamp = Path(self.kernels[0]._cache.cache_path) / f"{self.module_name}{_STAMP_SUFFIX}"
-                previous = stamp.read_text().strip() if stamp.exists() else None
-                if previous != digest:
+                previous = stamp.read_text().splitlines() if stamp.exists() else []
+                if _unchanged(previous[1:]):
+                    return
+                sources = project_sources(self.module_name)
+                digest = source_digest(self.module_name, sources)
+                if previous[:1] != [digest]:
                     for kernel in self.kernels:
                         kernel._cache.flush()
-                    temporary = stamp.with_name(f"{stamp.name}.{os.getpid()}")
-                    temporary.write_text(digest)
-                    os.replace(temporary, stamp)
+                temporary = stamp.with_name(f"{stamp.name}.{os.getpid()}")
+                temporary.write_text("\n".join([digest, *_file_stamps(sources)]))
+                os.replace(temporary, stamp)
             except OSError:  # a read-only cache: Numba compiles as usual
                 pass
+
+
+def _file_stamps(paths: list[Path]) -> list[str]:
+    """``mtime_ns size path`` of each file: what tells, without reading them, that the sources are the stamped ones."""
+    return [f"{(status := path.stat()).st_mtime_ns} {status.st_size} {path}" for path in paths]
+
+
+def _unchanged(file_stamps: list[str]) -> bool:
+    """Whether every file of a stamp still has its recorded modification time and size.
+
+    The digest's sources are found by parsing every one of them (~0.1-0.3 s at each process
+    start); a file's times and size are what Numba's own cache trusts for the file that defines a
+    kernel, so an unchanged set needs no parsing. Any difference -- an edit, a moved checkout, a
+    missing file -- means the digest is computed again from the contents.
+    """
+    if not file_stamps:
+        return False
+    try:
+        return _file_stamps([Path(line.split(" ", 2)[2]) for line in file_stamps]) == file_stamps
+    except (OSError, IndexError):
+        return False
 
 
 class KernelCacheWarning(RuntimeWarning):
@@ -235,6 +260,19 @@ def _uncached(kernel: Any) -> bool:
     return False
 
 
+def _load_overload(cache: Any, sig: Any, target_context: Any) -> Any:
+    """Numba's ``Cache.load_overload`` without its first step, a refresh of the target context.
+
+    That refresh imports every implementation registry of Numba (SciPy's BLAS among them:
+    0.4-0.9 s of each warm start, most of it) so that a compile can find them; rebuilding a
+    cached kernel needs only the runtime its allocations call into. A compile later in the
+    process refreshes the context itself (``numba.core.compiler.compile_extra``).
+    """
+    rtsys.initialize(target_context)
+    with cache._guard_against_spurious_io_errors():
+        return cache._load_overload(sig, target_context)
+
+
 def guard_kernel_cache(module_name: str) -> None:
     """Flush the cached kernels of ``module_name`` whenever a project source they depend on changes.
 
@@ -249,12 +287,12 @@ def guard_kernel_cache(module_name: str) -> None:
         cache = kernel._cache
         if getattr(cache, "source_guard", None) is not None:
             continue
-        original_load, original_save = cache.load_overload, cache.save_overload
+        original_save = cache.save_overload
 
-        def load_overload(sig: Any, target_context: Any, _cache: Any = cache, _original: Any = original_load) -> Any:
+        def load_overload(sig: Any, target_context: Any, _cache: Any = cache) -> Any:
             guard.check()
             try:
-                return _original(sig, target_context)
+                return _load_overload(_cache, sig, target_context)
             except OSError as exc:  # an unreadable cache: compile instead
                 _cache.disable()
                 _warn_uncached(f"cannot read Numba's cache at {_cache.cache_path} ({exc})")

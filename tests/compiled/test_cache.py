@@ -210,3 +210,38 @@ def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path:
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().split(maxsplit=2) == ["6", "7.0", "['KernelCacheWarning']"]
+
+
+def test_a_warm_start_loads_kernels_without_numbas_registries_or_parsing_sources(tmp_path: Path) -> None:
+    """Loading from the cache imports none of Numba's implementation registries and parses no source."""
+    package = tmp_path / "toy"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "kern.py").write_text(
+        "import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+        "@njit(cache=True)\ndef kernel(n):\n    out = np.empty(n)\n    for i in range(n):\n        out[i] = i * 0.5\n"
+        "    return out\n\nguard_kernel_cache(__name__)\n"
+    )
+    code = textwrap.dedent(
+        """
+        import sys
+        from coop_gym.compiled import cache
+        parsed = []
+        original = cache._imported_names
+        cache._imported_names = lambda *args: parsed.append(args) or original(*args)
+        from toy.kern import kernel
+        print(kernel(4).tolist(), "numba.np.arraymath" in sys.modules, len(parsed))
+        """
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    env.pop("NUMBA_DISABLE_JIT", None)
+    runs = [
+        subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+        for _ in range(2)
+    ]
+    assert all(run.returncode == 0 for run in runs), runs[-1].stderr
+    cold, warm = (run.stdout.split("]")[1].split() for run in runs)
+    assert cold[0] == "True" and int(cold[1]) > 0  # compiled: registries imported, sources parsed
+    assert warm == ["False", "0"]
+    assert runs[1].stdout.startswith("[0.0, 0.5, 1.0, 1.5]")
