@@ -4,8 +4,8 @@ For each bad constructor argument, action, reset option or call order: the excep
 a message naming the problem, and -- for an env already running -- that the env then goes
 on exactly like a twin that never saw the bad input (same observations, rewards, infos).
 
-``python tests/coop_gym/test_bad_input.py`` prints every case with the message it produces
-(a Markdown table).
+``python -m tests.coop_gym.test_bad_input`` prints every case with the message it produces
+(a Markdown table); the vector env's cases are in ``test_vector_bad_input.py``.
 """
 
 from __future__ import annotations
@@ -22,60 +22,7 @@ import coop_gym
 from coop_gym.envs.sit_to_stand import SitToStandEnv
 from coop_gym.model.params import PersonParams, Timing
 from coop_gym.model.personas import Persona
-
-ENV_ID = "CoopGym/SitToStand-v0"
-
-# --------------------------------------------------------------------------- helpers
-
-
-def assert_info_equal(a: dict[str, Any], b: dict[str, Any]) -> None:
-    assert a.keys() == b.keys()
-    for key in a:
-        if isinstance(a[key], dict):
-            assert_info_equal(a[key], b[key])
-        else:
-            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
-
-
-def valid_actions(action_type: str, n: int, seed: int = 7) -> list[Any]:
-    """A fixed sequence of valid actions (with a few lifts) of ``action_type``."""
-    rng = np.random.default_rng(seed)
-    out: list[Any] = []
-    for _ in range(n):
-        a = [int(rng.integers(3)), int(rng.integers(3)), int(rng.random() < 0.05)]
-        if action_type == "discrete":
-            out.append(int(np.ravel_multi_index(a, (3, 3, 2))))
-        elif action_type == "continuous":
-            out.append(np.array([a[0] - 1.0, a[1] * 0.9 - 0.9, 2.0 * a[2] - 1.0], dtype=np.float32))
-        else:
-            out.append(np.array(a))
-    return out
-
-
-def assert_same_future(env: gym.Env[Any, Any], twin: gym.Env[Any, Any], actions: list[Any]) -> None:
-    """Step both with ``actions`` (resetting both when an episode ends): identical results."""
-    for t, action in enumerate(actions):
-        got, want = env.step(action), twin.step(action)
-        np.testing.assert_array_equal(got[0], want[0], err_msg=f"obs at step {t}")
-        assert got[1:4] == want[1:4], f"reward/terminated/truncated at step {t}"
-        assert_info_equal(got[4], want[4])
-        if got[2] or got[3]:
-            got_reset, want_reset = env.reset(), twin.reset()
-            np.testing.assert_array_equal(got_reset[0], want_reset[0])
-            assert_info_equal(got_reset[1], want_reset[1])
-
-
-def started_pair(seed: int = 3, steps: int = 4, **kwargs: Any) -> tuple[SitToStandEnv, SitToStandEnv]:
-    """Two identical envs, reset with ``seed`` and stepped ``steps`` times."""
-    pair = (SitToStandEnv(**kwargs), SitToStandEnv(**kwargs))
-    action_type = kwargs.get("action_type", "multidiscrete")
-    for env in pair:
-        env.reset(seed=seed)
-        for action in valid_actions(action_type, steps, seed=1):
-            if env.step(action)[2]:
-                env.reset()
-    return pair
-
+from tests.coop_gym.twins import ENV_ID, assert_same_future, message, print_report, started_pair, valid_actions
 
 # --------------------------------------------------------------------------- constructor
 
@@ -390,32 +337,44 @@ def test_step_before_reset() -> None:
     assert_same_future(env, twin, valid_actions("multidiscrete", 30))
 
 
-@pytest.mark.parametrize("make", [SitToStandEnv, lambda: gym.make(ENV_ID)], ids=["raw", "gym.make"])
-def test_step_after_termination(make: Callable[[], gym.Env[Any, Any]]) -> None:
-    env, twin = make(), make()
-    for e in (env, twin):
+def _lifted(make: Callable[..., gym.Env[Any, Any]]) -> tuple[gym.Env[Any, Any], gym.Env[Any, Any]]:
+    """Two envs whose episode a lift has just ended."""
+    pair = make(), make()
+    for e in pair:
         e.reset(seed=4)
         assert e.step([0, 0, 1])[2]  # lift: terminated
-    with pytest.raises(RuntimeError, match=r"after the episode ended; call reset\(\)"):
-        env.step([0, 0, 0])
-    with pytest.raises(RuntimeError):  # still refused, however often
-        env.step([0, 0, 0])
-    for e in (env, twin):
-        e.reset()
-    assert_same_future(env, twin, valid_actions("multidiscrete", 30))
+    return pair
 
 
-def test_step_after_truncation_raises_like_after_termination() -> None:
-    """The episode clock truncates; the raw env then refuses steps until reset, as after a lift."""
-    env, twin = SitToStandEnv(timing={"episode_s": 0.5}), SitToStandEnv(timing={"episode_s": 0.5})
-    for e in (env, twin):
+def _timed_out(make: Callable[..., gym.Env[Any, Any]]) -> tuple[gym.Env[Any, Any], gym.Env[Any, Any]]:
+    """Two envs whose episode clock has just truncated their episode (the raw env refuses steps as after a lift)."""
+    pair = make(timing={"episode_s": 0.5}), make(timing={"episode_s": 0.5})
+    for e in pair:
         e.reset(seed=6)
         ends = [e.step([1, 2, 0])[2:4] for _ in range(5)]
         assert ends == [(False, False)] * 4 + [(False, True)]  # 5 steps of 0.1 s: truncated, not terminated
+    return pair
+
+
+@pytest.mark.parametrize(
+    ("ended", "make", "retry"),
+    [
+        (_lifted, SitToStandEnv, [0, 0, 0]),
+        (_lifted, lambda **kwargs: gym.make(ENV_ID, **kwargs), [0, 0, 0]),
+        (_timed_out, SitToStandEnv, [0, 0, 1]),
+    ],
+    ids=["terminated-raw", "terminated-gym.make", "truncated-raw"],
+)
+def test_step_after_the_episode_ended(
+    ended: Callable[..., tuple[gym.Env[Any, Any], gym.Env[Any, Any]]],
+    make: Callable[..., gym.Env[Any, Any]],
+    retry: list[int],
+) -> None:
+    env, twin = ended(make)
     with pytest.raises(RuntimeError, match=r"after the episode ended; call reset\(\)"):
         env.step([0, 0, 0])
     with pytest.raises(RuntimeError):  # still refused, however often
-        env.step([0, 0, 1])
+        env.step(retry)
     for e in (env, twin):
         e.reset()
     assert_same_future(env, twin, valid_actions("multidiscrete", 30))
@@ -431,136 +390,16 @@ def test_close_twice_and_step_after_close_reset() -> None:
     assert env.step([1, 2, 0])[0].shape == env.observation_space.shape
 
 
-# --------------------------------------------------------------------------- vector env
-
-
-def _vector_env(n: int = 3, **kwargs: Any) -> Any:
-    pytest.importorskip("coop_gym.envs.vector", reason="coop_gym.envs.vector not written yet")
-    return gym.make_vec(ENV_ID, num_envs=n, **kwargs)
-
-
-def vector_actions(n_envs: int, count: int) -> list[np.ndarray]:
-    rng = np.random.default_rng(3)
-    out = []
-    for _ in range(count):
-        a = rng.integers(0, [3, 3, 2], size=(n_envs, 3))
-        a[:, 2] = rng.random(n_envs) < 0.05
-        out.append(a)
-    return out
-
-
-def assert_same_vector_future(env: Any, twin: Any, actions: list[np.ndarray]) -> None:
-    for t, a in enumerate(actions):
-        got, want = env.step(a), twin.step(a)
-        for k in range(4):
-            np.testing.assert_array_equal(got[k], want[k], err_msg=f"step {t}, item {k}")
-        assert_info_equal(got[4], want[4])
-
-
-BAD_VECTOR_ACTIONS: list[tuple[str, Any, str]] = [
-    ("one env's action", np.array([1, 2, 0]), r"action has shape \(3,\).*\(3, 3\) for 3 envs"),
-    ("too many envs", np.zeros((4, 3), dtype=int), r"action has shape \(4, 3\).*\(3, 3\) for 3 envs"),
-    ("NaN in one env", np.array([[0, 0, 0], [math.nan, 0, 0], [0, 0, 0]]), r"action contains NaN or inf"),
-    ("out of range in one env", np.array([[0, 0, 0], [0, 3, 0], [0, 0, 0]]), r"multidiscrete action must be"),
-    ("strings", np.array([["1", "2", "0"]] * 3), r"action must be numeric"),
-    ("None", None, r"action must be numeric"),
-    ("bools", np.ones((3, 3), dtype=bool), r"multidiscrete action must be numbers, not bools"),
-    ("a bool cue in one env", [[0, 0, 0], [True, 2, False], [0, 0, 0]], r"multidiscrete action must be numbers, not"),
-]
-
-
-@pytest.mark.parametrize(
-    ("action_type", "action"),
-    [
-        ("multidiscrete", [[0, 0, 0], [1, np.True_, 0]]),
-        ("discrete", [3, True]),
-        ("continuous", [[0.0, 0.0, 0.0], [0.5, False, -1.0]]),
-    ],
-)
-def test_vector_env_refuses_a_bool_cue_on_every_action_type(action_type: str, action: Any) -> None:
-    envs = _vector_env(2, action_type=action_type)
-    envs.reset(seed=0)
-    with pytest.raises(ValueError, match=rf"{action_type} action must be numbers, not bools"):
-        envs.step(action)
-
-
-@pytest.mark.parametrize(
-    ("action", "match"), [c[1:] for c in BAD_VECTOR_ACTIONS], ids=[c[0] for c in BAD_VECTOR_ACTIONS]
-)
-def test_vector_env_bad_action_changes_no_env(action: Any, match: str) -> None:
-    env, twin = _vector_env(), _vector_env()
-    for e in (env, twin):
-        e.reset(seed=9)
-        for a in vector_actions(3, 5):
-            e.step(a)
-    with pytest.raises(ValueError, match=match):
-        env.step(action)
-    assert_same_vector_future(env, twin, vector_actions(3, 320))  # crosses the time limit
-
-
-BAD_VECTOR_RESETS: list[tuple[str, dict[str, Any], type[Exception], str]] = [
-    ("options a str", {"options": "x"}, ValueError, r"reset options must be a dict, got str"),
-    ("reset_mask a list", {"options": {"reset_mask": [True, False, True]}}, TypeError, r"must be a numpy array"),
-    ("reset_mask shape", {"options": {"reset_mask": np.ones(2, dtype=bool)}}, ValueError, r"must have shape \(3,\)"),
-    ("reset_mask empty", {"options": {"reset_mask": np.zeros(3, dtype=bool)}}, ValueError, r"at least one env"),
-    ("unknown option", {"options": {"bogus": 1}}, ValueError, r"unknown reset option\(s\) \['bogus'\]"),
-    ("bad initial_xi", {"options": {"initial_xi": 5}}, ValueError, r"initial_xi must be -1, 0 or 1"),
-    ("seed list length", {"seed": [1, 2]}, ValueError, r"a list of seeds must have num_envs=3 entries"),
-    ("negative seed", {"seed": -1}, ValueError, r"seed must be a non-negative int"),
-    ("str seed", {"seed": "a"}, ValueError, r"seed must be None, an int or a list"),
-]
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "exc", "match"), [c[1:] for c in BAD_VECTOR_RESETS], ids=[c[0] for c in BAD_VECTOR_RESETS]
-)
-def test_vector_env_bad_reset_changes_no_env(kwargs: dict[str, Any], exc: type[Exception], match: str) -> None:
-    env, twin = _vector_env(), _vector_env()
-    for e in (env, twin):
-        e.reset(seed=9)
-        for a in vector_actions(3, 5):
-            e.step(a)
-    with pytest.raises(exc, match=match):
-        env.reset(**kwargs)
-    assert_same_vector_future(env, twin, vector_actions(3, 100))
-
-
-def test_vector_env_bad_construction_and_order() -> None:
-    with pytest.raises(ValueError, match=r"num_envs must be a positive int, got 0"):
-        _vector_env(0)
-    with pytest.raises(ValueError, match=r"autoreset_mode must be an AutoresetMode or one of"):
-        _vector_env(2, autoreset_mode="bogus")
-    with pytest.raises(ValueError, match=r"unknown persona 'nobody'"):
-        _vector_env(2, personas="nobody")
-    with pytest.raises(ValueError, match=r"max_episode_steps must be a positive int or None, got 0"):
-        _vector_env(2, max_episode_steps=0)
-    env = _vector_env()
-    with pytest.raises(RuntimeError, match=r"step\(\) called before reset\(\)"):
-        env.step(np.zeros((3, 3), dtype=int))
-    twin = _vector_env()
-    for e in (env, twin):
-        e.reset(seed=1)
-    assert_same_vector_future(env, twin, vector_actions(3, 50))
-
-
 # --------------------------------------------------------------------------- report
-
-
-def _message(call: Callable[[], Any]) -> str:
-    try:
-        call()
-    except Exception as exc:  # the table reports whatever is raised
-        return f"{type(exc).__name__}: {exc}"
-    return "(accepted)"
 
 
 def main() -> None:
     """Print every case and the message it produces, as a Markdown table."""
     rows: list[tuple[str, str, str]] = []
     for name, kwargs, _, _ in BAD_KWARGS:
-        rows.append(("SitToStandEnv(...)", f"{name}: `{kwargs()!r}`", _message(lambda k=kwargs: SitToStandEnv(**k()))))
+        rows.append(("SitToStandEnv(...)", f"{name}: `{kwargs()!r}`", message(lambda k=kwargs: SitToStandEnv(**k()))))
     for name, make, _ in BAD_PERSONAS:
-        rows.append(("Persona(...)", name, _message(make)))
+        rows.append(("Persona(...)", name, message(make)))
     for action_type, name, action, _ in BAD_ACTIONS:
 
         def step(a: Any = action, t: str = action_type) -> Any:
@@ -568,10 +407,10 @@ def main() -> None:
             env.reset(seed=0)
             return env.step(a)
 
-        rows.append((f"step ({action_type})", f"{name}: `{action!r}`", _message(step)))
+        rows.append((f"step ({action_type})", f"{name}: `{action!r}`", message(step)))
     for name, kwargs, _, _ in BAD_RESETS:
-        rows.append(("reset(...)", f"{name}: `{kwargs!r}`", _message(lambda k=kwargs: SitToStandEnv().reset(**k))))
-    rows.append(("order", "step before reset", _message(lambda: SitToStandEnv().step([0, 0, 0]))))
+        rows.append(("reset(...)", f"{name}: `{kwargs!r}`", message(lambda k=kwargs: SitToStandEnv().reset(**k))))
+    rows.append(("order", "step before reset", message(lambda: SitToStandEnv().step([0, 0, 0]))))
 
     def after_lift() -> Any:
         env = SitToStandEnv()
@@ -579,28 +418,8 @@ def main() -> None:
         env.step([0, 0, 1])
         return env.step([0, 0, 0])
 
-    rows.append(("order", "step after termination", _message(after_lift)))
-    try:
-        import coop_gym.envs.vector  # noqa: F401
-    except ImportError:
-        pass
-    else:
-        for name, action, _ in BAD_VECTOR_ACTIONS:
-
-            def vstep(a: Any = action) -> Any:
-                env = gym.make_vec(ENV_ID, num_envs=3)
-                env.reset(seed=0)
-                return env.step(a)
-
-            rows.append(("vector step (3 envs)", f"{name}: `{action!r}`".replace("\n", " "), _message(vstep)))
-        for name, kwargs, _, _ in BAD_VECTOR_RESETS:
-            rows.append(
-                ("vector reset", f"{name}: `{kwargs!r}`", _message(lambda k=kwargs: gym.make_vec(ENV_ID, 3).reset(**k)))
-            )
-        rows.append(("vector order", "step before reset", _message(lambda: gym.make_vec(ENV_ID, 3).step(None))))
-    print("| where | bad input | raised |\n|---|---|---|")
-    for where, what, message in rows:
-        print(f"| {where} | {what} | {message.replace('|', '/')} |")
+    rows.append(("order", "step after termination", message(after_lift)))
+    print_report(rows)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ import pickle
 import subprocess
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -23,6 +24,7 @@ import numpy as np
 import pytest
 
 import coop_gym  # noqa: F401 -- registers the ids for the in-process tests
+from tests.coop_gym.twins import vector_actions
 
 ENV_ID = "coop_gym:CoopGym/SitToStand-v0"  # importable by child processes (GYM-NOTES)
 VARIANT_IDS = (
@@ -107,7 +109,10 @@ def assert_same_records(a: list[Any], b: list[Any]) -> None:
 def run_in_fresh_process(code: str, timeout: float = 300.0) -> str:
     """Run ``code`` in a new interpreter (``python -c``) with this file's functions as ``ns``."""
     prelude = f"import runpy; ns = runpy.run_path({__file__!r}); "
-    env = {**os.environ, "PYTHONHASHSEED": "4242"}  # a different string-hash order than ours
+    # A different string-hash order than ours; the checkout on the path for the shared test helpers.
+    root = str(Path(__file__).resolve().parents[2])
+    pythonpath = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
+    env = {**os.environ, "PYTHONHASHSEED": "4242", "PYTHONPATH": pythonpath}
     done = subprocess.run(
         [sys.executable, "-c", prelude + code], capture_output=True, text=True, timeout=timeout, env=env, check=False
     )
@@ -261,14 +266,9 @@ def test_unpickled_in_a_fresh_process_continues_identically(tmp_path: Any) -> No
 # --------------------------------------------------------------------------- vectorised
 
 
-def vec_actions(space: gym.Space[Any], n_envs: int, seed: int, n: int) -> list[np.ndarray]:
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(n):
-        a = rng.integers(0, [3, 3, 2], size=(n_envs, 3))
-        a[:, 2] = rng.random(n_envs) < 0.03
-        out.append(a)
-    return out
+def vec_actions(n_envs: int, seed: int, n: int) -> list[np.ndarray]:
+    """``n`` batches of multidiscrete actions, lifting rarely (3 %) so that episodes run long."""
+    return vector_actions(n_envs, n, seed, lift_probability=0.03)
 
 
 def sb3_trajectory(vec_cls: Any, n_envs: int, seed: int, n_steps: int, **vec_kwargs: Any) -> list[Any]:
@@ -276,7 +276,7 @@ def sb3_trajectory(vec_cls: Any, n_envs: int, seed: int, n_steps: int, **vec_kwa
     try:
         vec.seed(seed)
         records: list[Any] = [vec.reset()]
-        for actions in vec_actions(vec.action_space, n_envs, seed, n_steps):
+        for actions in vec_actions(n_envs, seed, n_steps):
             obs, rewards, dones, infos = vec.step(actions)
             # DummyVecEnv keeps rewards in a float32 buffer, SubprocVecEnv stacks the floats.
             records.append((obs, rewards.astype(np.float32), dones, infos))
@@ -311,7 +311,7 @@ def gym_vec_trajectory(mode: str, n_envs: int, seed: int, n_steps: int, **kwargs
     vec = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode=mode, **kwargs)
     try:
         records: list[Any] = [vec.reset(seed=seed)]
-        for actions in vec_actions(vec.single_action_space, n_envs, seed, n_steps):
+        for actions in vec_actions(n_envs, seed, n_steps):
             records.append(vec.step(actions))
     finally:
         vec.close()
@@ -326,7 +326,7 @@ def test_make_vec_async_matches_sync() -> None:
 def test_make_vec_sync_matches_single_envs_seeded_s_plus_i() -> None:
     """Env ``i`` of a vector env seeded ``s`` is the single env seeded ``s + i`` (first episode)."""
     sync = gym_vec_trajectory("sync", 3, 60, 40)
-    actions = vec_actions(gym.make(ENV_ID).action_space, 3, 60, 40)
+    actions = vec_actions(3, 60, 40)
     for i in range(3):
         env = gym.make(ENV_ID)
         obs, _ = env.reset(seed=60 + i)
@@ -382,7 +382,7 @@ def test_native_vector_env_matches_sync_vector_of_single_envs(mode: str) -> None
 def test_native_vector_env_clone_mid_run_continues_identically() -> None:
     _native_vector()
     original, twin = (gym.make_vec(ENV_ID, num_envs=4) for _ in range(2))
-    actions = vec_actions(original.single_action_space, 4, 2, 400)
+    actions = vec_actions(4, 2, 400)
     for env in (original, twin):
         env.reset(seed=12)
         for a in actions[:100]:
