@@ -19,25 +19,25 @@ for every command keeps a seed that works in evaluation working in training too.
 """
 
 
-def positive_int(text: str) -> int:
-    """An integer >= 1."""
+def _integer_at_least(text: str, minimum: int, what: str) -> int:
+    """``text`` read as an integer >= ``minimum``; argparse's error otherwise, naming ``what`` was expected."""
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
     return value
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1."""
+    return _integer_at_least(text, 1, "a positive integer")
 
 
 def seed(text: str) -> int:
     """A non-negative integer seed."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {value}")
+    value = _integer_at_least(text, 0, "a non-negative integer seed")
     if value >= SEED_LIMIT:
         raise argparse.ArgumentTypeError(f"seeds must be below 2**32, got {value}")
     return value
