@@ -12,6 +12,7 @@ import copy
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -59,6 +60,13 @@ class Persona:
 
 _TYPICAL = PersonParams()
 
+
+def _typical_but(**levels: dict[str, Any]) -> PersonParams:
+    """The typical person with some fields of some levels changed, e.g. ``_typical_but(intention={"min_m": -0.02})``."""
+    changed = {level: dataclasses.replace(getattr(_TYPICAL, level), **fields) for level, fields in levels.items()}
+    return dataclasses.replace(_TYPICAL, **changed)
+
+
 PERSONAS: dict[str, Persona] = {
     p.name: p
     for p in (
@@ -66,81 +74,63 @@ PERSONAS: dict[str, Persona] = {
         Persona(
             "frail",
             "Weak and compliant: a push moves them a lot whatever they think (the paper's first failure scenario).",
-            dataclasses.replace(
-                _TYPICAL,
-                biomechanics=dataclasses.replace(
-                    _TYPICAL.biomechanics,
-                    voluntary_gain_per_s2=4.0,
-                    damping_rate_per_s=4.0,
-                    push_compliance_m_per_s2_n=0.045,
-                    stiffness_factor_uncooperative=0.9,
-                    stiffness_factor_unresponsive=1.0,
-                ),
+            _typical_but(
+                biomechanics={
+                    "voluntary_gain_per_s2": 4.0,
+                    "damping_rate_per_s": 4.0,
+                    "push_compliance_m_per_s2_n": 0.045,
+                    "stiffness_factor_uncooperative": 0.9,
+                    "stiffness_factor_unresponsive": 1.0,
+                },
                 # Too infirm to lean back far against a push.
-                intention=dataclasses.replace(_TYPICAL.intention, min_m=-0.02),
-                cooperativeness=dataclasses.replace(
-                    _TYPICAL.cooperativeness, initial_p_uncooperative=0.35, initial_p_cooperative=0.1
-                ),
+                intention={"min_m": -0.02},
+                cooperativeness={"initial_p_uncooperative": 0.35, "initial_p_cooperative": 0.1},
             ),
         ),
         Persona(
             "anxious",
             "Starts uncooperative and startles easily; needs patient explaining.",
-            dataclasses.replace(
-                _TYPICAL,
-                cooperativeness=dataclasses.replace(
-                    _TYPICAL.cooperativeness,
-                    startle_sensitivity=3.0,
-                    persuadability=0.7,
-                    baseline=-1,
-                    initial_p_uncooperative=0.8,
-                    initial_p_cooperative=0.0,
-                ),
+            _typical_but(
+                cooperativeness={
+                    "startle_sensitivity": 3.0,
+                    "persuadability": 0.7,
+                    "baseline": -1,
+                    "initial_p_uncooperative": 0.8,
+                    "initial_p_cooperative": 0.0,
+                },
             ),
         ),
         Persona(
             "hard_of_hearing",
             "Words barely get through: weak response to verbal cues, explanations prepare little.",
-            dataclasses.replace(
-                _TYPICAL,
-                intention=dataclasses.replace(_TYPICAL.intention, verbal_gain_m_per_s=0.03),
-                cooperativeness=dataclasses.replace(_TYPICAL.cooperativeness, hearing=0.3),
-            ),
+            _typical_but(intention={"verbal_gain_m_per_s": 0.03}, cooperativeness={"hearing": 0.3}),
         ),
         Persona(
             "cooperative",
             "Willing and engaged: often cooperative from the start, easily persuaded.",
-            dataclasses.replace(
-                _TYPICAL,
-                cooperativeness=dataclasses.replace(
-                    _TYPICAL.cooperativeness,
-                    persuadability=1.5,
-                    baseline=1,
-                    initial_p_uncooperative=0.05,
-                    initial_p_cooperative=0.6,
-                ),
+            _typical_but(
+                cooperativeness={
+                    "persuadability": 1.5,
+                    "baseline": 1,
+                    "initial_p_uncooperative": 0.05,
+                    "initial_p_cooperative": 0.6,
+                },
             ),
         ),
         Persona(
             "stoic",
             "Stiff and slow to move, steady in mood: small, late responses to every cue.",
-            dataclasses.replace(
-                _TYPICAL,
-                biomechanics=dataclasses.replace(
-                    _TYPICAL.biomechanics, damping_rate_per_s=8.0, push_compliance_m_per_s2_n=0.008
-                ),
-                intention=dataclasses.replace(_TYPICAL.intention, reaction_delay_s=0.5, push_gain_m_per_s_n=0.004),
-                cooperativeness=dataclasses.replace(_TYPICAL.cooperativeness, startle_sensitivity=0.5),
+            _typical_but(
+                biomechanics={"damping_rate_per_s": 8.0, "push_compliance_m_per_s2_n": 0.008},
+                intention={"reaction_delay_s": 0.5, "push_gain_m_per_s_n": 0.004},
+                cooperativeness={"startle_sensitivity": 0.5},
             ),
         ),
         Persona(
             "forgetful",
             "Mild cognitive impairment: explanations fade fast and attention drifts away when idle.",
-            dataclasses.replace(
-                _TYPICAL,
-                cooperativeness=dataclasses.replace(
-                    _TYPICAL.cooperativeness, explanation_memory_s=2.5, drift_rate_per_s=0.3, idle_after_s=1.5
-                ),
+            _typical_but(
+                cooperativeness={"explanation_memory_s": 2.5, "drift_rate_per_s": 0.3, "idle_after_s": 1.5},
             ),
         ),
     )
