@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from coop_gym.compiled.checks import check_choice, check_flag, check_integer, check_number
 
@@ -32,6 +32,10 @@ __all__ = [
 
 MAX_REACTION_DELAY_S = 1.2
 """Longest supported reaction delay [s]; the delay line holds this many seconds of cues."""
+
+
+_RATE_RANGE = (0.0, 100.0)
+"""Range of every transition rate of the cooperativeness chain [1/s]."""
 
 
 def _validate_ranges(obj: Any, ranges: dict[str, tuple[float, float]]) -> None:
@@ -75,19 +79,19 @@ class Biomechanics:
     stiffness_factor_uncooperative: float = 0.8
     stiffness_factor_unresponsive: float = 0.5
 
+    RANGES: ClassVar[dict[str, tuple[float, float]]] = {
+        "damping_rate_per_s": (0.01, 100.0),
+        "voluntary_gain_per_s2": (0.01, 1000.0),
+        "push_compliance_m_per_s2_n": (0.0, 1.0),
+        "accel_noise_std_m_per_s2": (0.0, 10.0),
+        "stiffness_factor_uncooperative": (0.0, 10.0),
+        "stiffness_factor_unresponsive": (0.0, 10.0),
+    }
+    """The validated range ``[low, high]`` of each numeric field."""
+
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _validate_ranges(
-            self,
-            {
-                "damping_rate_per_s": (0.01, 100.0),
-                "voluntary_gain_per_s2": (0.01, 1000.0),
-                "push_compliance_m_per_s2_n": (0.0, 1.0),
-                "accel_noise_std_m_per_s2": (0.0, 10.0),
-                "stiffness_factor_uncooperative": (0.0, 10.0),
-                "stiffness_factor_unresponsive": (0.0, 10.0),
-            },
-        )
+        _validate_ranges(self, self.RANGES)
 
 
 @dataclass(frozen=True)
@@ -132,23 +136,23 @@ class Intention:
     spontaneous_lean_rate_per_s: float = 0.0
     spontaneous_lean_m: float = 0.2
 
+    RANGES: ClassVar[dict[str, tuple[float, float]]] = {
+        "passive_follow_rate_per_s": (0.0, 100.0),
+        "spontaneous_lean_rate_per_s": (0.0, 100.0),
+        "spontaneous_lean_m": (0.0, 1.0),
+        "push_gain_m_per_s_n": (0.0, 1.0),
+        "verbal_gain_m_per_s": (0.0, 10.0),
+        "noise_std_m_per_sqrt_s": (0.0, 1.0),
+        "reaction_delay_s": (0.0, MAX_REACTION_DELAY_S),
+        "min_m": (-1.0, 0.0),
+        "max_m": (0.0, 1.0),
+        "relaxation_rate_per_s": (0.0, 100.0),
+    }
+    """The validated range ``[low, high]`` of each numeric field."""
+
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _validate_ranges(
-            self,
-            {
-                "passive_follow_rate_per_s": (0.0, 100.0),
-                "spontaneous_lean_rate_per_s": (0.0, 100.0),
-                "spontaneous_lean_m": (0.0, 1.0),
-                "push_gain_m_per_s_n": (0.0, 1.0),
-                "verbal_gain_m_per_s": (0.0, 10.0),
-                "noise_std_m_per_sqrt_s": (0.0, 1.0),
-                "reaction_delay_s": (0.0, MAX_REACTION_DELAY_S),
-                "min_m": (-1.0, 0.0),
-                "max_m": (0.0, 1.0),
-                "relaxation_rate_per_s": (0.0, 100.0),
-            },
-        )
+        _validate_ranges(self, self.RANGES)
         _set_checked(self, "saturate", check_flag("Intention.saturate", self.saturate))
 
 
@@ -217,35 +221,34 @@ class Cooperativeness:
     pushed_lapse_rate_per_s: float = 0.0
     refusal_rate_per_s: float = 0.0
 
+    RANGES: ClassVar[dict[str, tuple[float, float]]] = {
+        "lapse_rate_per_s": _RATE_RANGE,
+        "pushed_lapse_rate_per_s": _RATE_RANGE,
+        "refusal_rate_per_s": _RATE_RANGE,
+        "explain_calm_rate_per_s": _RATE_RANGE,
+        "words_alone_rate_per_s": _RATE_RANGE,
+        "guided_push_rate_per_s": _RATE_RANGE,
+        "guided_calm_rate_per_s": _RATE_RANGE,
+        "push_alone_rate_per_s": _RATE_RANGE,
+        "startle_rate_per_s": _RATE_RANGE,
+        "prepared_startle_rate_per_s": _RATE_RANGE,
+        "confusion_rate_per_s": _RATE_RANGE,
+        "drift_rate_per_s": _RATE_RANGE,
+        "explanation_memory_s": (0.0, 1000.0),
+        "idle_after_s": (0.0, 1000.0),
+        "touch_threshold_n": (0.0, 1000.0),
+        "firm_push_threshold_n": (0.0, 1000.0),
+        "persuadability": (0.0, 100.0),
+        "startle_sensitivity": (0.0, 100.0),
+        "hearing": (0.0, 1.0),
+        "initial_p_uncooperative": (0.0, 1.0),
+        "initial_p_cooperative": (0.0, 1.0),
+    }
+    """The validated range ``[low, high]`` of each numeric field."""
+
     def __post_init__(self) -> None:
         """Validate ranges."""
-        rate = (0.0, 100.0)
-        _validate_ranges(
-            self,
-            {
-                "lapse_rate_per_s": rate,
-                "pushed_lapse_rate_per_s": rate,
-                "refusal_rate_per_s": rate,
-                "explain_calm_rate_per_s": rate,
-                "words_alone_rate_per_s": rate,
-                "guided_push_rate_per_s": rate,
-                "guided_calm_rate_per_s": rate,
-                "push_alone_rate_per_s": rate,
-                "startle_rate_per_s": rate,
-                "prepared_startle_rate_per_s": rate,
-                "confusion_rate_per_s": rate,
-                "drift_rate_per_s": rate,
-                "explanation_memory_s": (0.0, 1000.0),
-                "idle_after_s": (0.0, 1000.0),
-                "touch_threshold_n": (0.0, 1000.0),
-                "firm_push_threshold_n": (0.0, 1000.0),
-                "persuadability": (0.0, 100.0),
-                "startle_sensitivity": (0.0, 100.0),
-                "hearing": (0.0, 1.0),
-                "initial_p_uncooperative": (0.0, 1.0),
-                "initial_p_cooperative": (0.0, 1.0),
-            },
-        )
+        _validate_ranges(self, self.RANGES)
         _set_checked(self, "baseline", check_choice("Cooperativeness.baseline", self.baseline, (-1, 0, 1)))
         if self.initial_p_uncooperative + self.initial_p_cooperative > 1.0 + 1e-12:
             raise ValueError(
@@ -271,9 +274,15 @@ class Sensors:
     position_noise_std_m: float = 0.004
     force_noise_std_n: float = 0.5
 
+    RANGES: ClassVar[dict[str, tuple[float, float]]] = {
+        "position_noise_std_m": (0.0, 1.0),
+        "force_noise_std_n": (0.0, 100.0),
+    }
+    """The validated range ``[low, high]`` of each numeric field."""
+
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _validate_ranges(self, {"position_noise_std_m": (0.0, 1.0), "force_noise_std_n": (0.0, 100.0)})
+        _validate_ranges(self, self.RANGES)
 
 
 @dataclass(frozen=True)
@@ -290,11 +299,16 @@ class Cues:
     firm_push_n: float = 30.0
     verbal_duration_s: float = 1.0
 
+    RANGES: ClassVar[dict[str, tuple[float, float]]] = {
+        "soft_push_n": (0.0, 200.0),
+        "firm_push_n": (0.0, 200.0),
+        "verbal_duration_s": (0.02, 10.0),
+    }
+    """The validated range ``[low, high]`` of each numeric field."""
+
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _validate_ranges(
-            self, {"soft_push_n": (0.0, 200.0), "firm_push_n": (0.0, 200.0), "verbal_duration_s": (0.02, 10.0)}
-        )
+        _validate_ranges(self, self.RANGES)
         if self.soft_push_n > self.firm_push_n:
             raise ValueError(
                 f"Cues.soft_push_n ({self.soft_push_n} N) must be <= firm_push_n ({self.firm_push_n} N): "
@@ -320,9 +334,15 @@ class Timing:
     substeps: int = 5
     episode_s: float = 30.0
 
+    RANGES: ClassVar[dict[str, tuple[float, float]]] = {
+        "dt_s": (1e-4, 0.1),
+        "episode_s": (0.1, 3600.0),
+    }
+    """The validated range ``[low, high]`` of each numeric field."""
+
     def __post_init__(self) -> None:
         """Validate ranges."""
-        _validate_ranges(self, {"dt_s": (1e-4, 0.1), "episode_s": (0.1, 3600.0)})
+        _validate_ranges(self, self.RANGES)
         _set_checked(self, "substeps", check_integer("Timing.substeps", self.substeps, 1, 100))
 
     @property

@@ -1,8 +1,8 @@
 """Property-based robustness of the env over the whole parameter space the dataclasses allow.
 
-Strategies are built from each field's validated range (``RANGES`` below, copied from the
-``__post_init__`` of ``coop_gym.model.params`` and ``coop_gym.envs.config``); the first
-test checks that the table still matches the validation, so it cannot silently drift.
+Strategies are built from each field's validated range (``RANGES`` below: the model
+dataclasses' own ``RANGES``, and the bounds of ``coop_gym.envs.config``'s ``__post_init__``);
+the first tests check that the table covers every field and that the validation enforces it.
 
 Properties, for arbitrary parameters, action types, observation modes, seeds and action
 sequences: no NaN or inf in observations, rewards or infos; observations inside the
@@ -43,55 +43,10 @@ from estimator.judgment import ThresholdJudgment
 EXAMPLES: Counter[str] = Counter()
 """Examples run per property (printed at the end of the module)."""
 
-# field -> (low, high), inclusive: the validated range of each numeric field.
-RATE = (0.0, 100.0)
+# field -> (low, high), inclusive: the validated range of each numeric field (the model's
+# dataclasses declare theirs in RANGES, which their __post_init__ enforces).
 RANGES: dict[type, dict[str, tuple[float, float]]] = {
-    Biomechanics: {
-        "damping_rate_per_s": (0.01, 100.0),
-        "voluntary_gain_per_s2": (0.01, 1000.0),
-        "push_compliance_m_per_s2_n": (0.0, 1.0),
-        "accel_noise_std_m_per_s2": (0.0, 10.0),
-        "stiffness_factor_uncooperative": (0.0, 10.0),
-        "stiffness_factor_unresponsive": (0.0, 10.0),
-    },
-    Intention: {
-        "push_gain_m_per_s_n": (0.0, 1.0),
-        "verbal_gain_m_per_s": (0.0, 10.0),
-        "noise_std_m_per_sqrt_s": (0.0, 1.0),
-        "reaction_delay_s": (0.0, 1.2),
-        "min_m": (-1.0, 0.0),
-        "max_m": (0.0, 1.0),
-        "relaxation_rate_per_s": (0.0, 100.0),
-        "passive_follow_rate_per_s": (0.0, 100.0),
-        "spontaneous_lean_rate_per_s": (0.0, 100.0),
-        "spontaneous_lean_m": (0.0, 1.0),
-    },
-    Cooperativeness: {
-        "explain_calm_rate_per_s": RATE,
-        "words_alone_rate_per_s": RATE,
-        "guided_push_rate_per_s": RATE,
-        "guided_calm_rate_per_s": RATE,
-        "push_alone_rate_per_s": RATE,
-        "startle_rate_per_s": RATE,
-        "prepared_startle_rate_per_s": RATE,
-        "confusion_rate_per_s": RATE,
-        "drift_rate_per_s": RATE,
-        "explanation_memory_s": (0.0, 1000.0),
-        "idle_after_s": (0.0, 1000.0),
-        "touch_threshold_n": (0.0, 1000.0),
-        "firm_push_threshold_n": (0.0, 1000.0),
-        "persuadability": (0.0, 100.0),
-        "startle_sensitivity": (0.0, 100.0),
-        "hearing": (0.0, 1.0),
-        "initial_p_uncooperative": (0.0, 1.0),
-        "initial_p_cooperative": (0.0, 1.0),
-        "lapse_rate_per_s": RATE,
-        "pushed_lapse_rate_per_s": RATE,
-        "refusal_rate_per_s": RATE,
-    },
-    Sensors: {"position_noise_std_m": (0.0, 1.0), "force_noise_std_n": (0.0, 100.0)},
-    Cues: {"soft_push_n": (0.0, 200.0), "firm_push_n": (0.0, 200.0), "verbal_duration_s": (0.02, 10.0)},
-    Timing: {"dt_s": (1e-4, 0.1), "episode_s": (0.1, 3600.0)},
+    **{cls: cls.RANGES for cls in (Biomechanics, Intention, Cooperativeness, Sensors, Cues, Timing)},
     LiftCriteria: {"success_lean_m": (0.0, 1.0), "upright_m": (-1.0, 1.0)},
     RewardWeights: dict.fromkeys(("success", "unsafe", "premature", "time_per_s", "force_per_n_s"), (0.0, 1e6)),
 }
