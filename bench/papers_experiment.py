@@ -54,6 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--difficulties", default=",".join(DIFFICULTIES), help="comma-separated levels ('' for none)")
     add_save_argument(parser, "papers_experiment.json")
     args = parser.parse_args(argv)
+    if args.seeds < 2:
+        parser.error(f"--seeds: mean and std need at least 2 seeds, got {args.seeds}")
     estimators = [e for e in args.estimators.split(",") if e]
     difficulties = [d for d in args.difficulties.split(",") if d]
     bad = [e for e in estimators if e not in ESTIMATORS] + [d for d in difficulties if d not in DIFFICULTIES]

@@ -215,7 +215,7 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
 
     torch.set_num_threads(1)
     load_at_start = os.getloadavg()[0]
-    blocks = 4
+    blocks = 1 if quick else 4
     single_block = 1_000 if quick else 8_000
     vector_block = 5 if quick else 50
     ppo_block = 512 if quick else 2_048  # 4 blocks of 4 rollouts of 8 x 64 = 8192 timesteps

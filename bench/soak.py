@@ -162,7 +162,7 @@ def soak_vector(num_envs: int, steps: int, seed: int, info_every: int) -> dict[s
     done = 0
     warm_rss: float | None = None
     while done < iterations and not bad:
-        chunk = min(1000, iterations - done)
+        chunk = min(1000, iterations - done, max(1, iterations // 10))  # a boundary at 10 %
         if warm_rss is None and done >= iterations // 10:
             warm_rss = rss_mb().get("VmRSS")  # after compilation, caches and the first action bank
         for k, actions in enumerate(random_actions(rng, chunk, num_envs)):
@@ -190,7 +190,7 @@ def soak_single(steps: int, seed: int, info_every: int) -> dict[str, Any]:
     t0 = time.perf_counter()
     warm_rss: float | None = None
     while done < steps and not bad:
-        chunk = min(100_000, steps - done)
+        chunk = min(100_000, steps - done, max(1, steps // 10))
         if warm_rss is None and done >= steps // 10:
             warm_rss = rss_mb().get("VmRSS")
         for k, action in enumerate(random_actions(rng, chunk, None)):
