@@ -39,7 +39,6 @@ from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.compiled.checks import check_number
 from coop_gym.envs.config import LiftCriteria
-from coop_gym.envs.contract import observation_features
 from estimator.judgment import ThresholdJudgment
 
 __all__ = [
@@ -281,17 +280,7 @@ class OracleAgent(ScriptedAgent):
     needs = ("elapsed_s", "verbal_cue", "x_hat_m", "true_xi")
 
     settings_class = OracleSettings
-
-    def __init__(
-        self,
-        features: Sequence[str] | None = None,
-        action_type: str = "multidiscrete",
-        seed: int | None = None,
-        settings: OracleSettings | None = None,
-    ) -> None:
-        """See :class:`ScriptedAgent`; the default features are the oracle observation's."""
-        features = features if features is not None else observation_features("oracle", "kalman")
-        super().__init__(features, action_type, seed, settings)
+    default_observation = "oracle"
 
     def _decide(
         self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]

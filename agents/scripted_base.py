@@ -89,12 +89,13 @@ class ScriptedAgent:
     """Base class: batching, feature lookup, per-env memory and action encoding.
 
     Subclasses set :attr:`name` and :attr:`needs` (the features they read), optionally
-    :attr:`settings_class` (the frozen dataclass of their settings), and implement :meth:`_decide`.
+    :attr:`settings_class` (the frozen dataclass of their settings) and :attr:`default_observation`,
+    and implement :meth:`_decide`.
 
     Args:
         features: Names of the observation's features, in order (``env.unwrapped.features``
             or :func:`coop_gym.envs.contract.observation_features`). Default: the
-            belief observation of the paper's Kalman filter.
+            :attr:`default_observation` mode's features under the paper's Kalman filter.
         action_type: ``"multidiscrete"`` (default), ``"discrete"`` or ``"continuous"``.
         seed: Seed of the agent's own random generator (only :class:`RandomAgent` draws).
         settings: An instance of :attr:`settings_class` (default: its defaults); agents without
@@ -104,6 +105,8 @@ class ScriptedAgent:
     name: ClassVar[str] = "scripted"
     needs: ClassVar[tuple[str, ...]] = ("elapsed_s",)
     settings_class: ClassVar[type | None] = None
+    default_observation: ClassVar[str] = "belief"
+    """The observation mode whose features the agent reads when none are given."""
 
     def __init__(
         self,
@@ -120,7 +123,9 @@ class ScriptedAgent:
         self.settings: Any = settings if settings is not None or cls is None else cls()
         if action_type not in ACTION_TYPES:
             raise ValueError(f"action_type must be one of {list(ACTION_TYPES)}, got {action_type!r}")
-        self.features = tuple(features) if features is not None else observation_features("belief", "kalman")
+        if features is None:
+            features = observation_features(self.default_observation, "kalman")
+        self.features = tuple(features)
         self.action_type = action_type
         self.columns = require_features(self.features, self.needs, type(self).__name__)
         self.rng = np.random.default_rng(seed)
