@@ -2,6 +2,8 @@
 
 - :mod:`coop_gym.compiled.cache`: Numba's on-disk cache keyed by every project source a kernel
   compiles in (:func:`~coop_gym.compiled.cache.guard_kernel_cache`).
+- :mod:`coop_gym.compiled.background`: a kernel missing from that cache runs as Python while a
+  background process compiles it (a fresh install's first step without waiting for the compile).
 - :mod:`coop_gym.compiled.checks`: what counts as a number (NumPy scalars yes, bools and arrays no) for
   every validator of the project.
 - :mod:`coop_gym.compiled.rng`: NumPy's random streams inside kernels, number for number the

@@ -15,10 +15,12 @@ import threading
 from typing import Any
 
 import numpy as np
-from numba import config, types
+from numba import types
 from numba.core import cgutils
 from numba.core.extending import intrinsic
 from numpy.typing import NDArray
+
+from coop_gym.compiled.background import run_as_python
 
 __all__ = ["atomic_add", "atomic_cas", "atomic_load"]
 
@@ -93,14 +95,11 @@ def _python_add(array: NDArray[np.int64], index: int, amount: int) -> int:
         return old
 
 
-if getattr(config, "DISABLE_JIT", False):
-    atomic_load: Any = _python_load
-    atomic_cas: Any = _python_cas
-    atomic_add: Any = _python_add
-else:
-    atomic_load = intrinsic(_load_intrinsic)
-    atomic_cas = intrinsic(_cas_intrinsic)
-    atomic_add = intrinsic(_add_intrinsic)
+# The Python twins run in debug mode and in a kernel's first calls while it compiles
+# (coop_gym.compiled.background).
+atomic_load: Any = run_as_python(intrinsic(_load_intrinsic), _python_load)
+atomic_cas: Any = run_as_python(intrinsic(_cas_intrinsic), _python_cas)
+atomic_add: Any = run_as_python(intrinsic(_add_intrinsic), _python_add)
 
 atomic_load.__doc__ = """``array[index]``, read atomically."""
 atomic_cas.__doc__ = """If ``array[index] == expected`` set it to ``new``, atomically; returns the old value."""

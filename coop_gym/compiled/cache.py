@@ -40,6 +40,8 @@ from typing import Any
 from numba.core.caching import CacheImpl, FunctionCache, NullCache, _CacheLocator
 from numba.core.runtime import rtsys
 
+from coop_gym.compiled import background
+
 __all__ = ["KernelCacheWarning", "guard_kernel_cache", "guarded_kernels", "project_sources", "source_digest"]
 
 _STAMP_SUFFIX = ".sources.sha256"
@@ -308,3 +310,4 @@ def guard_kernel_cache(module_name: str) -> None:
         cache.load_overload = load_overload
         cache.save_overload = save_overload
         cache.source_guard = guard
+        background.install(kernel)

@@ -29,11 +29,12 @@ from typing import Any
 
 import numpy as np
 from llvmlite import ir
-from numba import config, njit, types
+from numba import njit, types
 from numba.core.extending import intrinsic
 from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 from numpy.typing import NDArray
 
+from coop_gym.compiled.background import run_as_python
 from coop_gym.compiled.cache import guard_kernel_cache
 
 __all__ = [
@@ -100,19 +101,20 @@ def _python_caller(restype: Any) -> Any:
     return call
 
 
-if getattr(config, "DISABLE_JIT", False):
-    _call_uint64: Any = _python_caller(ctypes.c_uint64)
-    _call_uint32: Any = _python_caller(ctypes.c_uint32)
-    _call_double: Any = _python_caller(ctypes.c_double)
-    # NumPy's C code calls libm's exp and log1p; the math module is libm, a NumPy ufunc may not be.
-    _exp: Any = math.exp
-    _log1p: Any = math.log1p
-else:
-    _call_uint64 = _state_function_caller("_call_uint64", types.uint64, ir.IntType(64))
-    _call_uint32 = _state_function_caller("_call_uint32", types.uint32, ir.IntType(32))
-    _call_double = _state_function_caller("_call_double", types.float64, ir.DoubleType())
-    _exp = np.exp
-    _log1p = np.log1p
+# The kernels' Python twins (NUMBA_DISABLE_JIT=1, or their first calls while they compile: see
+# coop_gym.compiled.background) call the same C functions through ctypes, and libm's exp and log1p
+# (the math module), as NumPy's C code does: a NumPy ufunc may not be libm.
+_call_uint64: Any = run_as_python(
+    _state_function_caller("_call_uint64", types.uint64, ir.IntType(64)), _python_caller(ctypes.c_uint64)
+)
+_call_uint32: Any = run_as_python(
+    _state_function_caller("_call_uint32", types.uint32, ir.IntType(32)), _python_caller(ctypes.c_uint32)
+)
+_call_double: Any = run_as_python(
+    _state_function_caller("_call_double", types.float64, ir.DoubleType()), _python_caller(ctypes.c_double)
+)
+_exp: Any = run_as_python(np.exp, math.exp)
+_log1p: Any = run_as_python(np.log1p, math.log1p)
 
 _U1 = np.uint64(1)
 _U8 = np.uint64(8)

@@ -23,9 +23,10 @@ from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
-from numba import config, njit
+from numba import njit
 from numpy.typing import NDArray
 
+from coop_gym.compiled.background import run_as_python
 from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.compiled.rng import G_STATE, bit_generator_row
 
@@ -160,8 +161,7 @@ def _python_seed_states(seeds: NDArray[np.uint64], out: NDArray[np.uint64]) -> N
         out[r] = (s >> 64, s & (2**64 - 1), i >> 64, i & (2**64 - 1))
 
 
-if getattr(config, "DISABLE_JIT", False):
-    seed_states = _python_seed_states  # type: ignore[assignment]
+seed_states = run_as_python(seed_states, _python_seed_states)
 
 
 def _read_layout() -> tuple[int, ...] | None:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from coop_gym.compiled.background import ENV_SWITCH
 from coop_gym.compiled.cache import guarded_kernels, project_sources
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -65,6 +66,7 @@ def test_every_cached_kernel_of_the_project_is_guarded() -> None:
 def _run(code: str, path: Path) -> str:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(path), str(ROOT)])}
     env.pop("NUMBA_DISABLE_JIT", None)
+    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
     out = subprocess.run([sys.executable, "-c", code], cwd=path, env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     return out.stdout.strip()
@@ -121,6 +123,7 @@ def _read_only_copy(tmp_path: Path) -> tuple[Path, dict[str, str]]:
     env["PYTHONDONTWRITEBYTECODE"] = "1"
     for name in ("XDG_CACHE_HOME", "NUMBA_DISABLE_JIT", "NUMBA_CACHE_LOCATOR_CLASSES"):
         env.pop(name, None)
+    env[ENV_SWITCH] = "0"
     return site, env
 
 
@@ -207,6 +210,7 @@ def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
     env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
     env.pop("NUMBA_DISABLE_JIT", None)
+    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().split(maxsplit=2) == ["6", "7.0", "['KernelCacheWarning']"]
@@ -236,6 +240,7 @@ def test_a_warm_start_loads_kernels_without_numbas_registries_or_parsing_sources
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
     env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
     env.pop("NUMBA_DISABLE_JIT", None)
+    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
     runs = [
         subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
         for _ in range(2)

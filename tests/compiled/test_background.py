@@ -1,0 +1,132 @@
+"""A kernel's first calls run as Python while a background process compiles it, on the same numbers."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+
+from coop_gym.compiled.background import ENV_SWITCH, python_twin
+from coop_gym.envs.core import SitToStandCore
+from coop_gym.envs.reset import draw_reset, start_episodes
+from coop_gym.envs.step import step_all
+from coop_gym.envs.vector import SitToStandVectorEnv
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV_IDS = ("CoopGym/SitToStand-v0", "CoopGym/SitToStandIMM-v0", "CoopGym/SitToStandHard-v1")
+
+
+def _run(code: str, *args: str, cache: Path | None, switch: str = "1", path: Path = ROOT) -> str:
+    """``code`` run in a fresh process, with an empty Numba cache folder ``cache`` (None: this one's)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(path), str(ROOT)])}
+    if cache is not None:
+        env["NUMBA_CACHE_DIR"] = str(cache)
+    env.pop("NUMBA_DISABLE_JIT", None)
+    env[ENV_SWITCH] = switch
+    out = subprocess.run(
+        [sys.executable, "-c", code, *args], cwd=path, env=env, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip().splitlines()[-1]
+
+
+def _core(n: int) -> SitToStandCore:
+    env = SitToStandVectorEnv(num_envs=n)
+    return env.core
+
+
+def test_the_python_twins_of_the_reset_and_step_kernels_give_the_compiled_numbers() -> None:
+    cores = [_core(6), _core(6)]
+    for core in cores:
+        core.seed_envs(np.arange(6), np.arange(6, dtype=np.uint64) + 40)
+        core.reset_envs(core._all)
+    twins = {kernel: python_twin(kernel) for kernel in (draw_reset, start_episodes, step_all)}
+    commands = np.random.default_rng(3).integers(0, 3, size=(25, 6, 2))
+    for t, command in enumerate(commands):
+        for core, run in zip(cores, (lambda kernel: kernel, twins.__getitem__), strict=True):
+            core.cmd[:, 0] = command[:, 0] * 10.0
+            core.cmd[:, 1] = command[:, 1] - 1.0
+            core.cmd[:, 2] = float(t % 9 == 8)  # a lift now and then: the episode ends
+            assert run(step_all)(core.cmd, core.state, core.generators, core.obs, core.consts) == -1
+        np.testing.assert_array_equal(cores[0].state, cores[1].state)
+        np.testing.assert_array_equal(cores[0].obs, cores[1].obs)
+
+
+ROLLOUT = textwrap.dedent(
+    """
+    import json, sys
+    import gymnasium as gym
+    import numpy as np
+    import coop_gym
+    from coop_gym.compiled import background
+    from coop_gym.envs.step import step_all
+    out = {}
+    for env_id in sys.argv[1:]:
+        env = gym.make(env_id)
+        obs, info = env.reset(seed=11)
+        rows = [obs.tolist()]
+        for push, verbal in np.random.default_rng(4).integers(0, 3, size=(8, 2)):
+            obs, reward, terminated, truncated, info = env.step([int(push), int(verbal), 0])
+            rows.append([*obs.tolist(), reward, info["true_x_m"], info["true_xi"]])
+        out[env_id] = rows
+    out["ran_as_python"] = not step_all.signatures
+    if background._compiler is not None:
+        background._compiler.process.kill()  # the test needs no compiled kernels
+    print(json.dumps(out))
+    """
+)
+
+
+def test_a_cold_start_steps_the_envs_as_python_on_the_compiled_numbers(tmp_path: Path) -> None:
+    python = json.loads(_run(ROLLOUT, *ENV_IDS, cache=tmp_path / "cold"))
+    assert python.pop("ran_as_python")
+    compiled = json.loads(_run(ROLLOUT, *ENV_IDS, cache=None, switch="0"))
+    assert not compiled.pop("ran_as_python")
+    assert python == compiled
+
+
+TOY = (
+    "import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+    "@njit(cache=True)\ndef half(x):\n    return x * 0.5\n\n"
+    "@njit(cache=True)\ndef kernel(n):\n    out = np.empty(n)\n    for i in range(n):\n        out[i] = half(i)\n"
+    "    return out\n\nguard_kernel_cache(__name__)\n"
+)
+
+TOY_RUN = textwrap.dedent(
+    """
+    from coop_gym.compiled import background
+    from toy.kern import kernel
+    first = kernel(4).tolist()
+    compiled_at_once = bool(kernel.signatures)
+    background.wait(300)
+    second = kernel(4).tolist()
+    print(first == second == [0.0, 0.5, 1.0, 1.5], compiled_at_once, kernel.stats.cache_hits != {})
+    """
+)
+
+
+def _toy(tmp_path: Path) -> None:
+    package = tmp_path / "toy"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "kern.py").write_text(TOY)
+
+
+def test_a_kernel_missing_from_the_cache_runs_as_python_until_the_background_process_compiled_it(
+    tmp_path: Path,
+) -> None:
+    _toy(tmp_path)
+    # As Python first, then loaded from the cache the background process filled.
+    assert _run(TOY_RUN, cache=tmp_path / "cache", path=tmp_path) == "True False True"
+    # Warm: loaded at the first call.
+    assert _run(TOY_RUN, cache=tmp_path / "cache", path=tmp_path) == "True True True"
+
+
+def test_switched_off_a_kernel_compiles_in_the_calling_process(tmp_path: Path) -> None:
+    _toy(tmp_path)
+    assert _run(TOY_RUN, cache=tmp_path / "cache", switch="0", path=tmp_path) == "True True False"
