@@ -179,8 +179,8 @@ class _Episode:
 
 
 @dataclass
-class _Table:
-    """What every episode of a session is played with: the env, the window, the keys and the clock."""
+class _Session:
+    """What every episode is played with: the env, the window, the keys and the clock."""
 
     env_id: str
     personas: list[str]
@@ -216,12 +216,12 @@ class _Table:
             self.view.close()
 
 
-def _step(table: _Table, episode: _Episode, controls: Controls) -> tuple[bool, NDArray[np.uint8]]:
+def _step(session: _Session, episode: _Episode, controls: Controls) -> tuple[bool, NDArray[np.uint8]]:
     """One env step with the held controls; returns ``(done, frame)``."""
     push, verbal, lift = controls.take()
-    action_type = action_type_of(table.env)
+    action_type = action_type_of(session.env)
     action = encode_actions(np.array([push]), np.array([verbal]), np.array([lift]), action_type)[0]
-    _, reward, terminated, truncated, info = table.env.step(action)
+    _, reward, terminated, truncated, info = session.env.step(action)
     episode.actions.append((push, verbal, lift))
     episode.episode_return += float(reward)
     episode.times_s.append(float(info["elapsed_s"]))
@@ -229,7 +229,7 @@ def _step(table: _Table, episode: _Episode, controls: Controls) -> tuple[bool, N
     episode.outcome = str(info["outcome"])
     if lift:
         episode.lift_time_s = float(info["elapsed_s"])
-    return bool(terminated or truncated), table.env.render()  # type: ignore[return-value]
+    return bool(terminated or truncated), session.env.render()  # type: ignore[return-value]
 
 
 def _compared(env_id: str, personas: list[str], seed: int) -> list[tuple[str, str, float | None]]:
@@ -241,42 +241,42 @@ def _compared(env_id: str, personas: list[str], seed: int) -> list[tuple[str, st
     return out
 
 
-def _play_episode(table: _Table, seed: int) -> tuple[_Episode, NDArray[np.uint8] | None]:
+def _play_episode(session: _Session, seed: int) -> tuple[_Episode, NDArray[np.uint8] | None]:
     """Reset to ``seed`` and step under the player's keys until the episode ends.
 
     Returns:
         The episode and its last frame; the frame is None if the player quit.
     """
-    _, info = table.env.reset(seed=seed)
-    frame: NDArray[np.uint8] = table.env.render()  # type: ignore[assignment]
-    table.open_view(frame)
+    _, info = session.env.reset(seed=seed)
+    frame: NDArray[np.uint8] = session.env.render()  # type: ignore[assignment]
+    session.open_view(frame)
     episode = _Episode(seed, str(info["persona"]), [0.0], [int(info["true_xi"])])
     # Real time waits for the first Space, so the player sees the person before the clock runs.
-    controls, paused, done, stepped = Controls(), table.pace == "realtime", False, True
+    controls, paused, done, stepped = Controls(), session.pace == "realtime", False, True
     while not done:
-        commands = [controls.press(k) for k in table.keys()]
+        commands = [controls.press(k) for k in session.keys()]
         if "quit" in commands:
             return episode, None
-        if table.pace == "realtime":
+        if session.pace == "realtime":
             paused ^= commands.count("space") % 2 == 1
             advance = not paused
         else:
             advance = "space" in commands or "act" in commands
         if advance:
-            done, frame = _step(table, episode, controls)
-        status = ("your move" if table.pace == "turns" else "") if not paused else "PAUSED: Space to run"
-        table.view.show_playing(frame, controls.push, controls.said, episode.times_s[-1], seed, status)
-        table.show(advance or stepped)
+            done, frame = _step(session, episode, controls)
+        status = ("your move" if session.pace == "turns" else "") if not paused else "PAUSED: Space to run"
+        session.view.show_playing(frame, controls.push, controls.said, episode.times_s[-1], seed, status)
+        session.show(advance or stepped)
         stepped = False
-        table.clock.tick(table.fps if table.pace == "realtime" else 30)
+        session.clock.tick(session.fps if session.pace == "realtime" else 30)
     return episode, frame
 
 
-def _summary(table: _Table, episode: _Episode, note: str) -> Any:
+def _summary(session: _Session, episode: _Episode, note: str) -> Any:
     """The after-episode panel: the outcome, the mental state under the player's cues, the scripted agents' runs."""
     from agents.play_view import Summary
 
-    timing = getattr(table.env.unwrapped, "timing", None)  # the env's clock sets the summary's time axis
+    timing = getattr(session.env.unwrapped, "timing", None)  # the env's clock sets the summary's time axis
     return Summary(
         episode.outcome,
         episode.lift_time_s,
@@ -285,23 +285,23 @@ def _summary(table: _Table, episode: _Episode, note: str) -> Any:
         episode.times_s,
         episode.true_xi,
         episode.actions,
-        _compared(table.env_id, table.personas, episode.seed),
+        _compared(session.env_id, session.personas, episode.seed),
         float(timing.episode_s) if timing is not None else 30.0,
         note,
     )
 
 
-def _wait_for_next(table: _Table, last: bool) -> bool:
+def _wait_for_next(session: _Session, last: bool) -> bool:
     """After the summary: True when the player asks for the next person, False when they quit."""
     controls = Controls()
     while True:
-        commands = [controls.press(k) for k in table.keys()]
+        commands = [controls.press(k) for k in session.keys()]
         if "quit" in commands or (last and "next" in commands):
             return False
         if "next" in commands:
             return True
-        table.view.present()
-        table.clock.tick(30)
+        session.view.present()
+        session.clock.tick(30)
 
 
 def play(
@@ -341,11 +341,11 @@ def play(
         read_played(csv_path)  # a foreign or corrupt CSV is refused before anyone plays
     seed = next_seed(csv_path, env_id) if seed is None else seed
     env = gym.make(env_id, personas=names, render_mode="rgb_array")
-    table = _Table(env_id, names, env, keys or pygame_keys, pace, fps, window, on_frame)
+    session = _Session(env_id, names, env, keys or pygame_keys, pace, fps, window, on_frame)
     played: list[PlayedEpisode] = []
     try:
         while True:
-            episode, frame = _play_episode(table, seed)
+            episode, frame = _play_episode(session, seed)
             if frame is None:
                 return played
             record = episode.played(env_id, personas)
@@ -353,13 +353,13 @@ def play(
             played.append(record)
             last = bool(episodes and len(played) >= episodes)
             hint = "Esc: quit" if last else f"Enter: next person (seed {seed + 1})   Esc: quit"
-            table.view.show_summary(frame, _summary(table, episode, f"saved to {csv_path}.   {hint}"))
-            table.show()
-            if not _wait_for_next(table, last):
+            session.view.show_summary(frame, _summary(session, episode, f"saved to {csv_path}.   {hint}"))
+            session.show()
+            if not _wait_for_next(session, last):
                 return played
             seed += 1
     finally:
-        table.close()
+        session.close()
 
 
 def _parser() -> argparse.ArgumentParser:
