@@ -22,6 +22,7 @@ the wall time, both evaluations and the handbook caregiver's on the same episode
 from __future__ import annotations
 
 import argparse
+import hashlib
 import runpy
 import sys
 import time
@@ -95,6 +96,7 @@ def main(argv: list[str] | None = None) -> None:
     name = f"cleanrl_{script.stem}_{args.total_timesteps}"
     agent = ScriptAgent(namespace["agent"].cpu().eval(), name)
     run = {"script_command": ["python", *command], "timesteps": args.total_timesteps, "seed": args.seed}
+    run["script_sha256"] = hashlib.sha256(script.read_bytes()).hexdigest()  # which version of the script
     run["wall_time_s"] = wall
     # Greedy (argmax, SB3's deterministic=True) and sampled (how the script acts while it trains).
     agents = {"greedy": (agent, True), "sampled": (agent, False)}

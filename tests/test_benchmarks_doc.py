@@ -1,0 +1,147 @@
+"""docs/BENCHMARKS.md is what bench/report.py renders from the committed results, and every bench script writes one.
+
+The page's figures live in ``bench/results/*.json`` (each bench script's ``--save``); a page
+edited by hand, or results rerun without rerendering, fails here. The writers are checked on
+runs too small to measure anything: each script's report reaches its file with the command, the
+date and the machine, and the page renders from those files. No speed is asserted.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "bench"
+
+
+def _bench(name: str) -> Any:
+    """A bench script as a module (bench/ on sys.path, as when it runs as a script)."""
+    if str(BENCH) not in sys.path:
+        sys.path.insert(0, str(BENCH))
+    module_name = f"_bench_{name}"
+    if module_name in sys.modules:
+        return sys.modules[module_name]
+    spec = importlib.util.spec_from_file_location(module_name, BENCH / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_page_is_what_the_committed_results_render() -> None:
+    report = _bench("report")
+    committed = (ROOT / "docs" / "BENCHMARKS.md").read_text(encoding="utf-8")
+    assert committed == report.render(), (
+        "docs/BENCHMARKS.md differs from what bench/report.py renders from bench/results/*.json: "
+        "rerun the benchmark with --save, then python bench/report.py (never edit the page by hand)"
+    )
+
+
+def test_every_committed_result_names_its_command_date_and_machine() -> None:
+    files = sorted((BENCH / "results").glob("*.json"))
+    assert files, "no results committed in bench/results"
+    for path in files:
+        record = json.loads(path.read_text(encoding="utf-8"))
+        assert record["command"].startswith(f"python bench/{record['benchmark']}.py"), path
+        assert record["date"] and record["results"], path
+        for key in ("cpu_count", "python", "numpy", "numba"):
+            assert record["machine"][key], (path, key)
+
+
+_CLEANRL_STANDIN = """
+import torch
+
+class Agent(torch.nn.Module):
+    def __init__(self):
+        super().__init__()
+        self.actor = torch.nn.Linear(11, 18)
+
+agent = Agent()
+"""
+
+
+def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
+    """(script, flags, --save PATH's name with the script's placeholders, the file it becomes)."""
+    ttq = ["--env", "CoopGym/SitToStand-v0", "--budget-s", "0.3", "--eval-every-s", "0.3", "--episodes", "4"]
+    return [
+        ("run", ["--quick", "--repeats", "1"], "run.json", "run"),
+        ("reset", ["--num-envs", "64", "--repeats", "1"], "reset.json", "reset"),
+        ("render", ["--repeats", "1", "--frames", "10"], "render.json", "render"),
+        ("soak", ["--steps", "640", "--num-envs", "8"], "soak.json", "soak"),
+        ("levels", ["--episodes", "4", "--levels", "hard", "--no-pretrained"], "levels.json", "levels"),
+        (
+            "papers_experiment",
+            ["--seeds", "2", "--estimators", "kalman", "--difficulties", "hard"],
+            "papers_experiment.json",
+            "papers_experiment",
+        ),
+        (
+            "time_to_quality",
+            [*ttq, "--out", str(tmp / "ttq")],
+            "time_to_quality_<env>.json",
+            "time_to_quality_CoopGym-SitToStand-v0",
+        ),
+        (
+            "library_defaults",
+            ["--algo", "dqn", "--timesteps", "64", "--episodes", "4", "--out", str(tmp / "defaults")],
+            "library_defaults_<algo>_<env>_<timesteps>.json",
+            "library_defaults_dqn_SitToStandDiscrete-v0_64",
+        ),
+        (
+            "cleanrl_defaults",
+            [
+                "--script",
+                str(tmp / "standin.py"),
+                "--total-timesteps",
+                "64",
+                "--episodes",
+                "4",
+                "--out",
+                str(tmp / "cleanrl"),
+            ],
+            "cleanrl_defaults_<script>_<env>_<timesteps>.json",
+            "cleanrl_defaults_standin_SitToStandDiscreteUnit-v0_64",
+        ),
+    ]
+
+
+def test_each_bench_script_writes_its_results_file_and_the_page_renders_from_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("stable_baselines3")
+    threads = torch.get_num_threads()
+    results = tmp_path / "results"
+    (tmp_path / "standin.py").write_text(_CLEANRL_STANDIN)
+    monkeypatch.chdir(tmp_path)  # CleanRL-style scripts log under ./runs
+    cases = _cases(tmp_path)
+    try:
+        for script, flags, save_as, stem in cases:
+            _bench(script).main([*flags, "--save", str(results / save_as)])
+            assert (results / f"{stem}.json").is_file(), (script, sorted(p.name for p in results.iterdir()))
+        # cold_start times fresh processes compiling the kernels (tens of seconds): its writer
+        # is checked on stand-in timings.
+        cold_start = _bench("cold_start")
+        monkeypatch.setattr(cold_start, "_reference", lambda: 0.5)
+        monkeypatch.setattr(
+            cold_start,
+            "_measure",
+            lambda *args: {"first_step_s": 2.0, "compiled_s": 9.0, "import_s": 0.5, "total_s": 2.5, "compiles": []},
+        )
+        cold_start.main(["--num-envs", "0", "--repeats", "1", "--save", str(results / "cold_start.json")])
+    finally:
+        torch.set_num_threads(threads)
+    assert {path.stem for path in results.glob("*.json")} == {stem for *_, stem in cases} | {"cold_start"}
+    for path in results.glob("*.json"):
+        record = json.loads(path.read_text(encoding="utf-8"))
+        assert record["command"].startswith(f"python bench/{record['benchmark']}.py"), path
+        assert record["machine"]["cpu_count"] and record["machine"]["numba"], path
+    page = _bench("report").render(results)
+    assert "No results file yet" not in page
