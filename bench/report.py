@@ -322,15 +322,18 @@ def papers_experiment(results: Results) -> str:
     from estimator.judgment import ThresholdJudgment
 
     head = "### The paper's experiment\n"
+    delay_s = ThresholdJudgment().delay_s
+    reaction_s = Intention().reaction_delay_s
+    cap = f"""At the paper's {delay_s} s the person has answered the cue for only ~{delay_s - reaction_s:.2f} s
+({reaction_s} s reaction delay), which caps every estimator, the bound included.
+"""
     record = results.get("papers_experiment")
     if record is None:
-        return head + "\n" + _missing("python bench/papers_experiment.py") + "\n"
+        return head + "\n" + _missing("python bench/papers_experiment.py") + "\n\n" + cap
     report = record["results"]
     estimators = report["estimators"]
     labels = ("uncooperative", "unresponsive", "cooperative")
     sections = [f"{head}\n{_provenance(record)}\n"]
-    delay_s = ThresholdJudgment().delay_s
-    reaction_s = Intention().reaction_delay_s
     sections.append(
         f"""`python -m estimator.experiment.protocol --seeds {report["seeds"]} --estimator NAME --json`, run by
 `bench/papers_experiment.py` for each estimator ([Estimators](estimators.md#the-papers-experiment)):
@@ -387,9 +390,7 @@ Accuracy {100 * kalman["accuracy"]:.1f} ± {100 * kalman["accuracy_std"]:.1f} % 
 
 {table}
 
-At {delay_s} s the person has answered the cue for only ~{delay_s - reaction_s:.2f} s
-({reaction_s} s reaction delay), which caps every estimator, the bound included.
-"""
+{cap}"""
     )
     if report["difficulties"]:
         levels = ", ".join(
