@@ -57,6 +57,10 @@ MAX_PYTHON_ELEMENTS = 1 << 20
 ~10,000 envs' state rows, whose Python step takes about as long as the compile (the make_vec row
 of ``python bench/cold_start.py`` times a Python step of 1024 envs)."""
 
+IDLE_EXIT_S = 30.0
+"""A background process with no request for this long exits (a process's kernels are usually asked
+for within its first steps; a later one starts another)."""
+
 _LOCK_NAME = "coop_gym-compile.lock"
 
 _replacements: dict[int, Any] = {}  # id(compiled object) -> its Python twin
@@ -183,6 +187,10 @@ class _Compiler:
             self.sent = -1
             self.changed.notify_all()
 
+    def ended(self) -> bool:
+        with self.changed:
+            return self.sent < 0
+
     def is_done(self, number: int) -> bool:
         with self.changed:
             return self.sent < 0 or number in self.finished
@@ -193,7 +201,7 @@ class _Compiler:
 
 
 _compiler: _Compiler | None = None
-_requests: dict[tuple[int, tuple[Any, ...]], int] = {}  # (id(kernel), signature) -> request number
+_requests: dict[tuple[int, tuple[Any, ...]], tuple[_Compiler, int]] = {}  # (id(kernel), signature) -> request
 _state_lock = threading.Lock()
 
 
@@ -236,21 +244,20 @@ def _compile_for_args(kernel: Any, *args: Any) -> Callable[..., Any]:
         return _numba_compile_for_args(kernel, *args)
     key = (id(kernel), signature)
     with _state_lock:
-        number = _requests.get(key)
-        if number is None:
+        request = _requests.get(key)
+        if request is None:
             if _in_cache(kernel, signature):
-                number = 0
-            else:
-                try:
-                    if _compiler is None:
-                        _compiler = _Compiler()
-                    number = _requests[key] = _compiler.request(kernel, signature)
-                except (OSError, ValueError, pickle.PicklingError):  # no process: compile here
-                    number = 0
-        elif _compiler is None or _compiler.is_done(number):
+                return _numba_compile_for_args(kernel, *args)
+            try:
+                if _compiler is None or _compiler.ended():
+                    _compiler = _Compiler()
+                request = _requests[key] = (_compiler, _compiler.request(kernel, signature))
+            except (OSError, ValueError, pickle.PicklingError):  # no process: compile here
+                return _numba_compile_for_args(kernel, *args)
+        elif request[0].is_done(request[1]):
             del _requests[key]
-            number = 0
-    if number == 0:
+            request = None
+    if request is None:  # compiled by now (or the background process ended): load it, or compile here
         return _numba_compile_for_args(kernel, *args)
     return _ignoring_float_warnings(python_twin(kernel))
 
@@ -284,9 +291,28 @@ def _compile_lock(kernel: Any) -> Iterator[None]:
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
+def _requests_in(idle_exit_s: float) -> Iterator[bytes]:
+    """The request lines on stdin, until its end or, where ``select`` works on pipes, ``idle_exit_s`` without one."""
+    if os.name != "posix":
+        yield from sys.stdin.buffer
+        return
+    import select
+
+    fd = sys.stdin.fileno()
+    pending = b""
+    while True:
+        if not select.select([fd], [], [], idle_exit_s)[0]:
+            return  # idle: free the memory; the asking process starts another when it needs one
+        chunk = os.read(fd, 1 << 16)
+        if not chunk:
+            return
+        *lines, pending = (pending + chunk).split(b"\n")
+        yield from lines
+
+
 def _serve() -> None:
-    """The background process: compile each request into the disk cache, report ``done N``, exit at end of input."""
-    for number, line in enumerate(sys.stdin.buffer, start=1):
+    """The background process: compile each request into the disk cache, report ``done N``, exit when idle."""
+    for number, line in enumerate(_requests_in(IDLE_EXIT_S), start=1):
         try:
             module_name, qualname, signature = pickle.loads(base64.b64decode(line))
             kernel: Any = importlib.import_module(module_name)
