@@ -360,8 +360,35 @@ def identify(
     packed = _PackedTrials(trials)
     objective = _Objective(packed, _labels(packed, labelled), initial, fields)
     theta0 = np.log([getattr(initial, f) for f in fields])
+    runs = _minimise_from_restarts(
+        objective, theta0, restarts, np.random.default_rng(seed), restart_spread, max_iterations
+    )
+    best = min(runs, key=lambda r: r.fun)
+    scale = objective.scale
+    standard_errors = _log_standard_errors(objective.costs, best.x, scale)
+    return IdentificationResult(
+        model=initial.replace(**_fitted_values(fields, best.x, packed)),
+        negative_log_likelihood=float(best.fun) / scale,
+        n_iterations=int(best.nit),
+        success=bool(best.success),
+        message=str(best.message),
+        n_measurements=packed.n_measurements,
+        fitted_fields=fields,
+        restart_negative_log_likelihoods=tuple(float(r.fun) / scale for r in runs),
+        standard_errors=dict(zip(fields, standard_errors.tolist(), strict=True)),
+    )
+
+
+def _minimise_from_restarts(
+    objective: _Objective,
+    theta0: NDArray[np.float64],
+    restarts: int,
+    rng: np.random.Generator,
+    restart_spread: float,
+    max_iterations: int,
+) -> list[scipy.optimize.OptimizeResult]:
+    """L-BFGS-B runs in log space: the first from ``theta0``, the others from log-normal perturbations of it."""
     bounds = [(t - _LOG_BOUND, t + _LOG_BOUND) for t in theta0]
-    rng = np.random.default_rng(seed)
     runs = []
     for k in range(restarts):
         start = theta0 if k == 0 else theta0 + rng.normal(0.0, restart_spread, theta0.shape)
@@ -374,24 +401,16 @@ def identify(
             options={"maxiter": max_iterations, "ftol": 1e-13, "gtol": 1e-9},
         )
         runs.append(res)
-    best = min(runs, key=lambda r: r.fun)
-    scale = objective.scale
-    standard_errors = _log_standard_errors(objective.costs, best.x, scale)
-    fitted = {name: float(np.exp(best.x[n])) for n, name in enumerate(fields)}
+    return runs
+
+
+def _fitted_values(fields: tuple[str, ...], theta: NDArray[np.float64], packed: _PackedTrials) -> dict[str, float]:
+    """The fitted fields' values from the log-space optimum, and the trials' ``dt_s`` when they share one."""
+    fitted = {name: float(np.exp(theta[n])) for n, name in enumerate(fields)}
     dts = {t.dt_s for t in packed.trials}
     if len(dts) == 1:
         fitted["dt_s"] = float(next(iter(dts)))
-    return IdentificationResult(
-        model=initial.replace(**fitted),
-        negative_log_likelihood=float(best.fun) / scale,
-        n_iterations=int(best.nit),
-        success=bool(best.success),
-        message=str(best.message),
-        n_measurements=packed.n_measurements,
-        fitted_fields=fields,
-        restart_negative_log_likelihoods=tuple(float(r.fun) / scale for r in runs),
-        standard_errors=dict(zip(fields, standard_errors.tolist(), strict=True)),
-    )
+    return fitted
 
 
 def _checked_fields(initial: NominalModel, restarts: int, fitted_fields: Sequence[str]) -> tuple[str, ...]:
