@@ -26,6 +26,11 @@ when confident:
   (:func:`estimator.identify.identify`) on the calibration session
   (:func:`~estimator.experiment.banks.identified_banks`): the subject's history, used
   generatively.
+* ``switching`` -- the switching particle filter the belief caregiver reads
+  (:mod:`estimator.particle`, built as the envs' ``estimator="switching"`` builds it): the
+  level's person (:attr:`ProtocolConfig.difficulty`) with ``xi`` as a switching mode, on
+  parameter hypotheses drawn around the training personas, never the subject's own. MAP of
+  its ``P(xi)``.
 * ``oracle`` -- the bank on each subject's *true* parameters: not an estimator but the
   information bound of linear delay-aware filters at the judgment instant.
 
@@ -49,6 +54,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr
 
+from coop_gym.model.difficulty import get_difficulty
 from estimator.experiment.banks import (
     bank_log_likelihoods,
     drive_model,
@@ -72,6 +78,9 @@ __all__ = [
     "fit_recalibration",
     "gaussian_xi_probabilities",
 ]
+
+SWITCHING_STREAM = 0x5317C4
+"""Mixed with the experiment's seed into the particles' random streams (``switching``)."""
 
 # --------------------------------------------------------------------------- estimation
 
@@ -314,6 +323,21 @@ def _imm(inputs: _Inputs) -> NDArray[np.float64]:
     return imm.run(inputs.force, inputs.verbal, inputs.position)
 
 
+def _switching(inputs: _Inputs) -> NDArray[np.float64]:
+    """The switching particle filter (the envs' ``estimator="switching"``) on the level's person."""
+    from coop_gym.envs.switching import SwitchingOptions, hypothesis_bank, switching_filter
+
+    config = inputs.data.config
+    options = SwitchingOptions(difficulty=config.difficulty)
+    n = inputs.position.shape[0]
+    level = None if config.difficulty is None else get_difficulty(config.difficulty)
+    bank = hypothesis_bank(n, level, config.realism, config.timing, options)
+    seeds = np.random.SeedSequence([inputs.data.seed, SWITCHING_STREAM]).spawn(n)
+    pf = switching_filter(bank, config.timing, [np.random.default_rng(s) for s in seeds], options)
+    pf.reset(np.arange(n), inputs.position[:, 0])
+    return pf.run(inputs.force, inputs.verbal, inputs.position)
+
+
 def _persona_delays(data: ExperimentData) -> list[float]:
     return [p.params.intention.reaction_delay_s for p in data.personas]
 
@@ -382,6 +406,7 @@ ESTIMATOR_REGISTRY: dict[str, Callable[[_Inputs], _Judgments]] = {
     "persona_bank": _judge_posterior(_bank(persona_banks)),
     "calibrated": _judge_posterior(_calibrated),
     "identified": _judge_posterior(_bank(identified_banks)),
+    "switching": _judge_posterior(_switching),
     "oracle": _judge_posterior(_bank(oracle_banks, true_delays=True)),
 }
 """Every estimator by name (see the module docstring): each judges the flattened trials."""

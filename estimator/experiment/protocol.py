@@ -11,7 +11,6 @@ re-exports their public names.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 from collections.abc import Sequence
@@ -21,7 +20,6 @@ from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
 from coop_gym.model.difficulty import DIFFICULTIES
-from coop_gym.model.personas import resolve_personas
 from estimator.experiment.banks import identified_banks, intention_drive
 from estimator.experiment.estimators import (
     ESTIMATORS,
@@ -121,13 +119,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        personas: Any = args.personas
-        if args.difficulty is not None:
-            level = DIFFICULTIES[args.difficulty]
-            personas = tuple(
-                dataclasses.replace(p, params=level.apply(p.params)) for p in resolve_personas(args.personas)
-            )
-        config = ProtocolConfig(n_subjects=args.subjects, n_trials=args.trials, personas=personas)
+        config = ProtocolConfig(
+            n_subjects=args.subjects, n_trials=args.trials, personas=args.personas, difficulty=args.difficulty
+        )
     except ValueError as err:
         parser.error(str(err))
     problem = seed_range_problem("--seed", args.seed, args.seeds)  # runs seed .. seed + seeds - 1

@@ -27,6 +27,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from coop_gym.model.difficulty import get_difficulty
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas, sample_person
@@ -73,6 +74,9 @@ class ProtocolConfig:
         cues: Cue magnitudes and the utterance length.
         switching_rate_per_s: IMM's mode-switching rate [1/s].
         probability_floor: Mode-probability floor of the multiple-model estimators.
+        difficulty: The ``-v1`` level the subjects are at (``None``: the ``-v0`` model): each
+            persona's parameters pass through the level's changes, and the ``switching``
+            estimator models that level's person.
     """
 
     n_subjects: int = 4
@@ -90,6 +94,7 @@ class ProtocolConfig:
     cues: Cues = field(default_factory=Cues)
     switching_rate_per_s: float = 0.05
     probability_floor: float = 1e-4
+    difficulty: str | None = None
 
     def __post_init__(self) -> None:
         """Validate counts and durations."""
@@ -114,6 +119,8 @@ class ProtocolConfig:
         if not 0.0 <= self.probability_floor < 1.0 / 3.0:
             raise ValueError(f"ProtocolConfig.probability_floor must be in [0, 1/3), got {self.probability_floor!r}")
         resolve_personas(self.personas)  # raises on an unknown name
+        if self.difficulty is not None:
+            get_difficulty(self.difficulty)  # raises on an unknown level
         if self.quiet_s + self.judgment.delay_s > self.trial_s:
             raise ValueError("the judgment must fall inside the trial")
 
@@ -301,6 +308,9 @@ def _draw_subjects(
 ) -> tuple[tuple[Persona, ...], tuple[PersonParams, ...]]:
     """The subjects: each a persona drawn from the pool, then a person around it, then the realism switches."""
     pool = resolve_personas(config.personas)
+    if config.difficulty is not None:
+        level = get_difficulty(config.difficulty)
+        pool = tuple(dataclasses.replace(p, params=level.apply(p.params)) for p in pool)
     personas, subjects = [], []
     for _ in range(config.n_subjects):
         persona = pool[int(rng.integers(len(pool)))]

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from coop_gym.envs.core import nominal_model_for
+from coop_gym.model.personas import PERSONAS
 from estimator import metrics
 from estimator.experiment import calibrate, protocol
 from estimator.experiment.protocol import (
@@ -116,6 +117,8 @@ def test_bad_configs_are_rejected() -> None:
         ProtocolConfig(requested_mix="mostly")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="persona"):
         ProtocolConfig(personas="nobody")
+    with pytest.raises(ValueError, match="unknown difficulty 'harder'"):
+        ProtocolConfig(difficulty="harder")
     with pytest.raises(ValueError, match="seed"):
         run_experiment(SMALL, seed=-1)
 
@@ -210,7 +213,9 @@ def test_intention_drive_is_the_delayed_cue_input() -> None:
     assert np.allclose(drive[0], expected)
 
 
-@pytest.mark.parametrize("name", ["kalman", "multiple_model", "imm", "delay_aware", "persona_bank", "oracle"])
+@pytest.mark.parametrize(
+    "name", ["kalman", "multiple_model", "imm", "delay_aware", "persona_bank", "switching", "oracle"]
+)
 def test_every_estimator_gives_judgments_and_distributions(small_data: protocol.ExperimentData, name: str) -> None:
     result = estimate(small_data, name)
     assert result.judgment.shape == (2, 9)
@@ -341,3 +346,16 @@ def test_calibration_report_runs_and_rejects_bad_arguments(capsys: pytest.Captur
         with pytest.raises(SystemExit) as info:
             calibrate.main(bad)
         assert info.value.code == 2
+
+
+def test_subjects_at_a_level_have_its_people_and_the_switching_filter_is_seeded_by_the_run() -> None:
+    from coop_gym.model.difficulty import get_difficulty
+
+    at_hard = dataclasses.replace(SMALL, difficulty="hard")
+    data = run_experiment(at_hard, seed=3)
+    level = get_difficulty("hard")
+    assert all(p.params == level.apply(PERSONAS[p.name].params) for p in data.personas)
+    first, again = estimate(data, "switching"), estimate(data, "switching")
+    assert np.array_equal(first.probabilities, again.probabilities)  # same run, same particles
+    other = estimate(run_experiment(at_hard, seed=4), "switching")
+    assert not np.array_equal(first.probabilities, other.probabilities)
