@@ -95,6 +95,28 @@ def _missing(command: str) -> str:
     return f"No results file yet: `{command} --save`, then `python bench/report.py`."
 
 
+def _from_results(
+    stem: str, heading: str, command: str
+) -> Callable[[Callable[[dict[str, Any], dict[str, Any]], str]], Callable[[Results], str]]:
+    """A section drawn from one results file: ``heading``, the file's provenance, then the body.
+
+    The decorated function gets the file's report and the whole record and returns the body;
+    without the file the section names ``command``, which makes it.
+    """
+
+    def wrap(body: Callable[[dict[str, Any], dict[str, Any]], str]) -> Callable[[Results], str]:
+        def section(results: Results) -> str:
+            record = results.get(stem)
+            if record is None:
+                return f"{heading}\n\n{_missing(command)}\n"
+            return f"{heading}\n\n{_provenance(record)}\n\n{body(record['results'], record)}"
+
+        section.__name__ = body.__name__
+        return section
+
+    return wrap
+
+
 # ---------------------------------------------------------------------------- sections
 
 INTRO = """\
@@ -136,12 +158,8 @@ def _level_agents(levels: dict[str, Any]) -> list[str]:
     return names
 
 
-def the_levels(results: Results) -> str:
-    head = "## Quality\n\n### The levels\n"
-    record = results.get("levels")
-    if record is None:
-        return head + "\n" + _missing("python bench/levels.py") + "\n"
-    report = record["results"]
+@_from_results("levels", "## Quality\n\n### The levels", "python bench/levels.py")
+def the_levels(report: dict[str, Any], record: dict[str, Any]) -> str:
     levels = report["levels"]
     ids = ", ".join(f"`{level['env_id']}`" for level in levels.values())
     rows = []
@@ -168,12 +186,10 @@ def the_levels(results: Results) -> str:
     room_table = _table(
         ["level", "oracle", "best blind", "best reader", "value of reading the mind", "achieved insight"], room_rows
     )
-    return f"""{head}
-{_provenance(record)}
-
-Held-out personas ({", ".join(next(iter(levels.values()))["results"][0]["personas"])}), {report["episodes"]} seeded
-episodes per agent (seeds {report["seed"]}..{report["seed"] + report["episodes"] - 1}, the same episodes for every
-agent) on each level ({ids}), played through `agents.evaluate` as
+    personas = ", ".join(next(iter(levels.values()))["results"][0]["personas"])
+    first, last = report["seed"], report["seed"] + report["episodes"] - 1
+    return f"""Held-out personas ({personas}), {report["episodes"]} seeded episodes per agent (seeds
+{first}..{last}, the same episodes for every agent) on each level ({ids}), played through `agents.evaluate` as
 `python -m agents.evaluate --env ID --compare AGENTS --personas test --episodes N` does. The
 `oracle` sees the person's true cooperativeness (`xi`): the ceiling every row is read against.
 `blind` is the mental-state-blind family's winner for the level (a schedule of cue phases with a
@@ -406,12 +422,8 @@ balanced accuracy: {levels} (paper {paper_ba:.1f} %).
     return "\n".join(sections)
 
 
-def against_gymnasium(results: Results) -> str:
-    head = "## Speed\n\n### Against Gymnasium's reference\n"
-    record = results.get("run")
-    if record is None:
-        return head + "\n" + _missing("python bench/run.py") + "\n"
-    report = record["results"]
+@_from_results("run", "## Speed\n\n### Against Gymnasium's reference", "python bench/run.py")
+def against_gymnasium(report: dict[str, Any], record: dict[str, Any]) -> str:
     r, m, s = report["ratios"], report["measurements"], report["settings"]
     n = s["vector_envs"]
     rows = [
@@ -453,10 +465,7 @@ def against_gymnasium(results: Results) -> str:
     vector = r["vector_ratio_vs_cartpole_vector"]
     met = "met" if vector["median"] >= goal else "**not met**"
     load = report["load"]
-    return f"""{head}
-{_provenance(record)}
-
-`python bench/run.py` measures the envs against Gymnasium's reference in the same run: median
+    return f"""`python bench/run.py` measures the envs against Gymnasium's reference in the same run: median
 of {s["repeats"]} repeats, each alternating the contenders in {s["blocks_per_repeat"]} blocks (load average
 {load["load_average_1min_at_start"]:.1f} at the start, {load["load_average_1min_at_end"]:.1f} at the end). Random
 actions, sampled up front; the PPO settings are `rollout` ({_kwargs(s["ppo_settings"]["rollout"])}: collecting
@@ -481,12 +490,8 @@ structure-of-arrays kernel with the envs in the inner loop) is described in
 """
 
 
-def cold_start(results: Results) -> str:
-    head = "### Cold start\n"
-    record = results.get("cold_start")
-    if record is None:
-        return head + "\n" + _missing("python bench/cold_start.py") + "\n"
-    report = record["results"]
+@_from_results("cold_start", "### Cold start", "python bench/cold_start.py")
+def cold_start(report: dict[str, Any], record: dict[str, Any]) -> str:
     rows = [
         [
             f"`{label}`",
@@ -514,10 +519,7 @@ def cold_start(results: Results) -> str:
     goal_s = 5.0
     worst = max(run["cold_s"]["median"] for run in report["runs"].values())
     met = "met" if worst <= goal_s else "**not met**"
-    return f"""{head}
-{_provenance(record)}
-
-The kernels compile on a fresh install and load from numba's cache after that; while a kernel is
+    return f"""The kernels compile on a fresh install and load from numba's cache after that; while a kernel is
 missing from the cache, its calls run as Python and a background process compiles it
 (`coop_gym/compiled/background.py`). `python bench/cold_start.py` times the first
 `gym.make`/`make_vec` + reset + step in fresh processes with an empty cache (cold; then how long
@@ -536,18 +538,11 @@ first step is {met}.
 """
 
 
-def reset(results: Results) -> str:
-    head = "### Reset\n"
-    record = results.get("reset")
-    if record is None:
-        return head + "\n" + _missing("python bench/reset.py") + "\n"
-    report = record["results"]
+@_from_results("reset", "### Reset", "python bench/reset.py")
+def reset(report: dict[str, Any], record: dict[str, Any]) -> str:
     n = report["num_envs"]
     per_env = 1e6 / n
-    return f"""{head}
-{_provenance(record)}
-
-`python bench/reset.py` times `reset(seed=s)` of a `make_vec` env of {_count(n)} envs (every env's
+    return f"""`python bench/reset.py` times `reset(seed=s)` of a `make_vec` env of {_count(n)} envs (every env's
 generator seeded and its episode started) against one step of the same env, alternating,
 {report["repeats"]} repeats: a reset takes {_spread(report["reset_over_step"])} steps' time
 ({report["reset_s"]["median"] * per_env:.2f} µs per env against {report["step_s"]["median"] * per_env:.2f} µs).
@@ -636,16 +631,9 @@ budget of {report["budget_s"]:.0f} s of training per contender; the handbook suc
     return "\n".join(sections)
 
 
-def rendering(results: Results) -> str:
-    head = "### Rendering\n"
-    record = results.get("render")
-    if record is None:
-        return head + "\n" + _missing("python bench/render.py") + "\n"
-    report = record["results"]
-    return f"""{head}
-{_provenance(record)}
-
-`python bench/render.py` times `render()` of `rgb_array` frames of `CoopGym/SitToStand-v0` and of
+@_from_results("render", "### Rendering", "python bench/render.py")
+def rendering(report: dict[str, Any], record: dict[str, Any]) -> str:
+    return f"""`python bench/render.py` times `render()` of `rgb_array` frames of `CoopGym/SitToStand-v0` and of
 `CartPole-v1` (both pygame, 600 {TIMES} 400, a step between frames, alternating blocks;
 {report["repeats"]} repeats of {report["frames_per_repeat"]} frames): ours
 {_spread(report["ours_ms_per_frame"], unit=" ms")} a frame, CartPole's
@@ -654,12 +642,8 @@ Rendering speed is measured here, against a reference, not asserted in a test.
 """
 
 
-def soak(results: Results) -> str:
-    head = "### Soak\n"
-    record = results.get("soak")
-    if record is None:
-        return head + "\n" + _missing("python bench/soak.py") + "\n"
-    report = record["results"]
+@_from_results("soak", "### Soak", "python bench/soak.py")
+def soak(report: dict[str, Any], record: dict[str, Any]) -> str:
     cov = report["covariances"]
     checks = "no NaN or infinity" if not report["failures"] else "failures: " + "; ".join(report["failures"])
     spd = (
@@ -667,10 +651,7 @@ def soak(results: Results) -> str:
         if isinstance(cov, dict) and cov.get("ok")
         else "covariance checks **failed**"
     )
-    return f"""{head}
-{_provenance(record)}
-
-Long run, not in the test suite: `python bench/soak.py` steps the {report["mode"]} with random
+    return f"""Long run, not in the test suite: `python bench/soak.py` steps the {report["mode"]} with random
 actions: {_count(report["env_steps"])} env-steps ({_count(report["episodes_ended"])} episodes ended) in
 {report["wall_s"]:.0f} s, {checks}; resident memory {_mb(report["rss_start_mb"])} at the start,
 {_mb(report["rss_after_10pct_mb"])} after 10 % of the run (compilation and warm-up behind it: growth after it
