@@ -245,10 +245,42 @@ def _imm_env_step(
 ) -> None:
     """One IMM cycle (Bar-Shalom): interaction/mixing, mode-matched filtering, mode update."""
     row = nominal[i]
+    lt = log_trans[i]
     lm = log_mu[i]
     for j in range(N_MODES):
-        _mixing_weights(log_trans[i], lm, j, log_cbar, w)
-        _mixed_moments(means[i], P[i], w, mixed_m[j], mixed_P[j])
+        # Predicted mode probability cbar_j = sum_i p_ij mu_i (log-sum-exp).
+        mx = -np.inf
+        for s in range(N_MODES):
+            mx = max(mx, lt[s, j] + lm[s])
+        if mx == -np.inf:
+            # Mode j unreachable (zero transitions and no floor): keep its filter, probability stays 0.
+            log_cbar[j] = -np.inf
+            for s in range(N_MODES):
+                w[s] = 1.0 if s == j else 0.0
+        else:
+            acc = 0.0
+            for s in range(N_MODES):
+                acc += math.exp(lt[s, j] + lm[s] - mx)
+            log_cbar[j] = mx + math.log(acc)
+            # Mixing weights mu_{s|j} = p_sj mu_s / cbar_j.
+            for s in range(N_MODES):
+                w[s] = math.exp(lt[s, j] + lm[s] - log_cbar[j])
+        # Mixed initial condition: m0_j = sum_s mu_{s|j} m_s,
+        # P0_j = sum_s mu_{s|j} (P_s + (m_s - m0_j)(m_s - m0_j)^T).
+        for k in range(STATE_WIDTH):
+            acc = 0.0
+            for s in range(N_MODES):
+                acc += w[s] * means[i, s, k]
+            mixed_m[j, k] = acc
+        for a in range(STATE_WIDTH):
+            for b in range(a, STATE_WIDTH):
+                acc = 0.0
+                for s in range(N_MODES):
+                    da = means[i, s, a] - mixed_m[j, a]
+                    db = means[i, s, b] - mixed_m[j, b]
+                    acc += w[s] * (P[i, s, a, b] + da * db)
+                mixed_P[j, a, b] = acc
+                mixed_P[j, b, a] = acc
     for j in range(N_MODES):
         for k in range(STATE_WIDTH):
             means[i, j, k] = mixed_m[j, k]
@@ -259,58 +291,6 @@ def _imm_env_step(
         innovation = mode_mean_step(means[i, j], row, float(j - 1), push_force_n, verbal_cue, measured_position_m, K)
         lm[j] = log_cbar[j] - 0.5 * (_LOG_2PI + math.log(S) + innovation * innovation / S)
     _log_normalise(lm)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _mixing_weights(
-    lt: NDArray[np.float64], lm: NDArray[np.float64], j: int, log_cbar: NDArray[np.float64], w: NDArray[np.float64]
-) -> None:
-    """Mode ``j``'s predicted probability ``log_cbar[j]`` and mixing weights ``w[s] = mu_{s|j}`` (log-sum-exp)."""
-    # Predicted mode probability cbar_j = sum_i p_ij mu_i.
-    mx = -np.inf
-    for s in range(N_MODES):
-        mx = max(mx, lt[s, j] + lm[s])
-    if mx == -np.inf:
-        # Mode j unreachable (zero transitions and no floor): keep its filter, probability stays 0.
-        log_cbar[j] = -np.inf
-        for s in range(N_MODES):
-            w[s] = 1.0 if s == j else 0.0
-    else:
-        acc = 0.0
-        for s in range(N_MODES):
-            acc += math.exp(lt[s, j] + lm[s] - mx)
-        log_cbar[j] = mx + math.log(acc)
-        # Mixing weights mu_{s|j} = p_sj mu_s / cbar_j.
-        for s in range(N_MODES):
-            w[s] = math.exp(lt[s, j] + lm[s] - log_cbar[j])
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _mixed_moments(
-    means: NDArray[np.float64],
-    P: NDArray[np.float64],
-    w: NDArray[np.float64],
-    mixed_m: NDArray[np.float64],
-    mixed_P: NDArray[np.float64],
-) -> None:
-    """A mode's mixed initial condition from the modes' ``means`` (3, 3) and ``P`` (3, 3, 3), weights ``w``.
-
-    m0_j = sum_s mu_{s|j} m_s, P0_j = sum_s mu_{s|j} (P_s + (m_s - m0_j)(m_s - m0_j)^T).
-    """
-    for k in range(STATE_WIDTH):
-        acc = 0.0
-        for s in range(N_MODES):
-            acc += w[s] * means[s, k]
-        mixed_m[k] = acc
-    for a in range(STATE_WIDTH):
-        for b in range(a, STATE_WIDTH):
-            acc = 0.0
-            for s in range(N_MODES):
-                da = means[s, a] - mixed_m[a]
-                db = means[s, b] - mixed_m[b]
-                acc += w[s] * (P[s, a, b] + da * db)
-            mixed_P[a, b] = acc
-            mixed_P[b, a] = acc
 
 
 @njit(cache=True, error_model="numpy")

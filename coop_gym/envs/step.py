@@ -76,7 +76,10 @@ def step_env(
         nominal = row[BLOCKS.nominal : BLOCKS.nominal + len(NOMINAL_COLUMNS)]
         judge = row[BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
         dt = params[PERSON.dt_s]
-        _start_utterance(cue, command, consts)
+        # A verbal cue is an utterance of fixed length; one can't talk over oneself.
+        if cue[CUES.verbal_remaining_s] <= 0.0 and command[CMD.verbal_cue] != 0.0:
+            cue[CUES.verbal_value] = command[CMD.verbal_cue]
+            cue[CUES.verbal_remaining_s] = consts[CONSTS.verbal_duration_s]
         for k in range(substeps):
             verbal_cue = cue[CUES.verbal_value] if cue[CUES.verbal_remaining_s] > 1e-9 else 0.0
             for j in range(NORMALS_PER_SUBSTEP):
@@ -90,7 +93,9 @@ def step_env(
             _record_readings(row, k, substeps, force_n, verbal_cue, position_m)
             cue[CUES.verbal_remaining_s] -= dt
             cue[CUES.impulse_n_s] += push_force_n * dt
-        _end_utterance(cue)
+        if cue[CUES.verbal_remaining_s] <= 1e-9:
+            cue[CUES.verbal_remaining_s] = 0.0
+            cue[CUES.verbal_value] = 0.0
         cue[CUES.elapsed_s] += substeps * dt
         _report_belief(row, consts[CONSTS.episode_s])
         # The episode clock ends the episode (Timing.max_episode_steps counts the same steps).
@@ -100,22 +105,6 @@ def step_env(
     _report_truth(report, person, outcome, 0.0 if lift else push_force_n)
     if consts[CONSTS.build_obs] > 0.5:
         observe_row(row, obs_row, consts)
-
-
-@njit(cache=True, error_model="numpy", nogil=True, inline="always")
-def _start_utterance(cue: NDArray[np.float64], command: NDArray[np.float64], consts: NDArray[np.float64]) -> None:
-    # A verbal cue is an utterance of fixed length; one can't talk over oneself.
-    if cue[CUES.verbal_remaining_s] <= 0.0 and command[CMD.verbal_cue] != 0.0:
-        cue[CUES.verbal_value] = command[CMD.verbal_cue]
-        cue[CUES.verbal_remaining_s] = consts[CONSTS.verbal_duration_s]
-
-
-@njit(cache=True, error_model="numpy", nogil=True, inline="always")
-def _end_utterance(cue: NDArray[np.float64]) -> None:
-    # An utterance that has played out is silent from the next step.
-    if cue[CUES.verbal_remaining_s] <= 1e-9:
-        cue[CUES.verbal_remaining_s] = 0.0
-        cue[CUES.verbal_value] = 0.0
 
 
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")

@@ -373,66 +373,36 @@ def person_substep(
         verbal_cue: Verbal cue heard during the step ``c_v`` in {-1, 0, +1}.
         z: At least 3 standard normals: acceleration, intention and chain noise.
     """
-    xi = s[STATE.xi]  # the step's cooperativeness: the chain moves it last
-    push_seen, verbal_seen = _remember_cues(s, p, delay_push, delay_verbal, push_force_n, verbal_cue)
-    _move_body(s, p, xi, push_force_n, z[0])
-    _move_intention(s, p, xi, push_seen, verbal_seen, z[1])
-    _lean_unprompted(s, p, xi, z[2])
-    if p[PERSON.hold_xi] < 0.5:
-        _step_cooperativeness(s, p, xi, push_force_n, verbal_cue, z[2])
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _remember_cues(
-    s: NDArray[np.float64],
-    p: NDArray[np.float64],
-    delay_push: NDArray[np.float64],
-    delay_verbal: NDArray[np.float64],
-    push_force_n: float,
-    verbal_cue: float,
-) -> tuple[float, float]:
-    """The person's memory of cues (read by the chain) and the cues perceived now, ``delay_steps`` late."""
     dt = p[PERSON.dt_s]
+    xi = s[STATE.xi]
+    # The person's memory of cues (used by the chain below).
     felt = push_force_n >= p[PERSON.touch_threshold_n]
     s[STATE.since_explanation_s] = 0.0 if verbal_cue > 0.5 else s[STATE.since_explanation_s] + dt
     s[STATE.since_cue_s] = 0.0 if (felt or verbal_cue != 0.0) else s[STATE.since_cue_s] + dt
+
     # Reaction delay: the intention answers the cues of `delay_steps` ago.
     k = int(s[STATE.delay_index])
     delay_push[k] = push_force_n
     delay_verbal[k] = verbal_cue
     j = (k - int(p[PERSON.delay_steps])) % DELAY_LINE_LENGTH
+    push_seen = delay_push[j]
+    verbal_seen = delay_verbal[j]
     s[STATE.delay_index] = float((k + 1) % DELAY_LINE_LENGTH)
-    return delay_push[j], delay_verbal[j]
 
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _move_body(s: NDArray[np.float64], p: NDArray[np.float64], xi: float, push_force_n: float, z_accel: float) -> None:
-    """The body, eq. 1 by exact zero-order hold: [x, xdot] <- Ad [x, xdot] + Bd u, u = k1*eta + k2_eff*c_p + w_x."""
-    # An uncooperative person stiffens (k2_eff < k2).
+    # eq. 1, exact zero-order hold: [x, xdot] <- Ad [x, xdot] + Bd u,
+    # u = k1*eta + k2_eff*c_p + w_x; an uncooperative person stiffens (k2_eff < k2).
     k2 = p[PERSON.push_compliance_m_per_s2_n]
     if xi < -0.5:
         k2 *= p[PERSON.stiffness_factor_uncooperative]
     elif xi < 0.5:
         k2 *= p[PERSON.stiffness_factor_unresponsive]
-    u = (
-        p[PERSON.voluntary_gain_per_s2] * s[STATE.eta_m]
-        + k2 * push_force_n
-        + p[PERSON.accel_noise_std_m_per_s2] * z_accel
-    )
+    u = p[PERSON.voluntary_gain_per_s2] * s[STATE.eta_m] + k2 * push_force_n + p[PERSON.accel_noise_std_m_per_s2] * z[0]
     x, xdot = s[STATE.x_m], s[STATE.xdot_m_per_s]
     s[STATE.x_m] = p[PERSON.zoh_a00] * x + p[PERSON.zoh_a01] * xdot + p[PERSON.zoh_b0] * u
     s[STATE.xdot_m_per_s] = p[PERSON.zoh_a10] * x + p[PERSON.zoh_a11] * xdot + p[PERSON.zoh_b1] * u
 
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _move_intention(
-    s: NDArray[np.float64], p: NDArray[np.float64], xi: float, push_seen: float, verbal_seen: float, z_intent: float
-) -> None:
-    """The intention, eq. 6: eta[t+1] = eta[t] + xi*(k3*c_p + k4*c_v)*dt + w_eta (cues as perceived, delayed).
-
-    With no cue acting the intention relaxes toward upright.
-    """
-    dt = p[PERSON.dt_s]
+    # eq. 6: eta[t+1] = eta[t] + xi*(k3*c_p + k4*c_v)*dt + w_eta (cues as perceived, delayed);
+    # with no cue acting the intention relaxes toward upright.
     eta = s[STATE.eta_m]
     if push_seen >= p[PERSON.touch_threshold_n] or verbal_seen != 0.0:
         eta += xi * (p[PERSON.push_gain_m_per_s_n] * push_seen + p[PERSON.verbal_gain_m_per_s] * verbal_seen) * dt
@@ -440,7 +410,7 @@ def _move_intention(
         # Euler step, capped: with rate*dt > 2 it would overshoot and diverge (relaxation
         # 100/s at dt 0.1 s is valid); a full relaxation in one step is the stable limit.
         eta -= min(p[PERSON.relaxation_rate_per_s] * dt, 1.0) * eta
-    eta += p[PERSON.intention_noise_std_per_step_m] * z_intent
+    eta += p[PERSON.intention_noise_std_per_step_m] * z[1]
     if p[PERSON.passive_follow_rate_per_s] > 0.0 and abs(xi) < 0.5:
         # A passive (unresponsive) person's intention follows the body: bent forward by a
         # push, a weak trunk stays bent instead of pulling back upright (capped as above).
@@ -449,40 +419,31 @@ def _move_intention(
         eta = min(max(eta, p[PERSON.min_m]), p[PERSON.max_m])
     s[STATE.eta_m] = eta
 
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _lean_unprompted(s: NDArray[np.float64], p: NDArray[np.float64], xi: float, z_chain: float) -> None:
-    """Looking ready while not ready: an unresponsive person left waiting (idle) now and then leans forward.
-
-    The chain's uniform decides it from the top of [0, 1) (the chain's jumps come from the
-    bottom), so the person still draws 5 normals per step.
-    """
+    # Looking ready while not ready: an unresponsive person left waiting (idle) now and then
+    # leans forward on their own. The chain's uniform decides it from the top of [0, 1) (the chain's jumps
+    # come from the bottom), so the person still draws 5 normals per step.
     if p[PERSON.spontaneous_lean_rate_per_s] > 0.0 and abs(xi) < 0.5 and s[STATE.since_cue_s] >= p[PERSON.idle_after_s]:
-        if _normal_cdf(z_chain) >= math.exp(-p[PERSON.spontaneous_lean_rate_per_s] * p[PERSON.dt_s]):
+        if _normal_cdf(z[2]) >= math.exp(-p[PERSON.spontaneous_lean_rate_per_s] * dt):
             s[STATE.eta_m] = max(s[STATE.eta_m], p[PERSON.spontaneous_lean_m])
 
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _step_cooperativeness(
-    s: NDArray[np.float64], p: NDArray[np.float64], xi: float, push_force_n: float, verbal_cue: float, z_chain: float
-) -> None:
-    """The cooperativeness, eq. 8: one exact step of the cue-driven chain, rates held over dt."""
-    up, down = cooperativeness_rates(
-        p, xi, push_force_n, verbal_cue, s[STATE.since_explanation_s], s[STATE.since_cue_s]
-    )
-    refuse = p[PERSON.refusal_rate_per_s] if xi > 0.5 else 0.0
-    total = up + down + refuse
-    if total > 0.0:
-        leave = 1.0 - math.exp(-total * p[PERSON.dt_s])
-        uniform = _normal_cdf(z_chain)
-        if uniform < leave * up / total:
-            s[STATE.xi] = xi + 1.0
-        elif uniform < leave:
-            # A sudden refusal jumps from +1 straight to -1.
-            if refuse > 0.0 and uniform >= leave * (up + down) / total:
-                s[STATE.xi] = -1.0
-            else:
-                s[STATE.xi] = xi - 1.0
+    # eq. 8: one exact step of the cue-driven chain, rates held over dt.
+    if p[PERSON.hold_xi] < 0.5:
+        up, down = cooperativeness_rates(
+            p, xi, push_force_n, verbal_cue, s[STATE.since_explanation_s], s[STATE.since_cue_s]
+        )
+        refuse = p[PERSON.refusal_rate_per_s] if xi > 0.5 else 0.0
+        total = up + down + refuse
+        if total > 0.0:
+            leave = 1.0 - math.exp(-total * dt)
+            uniform = _normal_cdf(z[2])
+            if uniform < leave * up / total:
+                s[STATE.xi] = xi + 1.0
+            elif uniform < leave:
+                # A sudden refusal jumps from +1 straight to -1.
+                if refuse > 0.0 and uniform >= leave * (up + down) / total:
+                    s[STATE.xi] = -1.0
+                else:
+                    s[STATE.xi] = xi - 1.0
 
 
 @njit(cache=True, error_model="numpy")
