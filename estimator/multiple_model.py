@@ -105,6 +105,7 @@ class _MultipleModelBase:
     """State and bookkeeping shared by the MMAE and IMM estimators (one ``P`` or one per mode)."""
 
     _per_mode_covariance = False
+    _floor_before_update = False
 
     def __init__(
         self,
@@ -147,9 +148,12 @@ class _MultipleModelBase:
         self._probs = np.zeros((n, N_MODES))
         self._mean = np.zeros((n, STATE_WIDTH))
         self._shape = (n,)
-        # Kernel arguments of the other estimator kind (MMAE: floor; IMM: transitions), unused by this one.
-        self._log_keep = 0.0
-        self._log_floor = -math.inf
+        # The MMAE mixes the probability floor in before each update (log_keep, log_floor); the IMM folds it
+        # into its transitions (_log_trans, set by IMMEstimator). The other kind's kernel arguments go unused.
+        eps = self.probability_floor
+        floor_first = self._floor_before_update
+        self._log_keep = math.log1p(-N_MODES * eps) if floor_first else 0.0
+        self._log_floor = math.log(eps) if floor_first and eps > 0 else -math.inf
         self._log_trans = np.zeros((1, N_MODES, N_MODES))
         self.reset(np.arange(n), first_position_m)
 
@@ -326,23 +330,7 @@ class MultipleModelEstimator(_MultipleModelBase):
     """
 
     _per_mode_covariance = False
-
-    def __init__(
-        self,
-        nominal_rows: ArrayLike,
-        first_position_m: ArrayLike,
-        *,
-        prior: NominalModel | None = None,
-        mode_prior: ArrayLike | None = None,
-        probability_floor: float = 1e-6,
-    ) -> None:
-        """Create N estimators, each at its first measurement and mode prior."""
-        super().__init__(
-            nominal_rows, first_position_m, prior=prior, mode_prior=mode_prior, probability_floor=probability_floor
-        )
-        eps = self.probability_floor
-        self._log_keep = math.log1p(-N_MODES * eps)
-        self._log_floor = math.log(eps) if eps > 0 else -math.inf
+    _floor_before_update = True
 
     @classmethod
     def from_model(
