@@ -186,15 +186,28 @@ def test_kernels_of_modules_outside_the_compiled_boundary_keep_numbas_error(tmp_
     assert "no locator available" in out.stderr
 
 
-def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path: Path) -> None:
-    """Writable when the kernels were decorated, gone when they compile: they run uncached."""
+def _toy_package(tmp_path: Path, kernels: str) -> dict[str, str]:
+    """Package ``toy`` with module ``kern`` (``kernels``, guarded) under ``tmp_path``; the environment to run it in."""
     package = tmp_path / "toy"
     package.mkdir()
     (package / "__init__.py").write_text("")
     (package / "kern.py").write_text(
-        "from numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+        f"import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+        f"{kernels}\n\nguard_kernel_cache(__name__)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
+    env.pop("NUMBA_DISABLE_JIT", None)
+    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
+    return env
+
+
+def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path: Path) -> None:
+    """Writable when the kernels were decorated, gone when they compile: they run uncached."""
+    env = _toy_package(
+        tmp_path,
         "@njit(cache=True)\ndef kernel(x):\n    return 2 * x\n\n"
-        "@njit(cache=True)\ndef other(x):\n    return kernel(x) + 1\n\nguard_kernel_cache(__name__)\n"
+        "@njit(cache=True)\ndef other(x):\n    return kernel(x) + 1",
     )
     code = textwrap.dedent(
         """
@@ -207,10 +220,6 @@ def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path:
             print(kernel(3), other(3.0), [w.category.__name__ for w in caught])
         """
     )
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
-    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
-    env.pop("NUMBA_DISABLE_JIT", None)
-    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().split(maxsplit=2) == ["6", "7.0", "['KernelCacheWarning']"]
@@ -218,13 +227,10 @@ def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path:
 
 def test_a_warm_start_loads_kernels_without_numbas_registries_or_parsing_sources(tmp_path: Path) -> None:
     """Loading from the cache imports none of Numba's implementation registries and parses no source."""
-    package = tmp_path / "toy"
-    package.mkdir()
-    (package / "__init__.py").write_text("")
-    (package / "kern.py").write_text(
-        "import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+    env = _toy_package(
+        tmp_path,
         "@njit(cache=True)\ndef kernel(n):\n    out = np.empty(n)\n    for i in range(n):\n        out[i] = i * 0.5\n"
-        "    return out\n\nguard_kernel_cache(__name__)\n"
+        "    return out",
     )
     code = textwrap.dedent(
         """
@@ -237,10 +243,6 @@ def test_a_warm_start_loads_kernels_without_numbas_registries_or_parsing_sources
         print(kernel(4).tolist(), "numba.np.arraymath" in sys.modules, len(parsed))
         """
     )
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
-    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
-    env.pop("NUMBA_DISABLE_JIT", None)
-    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
     runs = [
         subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
         for _ in range(2)
