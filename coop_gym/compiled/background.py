@@ -252,7 +252,7 @@ def _compile_for_args(kernel: Any, *args: Any) -> Callable[..., Any]:
                 if _compiler is None or _compiler.ended():
                     _compiler = _Compiler()
                 request = _requests[key] = (_compiler, _compiler.request(kernel, signature))
-            except (OSError, ValueError, pickle.PicklingError):  # no process: compile here
+            except Exception:  # no process, or a signature it cannot be sent: compile here
                 return _numba_compile_for_args(kernel, *args)
         elif request[0].is_done(request[1]):
             del _requests[key]
