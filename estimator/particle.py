@@ -189,6 +189,28 @@ def _filter(
     return -1
 
 
+def _checked_arrays(
+    params: ArrayLike, initial_state: ArrayLike, rngs: Sequence[np.random.Generator], mode_prior: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:class:`SwitchingParticleFilter`'s (N, K, C) hypotheses, state template and mode prior, checked."""
+    rows = np.asarray(params, dtype=np.float64)
+    if rows.ndim == 2:
+        rows = rows[:, None, :]
+    rows = np.ascontiguousarray(rows)
+    if rows.ndim != 3 or not np.all(np.isfinite(rows)):
+        raise ValueError(f"params must be a finite (N, K, C) or (N, C) array, got shape {np.shape(params)}")
+    n = rows.shape[0]
+    if len(rngs) != n or not all(isinstance(r, np.random.Generator) for r in rngs):
+        raise ValueError(f"rngs must be {n} numpy.random.Generator objects, one per env")
+    template = np.asarray(initial_state, dtype=np.float64)
+    if template.ndim != 1 or not np.all(np.isfinite(template)):
+        raise ValueError("initial_state must be a finite 1-D state row")
+    prior = np.asarray(mode_prior, dtype=np.float64)
+    if prior.shape != (N_MODES,) or np.any(prior < 0) or not math.isclose(prior.sum(), 1.0, abs_tol=1e-9):
+        raise ValueError(f"mode_prior must be 3 non-negative probabilities summing to 1, got {mode_prior!r}")
+    return rows, template, prior / prior.sum()
+
+
 class SwitchingParticleFilter:
     """``P(xi = -1, 0, +1)`` of ``N`` people, each tracked by ``M`` particles of its whole state.
 
@@ -236,23 +258,10 @@ class SwitchingParticleFilter:
         mode_jitter_per_s: float = 0.0,
         dt_s: float = 0.02,
     ) -> None:
-        rows = np.asarray(params, dtype=np.float64)
-        if rows.ndim == 2:
-            rows = rows[:, None, :]
-        rows = np.ascontiguousarray(rows)
-        if rows.ndim != 3 or not np.all(np.isfinite(rows)):
-            raise ValueError(f"params must be a finite (N, K, C) or (N, C) array, got shape {np.shape(params)}")
+        rows, template, prior = _checked_arrays(params, initial_state, rngs, mode_prior)
         self.n_envs = n = rows.shape[0]
-        if len(rngs) != n or not all(isinstance(r, np.random.Generator) for r in rngs):
-            raise ValueError(f"rngs must be {n} numpy.random.Generator objects, one per env")
-        template = np.asarray(initial_state, dtype=np.float64)
-        if template.ndim != 1 or not np.all(np.isfinite(template)):
-            raise ValueError("initial_state must be a finite 1-D state row")
         self.n_particles = m = check_integer("n_particles", n_particles, 1, 1_000_000)
-        prior = np.asarray(mode_prior, dtype=np.float64)
-        if prior.shape != (N_MODES,) or np.any(prior < 0) or not math.isclose(prior.sum(), 1.0, abs_tol=1e-9):
-            raise ValueError(f"mode_prior must be 3 non-negative probabilities summing to 1, got {mode_prior!r}")
-        self.mode_prior = prior / prior.sum()
+        self.mode_prior = prior
         self.lean_std_m = check_number("lean_std_m", lean_std_m, 0.0, 1.0)
         self.reading_std_m = check_number("reading_std_m", reading_std_m, 1e-6, 1.0)
         self.resample_fraction = check_number("resample_fraction", resample_fraction, 0.0, 1.0)
