@@ -590,7 +590,8 @@ def time_to_quality(results: Results) -> str:
 the same run, what a user writes first (`PPO("MlpPolicy", make_vec_env(id, n_envs=8))`, SB3's
 defaults), scoring held-out success on the same episodes at intervals of training time
 (evaluation time not counted), and reports the training time each needs to reach the handbook
-caregiver (the low end of its 95 % interval on those episodes); the issue's goal for the ratio
+caregiver (the low end of its 95 % interval on those episodes; the target counts successes
+only, the unsafe lifts at that point are shown beside them); the issue's goal for the ratio
 of the two times is 1/5. The contenders train one after the other, so a change of load between
 them moves the ratio (the results file holds the load average before and after each).
 """
@@ -607,7 +608,10 @@ them moves the ratio (the results file holds the load average before and after e
                 [
                     f"`{run['contender']}`",
                     "not within the budget" if reached is None else f"{reached:.0f} s",
-                    "" if at is None else f"{_count(at['timesteps'])} steps, {_pct(at['success_rate'])} success",
+                    ""
+                    if at is None
+                    else f"{_count(at['timesteps'])} steps, {_pct(at['success_rate'])} success, "
+                    f"{_pct(at['unsafe_rate'])} unsafe",
                     _count(run["steps_per_s"] or 0),
                 ]
             )
