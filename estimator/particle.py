@@ -432,4 +432,4 @@ def reference_run(
     return out
 
 
-guard_kernel_cache(__name__)
+guard_kernel_cache(__name__, compile_here=("_filter",))  # one call filters a whole sequence

@@ -275,12 +275,19 @@ def _load_overload(cache: Any, sig: Any, target_context: Any) -> Any:
         return cache._load_overload(sig, target_context)
 
 
-def guard_kernel_cache(module_name: str) -> None:
+def guard_kernel_cache(module_name: str, *, compile_here: tuple[str, ...] = ()) -> None:
     """Flush the cached kernels of ``module_name`` whenever a project source they depend on changes.
 
     Call at the end of a module that defines ``@njit(cache=True)`` kernels:
     ``guard_kernel_cache(__name__)``. No file is touched until a kernel is first called.
+    Uncompiled kernels run as Python while a background process compiles them
+    (:mod:`coop_gym.compiled.background`), except those named in ``compile_here``: kernels
+    whose one call can be long (a filter over a whole recorded sequence), which would run
+    far longer as Python than their compile takes, compile in the calling process.
     """
+    unknown = sorted(set(compile_here) - {kernel.__name__ for kernel in guarded_kernels(module_name)})
+    if unknown:
+        raise ValueError(f"compile_here names no kernel of {module_name}: {', '.join(map(repr, unknown))}")
     kernels = [kernel for kernel in guarded_kernels(module_name) if not _uncached(kernel)]
     if not kernels:
         return
@@ -310,4 +317,5 @@ def guard_kernel_cache(module_name: str) -> None:
         cache.load_overload = load_overload
         cache.save_overload = save_overload
         cache.source_guard = guard
-        background.install(kernel)
+        if kernel.__name__ not in compile_here:
+            background.install(kernel)

@@ -10,8 +10,10 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from coop_gym.compiled.background import ENV_SWITCH, python_twin
+from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.envs.core import SitToStandCore
 from coop_gym.envs.reset import draw_reset, start_episodes
 from coop_gym.envs.step import step_all
@@ -110,11 +112,11 @@ TOY_RUN = textwrap.dedent(
 )
 
 
-def _toy(tmp_path: Path) -> None:
+def _toy(tmp_path: Path, guard: str = "guard_kernel_cache(__name__)") -> None:
     package = tmp_path / "toy"
     package.mkdir()
     (package / "__init__.py").write_text("")
-    (package / "kern.py").write_text(TOY)
+    (package / "kern.py").write_text(TOY.replace("guard_kernel_cache(__name__)", guard))
 
 
 def test_a_kernel_missing_from_the_cache_runs_as_python_until_the_background_process_compiled_it(
@@ -130,3 +132,15 @@ def test_a_kernel_missing_from_the_cache_runs_as_python_until_the_background_pro
 def test_switched_off_a_kernel_compiles_in_the_calling_process(tmp_path: Path) -> None:
     _toy(tmp_path)
     assert _run(TOY_RUN, cache=tmp_path / "cache", switch="0", path=tmp_path) == "True True False"
+
+
+def test_a_kernel_named_compile_here_compiles_in_the_calling_process(tmp_path: Path) -> None:
+    _toy(tmp_path, guard='guard_kernel_cache(__name__, compile_here=("kernel",))')
+    assert _run(TOY_RUN, cache=tmp_path / "cache", path=tmp_path) == "True True False"
+
+
+def test_compile_here_names_kernels_of_the_module() -> None:
+    import estimator.particle  # noqa: F401  (the module whose kernels are named)
+
+    with pytest.raises(ValueError, match=r"compile_here names no kernel of estimator\.particle: 'filter'"):
+        guard_kernel_cache("estimator.particle", compile_here=("filter",))
