@@ -255,7 +255,24 @@ def kalman_step(
         ``(innovation, S)``: the measurement residual and its variance, for
         likelihoods (system identification, multiple-model estimators).
     """
-    # --- predict: A from the cues (eqs. 1, 6, 10 Euler-discretised) ---
+    _predict(m, P, nominal, push_force_n, verbal_cue)
+    # Guard (never taken when P stays PSD, so ordinary models keep these exact operations): a
+    # prediction that rounding made indefinite would give S <= 0 and a NaN likelihood.
+    if P[0, 0] < 0.0 and _needs_repair(P):
+        _nearest_psd(P)
+    innovation, S = _update(m, P, nominal, measured_position_m)
+    # Guard: with a tiny R against a huge prior, or no process noise on a growing model, the
+    # update's cancellation can leave P slightly indefinite; project it back (see _nearest_psd).
+    if _needs_repair(P):
+        _nearest_psd(P)
+    return innovation, S
+
+
+@njit(cache=True, error_model="numpy", fastmath=False, inline="always")
+def _predict(
+    m: NDArray[np.float64], P: NDArray[np.float64], nominal: NDArray[np.float64], push_force_n: float, verbal_cue: float
+) -> None:
+    """The prediction ``m = A m + B u``, ``P = A P A^T + Q``, A from the cues (eqs. 1, 6, 10 Euler-discretised)."""
     a01, a10, a11, a12, a23, b1 = nominal_transition(nominal, push_force_n, verbal_cue)
     m0, m1, m2, m3 = m[0], m[1], m[2], m[3]
     m[0] = m0 + a01 * m1
@@ -280,11 +297,13 @@ def kalman_step(
     P[1, 1] += nominal[NOMINAL.q_velocity]
     P[2, 2] += nominal[NOMINAL.q_intention]
     P[3, 3] += nominal[NOMINAL.q_cooperativeness]
-    # Guard (never taken when P stays PSD, so ordinary models keep these exact operations): a
-    # prediction that rounding made indefinite would give S <= 0 and a NaN likelihood.
-    if P[0, 0] < 0.0 and _needs_repair(P):
-        _nearest_psd(P)
-    # --- update with the scalar measurement y = H s + v, H = [1 0 0 0] ---
+
+
+@njit(cache=True, error_model="numpy", fastmath=False, inline="always")
+def _update(
+    m: NDArray[np.float64], P: NDArray[np.float64], nominal: NDArray[np.float64], measured_position_m: float
+) -> tuple[float, float]:
+    """The update with the scalar measurement y = H s + v, H = [1 0 0 0]; returns ``(innovation, S)``."""
     innovation = measured_position_m - m[0]
     R = nominal[NOMINAL.r_position]
     S = P[0, 0] + R
@@ -305,10 +324,6 @@ def kalman_step(
             s = 0.5 * (P[i, j] + P[j, i])
             P[i, j] = s
             P[j, i] = s
-    # Guard: with a tiny R against a huge prior, or no process noise on a growing model, the
-    # update's cancellation can leave P slightly indefinite; project it back (see _nearest_psd).
-    if _needs_repair(P):
-        _nearest_psd(P)
     return innovation, S
 
 
