@@ -156,6 +156,7 @@ def test_the_checker_sees_cycles_and_upward_imports() -> None:
 
 def test_estimator_filters_import_nothing_of_coop_gym() -> None:
     graph = import_graph()
+
     def leaked(target: str) -> bool:
         return target.startswith("coop_gym") and not target.startswith("coop_gym.compiled")
 
