@@ -135,7 +135,7 @@ _PPO = TrainingConfig(
 
 HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
     "ppo": {
-        # Sized for time to quality (bench/time_to_quality.py, README "Learner sizing"): the same
+        # Sized for time to quality (python bench/time_to_quality.py): the same
         # 4096 samples per update from 64 envs x 64 steps -- one policy call per 64 env-steps
         # instead of per 8 -- reached the handbook's level in a quarter of 8 x 512's wall time.
         "CoopGym/SitToStand-v0": _PPO.replace(n_envs=64, algo_kwargs={**_PPO.algo_kwargs, "n_steps": 64}),
