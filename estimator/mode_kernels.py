@@ -248,22 +248,14 @@ def _imm_env_step(
     lt = log_trans[i]
     lm = log_mu[i]
     for j in range(N_MODES):
-        # Predicted mode probability cbar_j = sum_i p_ij mu_i (log-sum-exp).
-        mx = -np.inf
+        # Predicted mode probability cbar_j = sum_s p_sj mu_s.
+        log_cbar[j] = _log_sum_exp(lt[0, j] + lm[0], lt[1, j] + lm[1], lt[2, j] + lm[2])
         for s in range(N_MODES):
-            mx = max(mx, lt[s, j] + lm[s])
-        if mx == -np.inf:
-            # Mode j unreachable (zero transitions and no floor): keep its filter, probability stays 0.
-            log_cbar[j] = -np.inf
-            for s in range(N_MODES):
+            if log_cbar[j] == -np.inf:
+                # Mode j unreachable (zero transitions and no floor): keep its filter, probability stays 0.
                 w[s] = 1.0 if s == j else 0.0
-        else:
-            acc = 0.0
-            for s in range(N_MODES):
-                acc += math.exp(lt[s, j] + lm[s] - mx)
-            log_cbar[j] = mx + math.log(acc)
-            # Mixing weights mu_{s|j} = p_sj mu_s / cbar_j.
-            for s in range(N_MODES):
+            else:
+                # Mixing weights mu_{s|j} = p_sj mu_s / cbar_j.
                 w[s] = math.exp(lt[s, j] + lm[s] - log_cbar[j])
         # Mixed initial condition: m0_j = sum_s mu_{s|j} m_s,
         # P0_j = sum_s mu_{s|j} (P_s + (m_s - m0_j)(m_s - m0_j)^T).
@@ -291,6 +283,19 @@ def _imm_env_step(
         innovation = mode_mean_step(means[i, j], row, float(j - 1), push_force_n, verbal_cue, measured_position_m, K)
         lm[j] = log_cbar[j] - 0.5 * (_LOG_2PI + math.log(S) + innovation * innovation / S)
     _log_normalise(lm)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _log_sum_exp(log_a: float, log_b: float, log_c: float) -> float:
+    """``log(exp(log_a) + exp(log_b) + exp(log_c))`` of the three modes' terms, shifted by their maximum.
+
+    ``-inf`` when all three are (a mode no mode can reach). Scalars in and out, so the IMM's
+    loop over modes keeps no extra array references.
+    """
+    largest = max(max(max(-np.inf, log_a), log_b), log_c)
+    if largest == -np.inf:
+        return -np.inf
+    return largest + math.log(math.exp(log_a - largest) + math.exp(log_b - largest) + math.exp(log_c - largest))
 
 
 @njit(cache=True, error_model="numpy")
