@@ -94,8 +94,7 @@ def step_env(
             cue[CUES.verbal_remaining_s] -= dt
             cue[CUES.impulse_n_s] += push_force_n * dt
         if cue[CUES.verbal_remaining_s] <= 1e-9:
-            cue[CUES.verbal_remaining_s] = 0.0
-            cue[CUES.verbal_value] = 0.0
+            cue[CUES.verbal_remaining_s] = cue[CUES.verbal_value] = 0.0
         cue[CUES.elapsed_s] += substeps * dt
         _report_belief(row, consts[CONSTS.episode_s])
         # The episode clock ends the episode (Timing.max_episode_steps counts the same steps).
