@@ -4,10 +4,10 @@
 
 Runs ``python -m estimator.experiment.protocol --seeds N --json`` (Bell & Asada's protocol:
 4 subjects x 25 trials, judged at the paper's 0.75 s) once per estimator on the ``-v0``
-model's personas, and the paper's thresholded Kalman filter once per difficulty level of the
-``-v1`` envs. Each run's report holds the confusion matrix, P(judged | requested), accuracy,
-balanced accuracy, log loss, Brier score and ECE as mean and std over the seeds; the paper's
-own table on real people (``estimator.experiment.PAPER_RESULTS``) comes with it, the
+model's personas, and the paper's thresholded Kalman filter and the switching particle filter
+once per difficulty level of the ``-v1`` envs. Each run's report holds the confusion matrix,
+P(judged | requested), accuracy, balanced accuracy, log loss, Brier score and ECE as mean and
+std over the seeds; the paper's own table on real people (``estimator.experiment.PAPER_RESULTS``) comes with it, the
 reference the simulated figures are read against. The ``oracle`` estimator (the subject's
 true parameters) bounds what any estimator can judge from the same trials.
 
@@ -30,7 +30,9 @@ from result_files import add_save_argument, save
 
 from coop_gym.cli import positive_int
 
-ESTIMATORS = ("kalman", "multiple_model", "imm", "delay_aware", "persona_bank", "calibrated", "oracle")
+ESTIMATORS = ("kalman", "multiple_model", "imm", "delay_aware", "persona_bank", "calibrated", "switching", "oracle")
+LEVEL_ESTIMATORS = ("kalman", "switching")
+"""Run on every level: the paper's filter, and the switching particle filter of the level's person."""
 DIFFICULTIES = ("easy", "medium", "hard")
 
 
@@ -62,13 +64,14 @@ def main(argv: list[str] | None = None) -> int:
     if bad or not estimators:
         parser.error(f"unknown or no estimators/difficulties: {bad or args.estimators!r}")
     seeds = ["--seeds", str(args.seeds)]
-    report: dict[str, Any] = {"seeds": args.seeds, "estimators": {}, "difficulties": {}}
+    report: dict[str, Any] = {"seeds": args.seeds, "estimators": {}, "difficulties": {}, "difficulties_switching": {}}
     for estimator in estimators:
         report["estimators"][estimator] = run = protocol([*seeds, "--estimator", estimator])
         print(f"{estimator:>15}: balanced accuracy {run['balanced_accuracy']:.3f}", file=sys.stderr)
     for level in difficulties:
-        report["difficulties"][level] = run = protocol([*seeds, "--difficulty", level])
-        print(f"{level:>15}: balanced accuracy {run['balanced_accuracy']:.3f} (kalman)", file=sys.stderr)
+        for estimator, key in zip(LEVEL_ESTIMATORS, ("difficulties", "difficulties_switching"), strict=True):
+            report[key][level] = run = protocol([*seeds, "--difficulty", level, "--estimator", estimator])
+            print(f"{level:>15}: balanced accuracy {run['balanced_accuracy']:.3f} ({estimator})", file=sys.stderr)
     if args.save:
         save(args.save, "papers_experiment", argv, report)
     return 0
