@@ -389,35 +389,13 @@ def person_substep(
     verbal_seen = delay_verbal[j]
     s[STATE.delay_index] = float((k + 1) % DELAY_LINE_LENGTH)
 
-    # eq. 1, exact zero-order hold: [x, xdot] <- Ad [x, xdot] + Bd u,
-    # u = k1*eta + k2_eff*c_p + w_x; an uncooperative person stiffens (k2_eff < k2).
-    k2 = p[PERSON.push_compliance_m_per_s2_n]
-    if xi < -0.5:
-        k2 *= p[PERSON.stiffness_factor_uncooperative]
-    elif xi < 0.5:
-        k2 *= p[PERSON.stiffness_factor_unresponsive]
-    u = p[PERSON.voluntary_gain_per_s2] * s[STATE.eta_m] + k2 * push_force_n + p[PERSON.accel_noise_std_m_per_s2] * z[0]
-    x, xdot = s[STATE.x_m], s[STATE.xdot_m_per_s]
-    s[STATE.x_m] = p[PERSON.zoh_a00] * x + p[PERSON.zoh_a01] * xdot + p[PERSON.zoh_b0] * u
-    s[STATE.xdot_m_per_s] = p[PERSON.zoh_a10] * x + p[PERSON.zoh_a11] * xdot + p[PERSON.zoh_b1] * u
-
-    # eq. 6: eta[t+1] = eta[t] + xi*(k3*c_p + k4*c_v)*dt + w_eta (cues as perceived, delayed);
-    # with no cue acting the intention relaxes toward upright.
-    eta = s[STATE.eta_m]
-    if push_seen >= p[PERSON.touch_threshold_n] or verbal_seen != 0.0:
-        eta += xi * (p[PERSON.push_gain_m_per_s_n] * push_seen + p[PERSON.verbal_gain_m_per_s] * verbal_seen) * dt
-    else:
-        # Euler step, capped: with rate*dt > 2 it would overshoot and diverge (relaxation
-        # 100/s at dt 0.1 s is valid); a full relaxation in one step is the stable limit.
-        eta -= min(p[PERSON.relaxation_rate_per_s] * dt, 1.0) * eta
-    eta += p[PERSON.intention_noise_std_per_step_m] * z[1]
-    if p[PERSON.passive_follow_rate_per_s] > 0.0 and abs(xi) < 0.5:
-        # A passive (unresponsive) person's intention follows the body: bent forward by a
-        # push, a weak trunk stays bent instead of pulling back upright (capped as above).
-        eta += min(p[PERSON.passive_follow_rate_per_s] * dt, 1.0) * (s[STATE.x_m] - eta)
-    if p[PERSON.saturate] > 0.5:
-        eta = min(max(eta, p[PERSON.min_m]), p[PERSON.max_m])
-    s[STATE.eta_m] = eta
+    # The inlined helpers take scalars and at most the parameter row, read last outside any
+    # branch, and return scalars: other array arguments, or a last read of the row inside a
+    # branch, leave reference counting in the compiled step (NRT_incref in inspect_llvm()).
+    s[STATE.x_m], s[STATE.xdot_m_per_s] = _move_body(
+        p, s[STATE.x_m], s[STATE.xdot_m_per_s], s[STATE.eta_m], xi, push_force_n, z[0]
+    )
+    s[STATE.eta_m] = _move_intention(p, s[STATE.eta_m], s[STATE.x_m], xi, push_seen, verbal_seen, z[1])
 
     # Looking ready while not ready: an unresponsive person left waiting (idle) now and then
     # leans forward on their own. The chain's uniform decides it from the top of [0, 1) (the chain's jumps
@@ -432,18 +410,83 @@ def person_substep(
             p, xi, push_force_n, verbal_cue, s[STATE.since_explanation_s], s[STATE.since_cue_s]
         )
         refuse = p[PERSON.refusal_rate_per_s] if xi > 0.5 else 0.0
-        total = up + down + refuse
-        if total > 0.0:
-            leave = 1.0 - math.exp(-total * dt)
-            uniform = _normal_cdf(z[2])
-            if uniform < leave * up / total:
-                s[STATE.xi] = xi + 1.0
-            elif uniform < leave:
-                # A sudden refusal jumps from +1 straight to -1.
-                if refuse > 0.0 and uniform >= leave * (up + down) / total:
-                    s[STATE.xi] = -1.0
-                else:
-                    s[STATE.xi] = xi - 1.0
+        s[STATE.xi] = _step_cooperativeness(xi, up, down, refuse, dt, z[2])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _move_body(
+    p: NDArray[np.float64], x: float, xdot: float, eta: float, xi: float, push_force_n: float, z_accel: float
+) -> tuple[float, float]:
+    """The body, eq. 1 by exact zero-order hold: the new ``(x, xdot)`` [m, m/s].
+
+    ``[x, xdot] <- Ad [x, xdot] + Bd u``, ``u = k1*eta + k2_eff*c_p + w_x``; an uncooperative
+    person stiffens (``k2_eff < k2``).
+    """
+    k2 = p[PERSON.push_compliance_m_per_s2_n]
+    if xi < -0.5:
+        k2 *= p[PERSON.stiffness_factor_uncooperative]
+    elif xi < 0.5:
+        k2 *= p[PERSON.stiffness_factor_unresponsive]
+    u = p[PERSON.voluntary_gain_per_s2] * eta + k2 * push_force_n + p[PERSON.accel_noise_std_m_per_s2] * z_accel
+    return (
+        p[PERSON.zoh_a00] * x + p[PERSON.zoh_a01] * xdot + p[PERSON.zoh_b0] * u,
+        p[PERSON.zoh_a10] * x + p[PERSON.zoh_a11] * xdot + p[PERSON.zoh_b1] * u,
+    )
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _move_intention(
+    p: NDArray[np.float64], eta: float, x: float, xi: float, push_seen: float, verbal_seen: float, z_intent: float
+) -> float:
+    """The intention, eq. 6: the new ``eta`` [m] from the cues as perceived (delayed) and the body's ``x``.
+
+    ``eta[t+1] = eta[t] + xi*(k3*c_p + k4*c_v)*dt + w_eta``; with no cue acting the intention
+    relaxes toward upright.
+    """
+    dt = p[PERSON.dt_s]
+    if push_seen >= p[PERSON.touch_threshold_n] or verbal_seen != 0.0:
+        eta += xi * (p[PERSON.push_gain_m_per_s_n] * push_seen + p[PERSON.verbal_gain_m_per_s] * verbal_seen) * dt
+    else:
+        # Euler step, capped: with rate*dt > 2 it would overshoot and diverge (relaxation
+        # 100/s at dt 0.1 s is valid); a full relaxation in one step is the stable limit.
+        eta -= min(p[PERSON.relaxation_rate_per_s] * dt, 1.0) * eta
+    eta += p[PERSON.intention_noise_std_per_step_m] * z_intent
+    if p[PERSON.passive_follow_rate_per_s] > 0.0 and abs(xi) < 0.5:
+        # A passive (unresponsive) person's intention follows the body: bent forward by a
+        # push, a weak trunk stays bent instead of pulling back upright (capped as above).
+        eta += min(p[PERSON.passive_follow_rate_per_s] * dt, 1.0) * (x - eta)
+    # The bounds read before the branch: the row's last use then comes after every other branch,
+    # and Numba drops the inlined argument's reference counting.
+    min_m, max_m = p[PERSON.min_m], p[PERSON.max_m]
+    if p[PERSON.saturate] > 0.5:
+        eta = min(max(eta, min_m), max_m)
+    return eta
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _step_cooperativeness(xi: float, up: float, down: float, refuse: float, dt: float, z_chain: float) -> float:
+    """The cooperativeness after one exact step of the chain (eq. 8) from ``xi`` [-1, 0, +1].
+
+    Args:
+        xi: Cooperativeness before the step.
+        up: Rate [1/s] of the jump up, held over ``dt``.
+        down: Rate [1/s] of the jump down.
+        refuse: Rate [1/s] of the jump from +1 straight to -1.
+        dt: Step [s].
+        z_chain: Standard normal giving the chain's uniform (jumps from its bottom, the lean from its top).
+    """
+    total = up + down + refuse
+    if total > 0.0:
+        leave = 1.0 - math.exp(-total * dt)
+        uniform = _normal_cdf(z_chain)
+        if uniform < leave * up / total:
+            return xi + 1.0
+        if uniform < leave:
+            # A sudden refusal jumps from +1 straight to -1.
+            if refuse > 0.0 and uniform >= leave * (up + down) / total:
+                return -1.0
+            return xi - 1.0
+    return xi
 
 
 @njit(cache=True, error_model="numpy")
