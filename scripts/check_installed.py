@@ -38,7 +38,7 @@ def main() -> None:
     import estimator
 
     for module in (coop_gym, agents, estimator):
-        if checkout in Path(module.__file__ or "").resolve().parents:
+        if Path(module.__file__ or "").resolve().parent == checkout / module.__name__:  # the venv may sit inside
             sys.exit(f"{module.__name__} was imported from the checkout ({module.__file__}), not the install")
     top = installed_top_level()
     if top != EXPECTED_TOP_LEVEL:
