@@ -211,19 +211,11 @@ def _ppo_runners(setting: str, block: int) -> Callable[[int], list[Callable[[], 
     return lambda r: [PPORunner(backend, setting, block, r) for backend in ("adapter", "dummy", "null")]
 
 
-def run(repeats: int, quick: bool) -> dict[str, Any]:
-    """All measurements; returns the JSON-ready report."""
-    import torch
+Measure = Callable[[str, tuple[str, ...], Callable[[int], list[Callable[[], int]]]], list[list[float]]]
+"""``measure(label, names, make)``: ``repeats`` interleaved measurements, rates[k][r] of runner k in repeat r."""
 
-    torch.set_num_threads(1)
-    load_at_start = os.getloadavg()[0]
-    blocks = 1 if quick else 4
-    single_block = 1_000 if quick else 8_000
-    vector_block = 5 if quick else 50
-    ppo_block = 512 if quick else 2_048  # 4 blocks of 4 rollouts of 8 x 64 = 8192 timesteps
-    measurements: dict[str, Any] = {}
-    ratios: dict[str, Any] = {}
 
+def _measurer(repeats: int, blocks: int) -> Measure:
     def measure(
         label: str, names: tuple[str, ...], make: Callable[[int], list[Callable[[], int]]]
     ) -> list[list[float]]:
@@ -237,52 +229,81 @@ def run(repeats: int, quick: bool) -> dict[str, Any]:
             print(f"  [{r + 1}/{repeats}] {shown}", file=sys.stderr)
         return rates
 
+    return measure
+
+
+def _ratio(a: list[float], b: list[float]) -> dict[str, float]:
+    return summary([x / y for x, y in zip(a, b, strict=True)])
+
+
+def _single(measure: Measure, block: int, blocks: int, measurements: dict[str, Any], ratios: dict[str, Any]) -> None:
+    """The single env against CartPole-v1."""
     ours, cartpole = measure(
         "single env steps/s (gymnasium.make)",
         (ENV_ID, CARTPOLE_ID),
-        lambda r: [SingleEnvRunner(i, single_block, blocks, r) for i in (ENV_ID, CARTPOLE_ID)],
+        lambda r: [SingleEnvRunner(i, block, blocks, r) for i in (ENV_ID, CARTPOLE_ID)],
     )
     measurements["single_steps_per_s"] = summary(ours)
     measurements["cartpole_single_steps_per_s"] = summary(cartpole)
-    ratios["single_ratio_vs_cartpole"] = summary([a / b for a, b in zip(ours, cartpole, strict=True)])
+    ratios["single_ratio_vs_cartpole"] = _ratio(ours, cartpole)
 
+
+def _vector(measure: Measure, block: int, blocks: int, measurements: dict[str, Any], ratios: dict[str, Any]) -> None:
+    """The batched env on each thread count against CartPoleVectorEnv."""
     threads = list(VECTOR_THREADS)
     *ours_by_threads, cartpole = measure(
         f"batched env-steps/s ({VECTOR_ENVS} envs; ours on {threads} threads, CartPole's single-threaded NumPy)",
         (*(f"{ENV_ID} threads={t}" for t in threads), "CartPoleVectorEnv"),
         lambda r: [
-            *(VectorEnvRunner(ENV_ID, vector_block, blocks, r, threads=t) for t in threads),
-            VectorEnvRunner(CARTPOLE_ID, vector_block, blocks, r),
+            *(VectorEnvRunner(ENV_ID, block, blocks, r, threads=t) for t in threads),
+            VectorEnvRunner(CARTPOLE_ID, block, blocks, r),
         ],
     )
     measurements["cartpole_vector_env_steps_per_s"] = summary(cartpole)
     for t, ours in zip(threads, ours_by_threads, strict=True):
         measurements[f"vector_env_steps_per_s_threads{t}"] = summary(ours)
-        ratios[f"vector_ratio_vs_cartpole_vector_threads{t}"] = summary(
-            [a / b for a, b in zip(ours, cartpole, strict=True)]
-        )
+        ratios[f"vector_ratio_vs_cartpole_vector_threads{t}"] = _ratio(ours, cartpole)
     # The headline figures: our env as users get it, with the default thread count.
     default = min(available_threads(), max(threads))
     measurements["vector_env_steps_per_s"] = measurements[f"vector_env_steps_per_s_threads{default}"]
     ratios["vector_ratio_vs_cartpole_vector"] = ratios[f"vector_ratio_vs_cartpole_vector_threads{default}"]
     if len(threads) > 1:
-        one, many = ours_by_threads[0], ours_by_threads[-1]
-        ratios["vector_thread_scaling"] = summary([b / a for a, b in zip(one, many, strict=True)])
+        ratios["vector_thread_scaling"] = _ratio(ours_by_threads[-1], ours_by_threads[0])
 
+
+def _ppo(measure: Measure, block: int, measurements: dict[str, Any], ratios: dict[str, Any]) -> None:
+    """SB3 PPO through the adapter, through DummyVecEnv and on a no-work VecEnv, per setting."""
     for setting in PPO_SETTINGS:
         adapter, dummy, null = measure(
             f"PPO timesteps/s, {PPO_ENVS} envs, setting {setting!r} {PPO_SETTINGS[setting]}",
             ("adapter", "DummyVecEnv", "no-work VecEnv (PPO's own cost)"),
-            _ppo_runners(setting, ppo_block),
+            _ppo_runners(setting, block),
         )
         suffix = "" if setting == "rollout" else f"_{setting}"
         measurements[f"ppo_adapter_timesteps_per_s{suffix}"] = summary(adapter)
         measurements[f"ppo_dummy_timesteps_per_s{suffix}"] = summary(dummy)
         measurements[f"ppo_null_env_timesteps_per_s{suffix}"] = summary(null)
-        ratios[f"ppo_speedup_vector_adapter{suffix}"] = summary([a / b for a, b in zip(adapter, dummy, strict=True)])
+        ratios[f"ppo_speedup_vector_adapter{suffix}"] = _ratio(adapter, dummy)
         # No env can make PPO faster than the no-work VecEnv does.
-        ratios[f"ppo_speedup_upper_bound{suffix}"] = summary([a / b for a, b in zip(null, dummy, strict=True)])
+        ratios[f"ppo_speedup_upper_bound{suffix}"] = _ratio(null, dummy)
 
+
+def run(repeats: int, quick: bool) -> dict[str, Any]:
+    """All measurements; returns the JSON-ready report."""
+    import torch
+
+    torch.set_num_threads(1)
+    load_at_start = os.getloadavg()[0]
+    blocks = 1 if quick else 4
+    single_block = 1_000 if quick else 8_000
+    vector_block = 5 if quick else 50
+    ppo_block = 512 if quick else 2_048  # 4 blocks of 4 rollouts of 8 x 64 = 8192 timesteps
+    measurements: dict[str, Any] = {}
+    ratios: dict[str, Any] = {}
+    measure = _measurer(repeats, blocks)
+    _single(measure, single_block, blocks, measurements, ratios)
+    _vector(measure, vector_block, blocks, measurements, ratios)
+    _ppo(measure, ppo_block, measurements, ratios)
     return {
         **{key: value["median"] for key, value in ratios.items()},
         "ratios": ratios,
