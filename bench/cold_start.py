@@ -99,6 +99,52 @@ def _seconds(values: list[float]) -> str:
     return f"{statistics.median(values):6.2f} s ({min(values):.2f}..{max(values):.2f})"
 
 
+def _list_kernels(env_id: str, n: int, label: str) -> None:
+    """Print a cold run's compilations in the calling process (``--kernels``)."""
+    with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
+        listed = _measure(env_id, n, cache, True)
+    print(f"{label}: cold compilations in the calling process (s, nested), first step {listed['first_step_s']:.2f} s")
+    for _, depth, name, seconds in listed["compiles"]:
+        if seconds >= 0.1:
+            print(f"  {'  ' * depth}{seconds:6.2f} {name}")
+
+
+def _cold_and_warm(env_id: str, n: int, repeats: int, label: str) -> dict[str, Any]:
+    """``repeats`` cold runs (empty cache) each followed by a warm one, with CartPole around each; printed."""
+    cold, warm, imports, cold_ratio, warm_ratio, reference, compiled = [], [], [], [], [], [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
+            before = _reference()
+            first = _measure(env_id, n, cache, False)
+            second = _measure(env_id, n, cache, False)
+            after = _reference()
+        cold.append(first["first_step_s"])
+        compiled.append(first["compiled_s"])
+        warm.append(second["first_step_s"])
+        imports.append(second["import_s"])
+        # Import + make + reset + step, each over the mean of the references around it.
+        ref = (before + after) / 2
+        reference.append(ref)
+        cold_ratio.append(first["total_s"] / ref)
+        warm_ratio.append(second["total_s"] / ref)
+    print(f"{label:>14}: cold {_seconds(cold)}  warm {_seconds(warm)}  import {_seconds(imports)}")
+    print(f"{'':>14}  cold: the kernels compiled by the background process {_seconds(compiled).strip()} after make")
+    print(
+        f"{'':>14}  import+first step / CartPole-v1's ({_seconds(reference).strip()}): "
+        f"cold {statistics.median(cold_ratio):.1f}x ({min(cold_ratio):.1f}..{max(cold_ratio):.1f}), "
+        f"warm {statistics.median(warm_ratio):.1f}x ({min(warm_ratio):.1f}..{max(warm_ratio):.1f})"
+    )
+    return {
+        "cold_s": summary(cold),
+        "warm_s": summary(warm),
+        "compiled_s": summary(compiled),
+        "import_s": summary(imports),
+        "reference_s": summary(reference),
+        "cold_ratio": summary(cold_ratio),
+        "warm_ratio": summary(warm_ratio),
+    }
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--env", default="CoopGym/SitToStand-v0", help="env id (default: %(default)s)")
@@ -124,46 +170,9 @@ def main(argv: list[str] | None = None) -> None:
     }
     for n in args.num_envs:
         label = "gym.make" if n == 0 else f"make_vec x{n}"
-        cold, warm, imports, cold_ratio, warm_ratio, reference, compiled = [], [], [], [], [], [], []
         if args.kernels:
-            with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
-                listed = _measure(args.env, n, cache, True)
-            first_step = listed["first_step_s"]
-            print(f"{label}: cold compilations in the calling process (s, nested), first step {first_step:.2f} s")
-            for _, depth, name, seconds in listed["compiles"]:
-                if seconds >= 0.1:
-                    print(f"  {'  ' * depth}{seconds:6.2f} {name}")
-        for _ in range(args.repeats):
-            with tempfile.TemporaryDirectory(prefix="numba-cold-") as cache:
-                before = _reference()
-                first = _measure(args.env, n, cache, False)
-                second = _measure(args.env, n, cache, False)
-                after = _reference()
-            cold.append(first["first_step_s"])
-            compiled.append(first["compiled_s"])
-            warm.append(second["first_step_s"])
-            imports.append(second["import_s"])
-            # Import + make + reset + step, each over the mean of the references around it.
-            ref = (before + after) / 2
-            reference.append(ref)
-            cold_ratio.append(first["total_s"] / ref)
-            warm_ratio.append(second["total_s"] / ref)
-        results["runs"][label] = {
-            "cold_s": summary(cold),
-            "warm_s": summary(warm),
-            "compiled_s": summary(compiled),
-            "import_s": summary(imports),
-            "reference_s": summary(reference),
-            "cold_ratio": summary(cold_ratio),
-            "warm_ratio": summary(warm_ratio),
-        }
-        print(f"{label:>14}: cold {_seconds(cold)}  warm {_seconds(warm)}  import {_seconds(imports)}")
-        print(f"{'':>14}  cold: the kernels compiled by the background process {_seconds(compiled).strip()} after make")
-        print(
-            f"{'':>14}  import+first step / CartPole-v1's ({_seconds(reference).strip()}): "
-            f"cold {statistics.median(cold_ratio):.1f}x ({min(cold_ratio):.1f}..{max(cold_ratio):.1f}), "
-            f"warm {statistics.median(warm_ratio):.1f}x ({min(warm_ratio):.1f}..{max(warm_ratio):.1f})"
-        )
+            _list_kernels(args.env, n, label)
+        results["runs"][label] = _cold_and_warm(args.env, n, args.repeats, label)
     results["load_end"] = os.getloadavg()[0]
     print(f"load average {results['load_start']:.1f} -> {results['load_end']:.1f}")
     if args.save:

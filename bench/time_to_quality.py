@@ -41,6 +41,7 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -99,31 +100,16 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     return PPO("MlpPolicy", make_vec_env(env_id, n_envs=8, seed=seed), seed=seed, device="cpu")
 
 
-def _train_with_clock(
+def _clock(
     contender: str,
-    env_id: str,
-    seed: int,
     budget_s: float,
     every_s: float,
-    episodes: int,
-    eval_seed: int,
     target: float,
-    stop_at_target: bool,
-) -> dict[str, Any]:
-    """Train ``contender`` for ``budget_s`` seconds of training time, evaluating on the way."""
+    score: Callable[[], dict[str, Any]],
+    points: list[dict[str, Any]],
+) -> Any:
+    """An SB3 callback that counts training time (not evaluation time) and scores every ``every_s``."""
     from stable_baselines3.common.callbacks import BaseCallback
-
-    from agents.evaluate import evaluate
-    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
-
-    model = _build(contender, env_id, seed)
-    points: list[dict[str, Any]] = []
-
-    def score() -> dict[str, Any]:
-        normalizer = ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env()))
-        agent = SB3Agent(model, "ppo", env_id, normalizer)
-        result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
-        return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
 
     class Clock(BaseCallback):
         def __init__(self) -> None:
@@ -155,7 +141,36 @@ def _train_with_clock(
         def _on_training_start(self) -> None:
             self.since = time.perf_counter()
 
-    clock = Clock()
+    return Clock()
+
+
+def _train_with_clock(
+    contender: str,
+    env_id: str,
+    seed: int,
+    budget_s: float,
+    every_s: float,
+    episodes: int,
+    eval_seed: int,
+    target: float,
+    stop_at_target: bool,
+) -> dict[str, Any]:
+    """Train ``contender`` for ``budget_s`` seconds of training time, evaluating on the way."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from agents.evaluate import evaluate
+    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
+
+    model = _build(contender, env_id, seed)
+    points: list[dict[str, Any]] = []
+
+    def score() -> dict[str, Any]:
+        normalizer = ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env()))
+        agent = SB3Agent(model, "ppo", env_id, normalizer)
+        result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
+        return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
+
+    clock = _clock(contender, budget_s, every_s, target, score, points)
 
     class Budget(BaseCallback):
         def _on_step(self) -> bool:
