@@ -285,10 +285,11 @@ def guard_kernel_cache(module_name: str, *, compile_here: tuple[str, ...] = ()) 
     whose one call can be long (a filter over a whole recorded sequence), which would run
     far longer as Python than their compile takes, compile in the calling process.
     """
-    unknown = sorted(set(compile_here) - {kernel.__name__ for kernel in guarded_kernels(module_name)})
+    defined = guarded_kernels(module_name)
+    unknown = sorted(set(compile_here) - {kernel.__name__ for kernel in defined})
     if unknown:
         raise ValueError(f"compile_here names no kernel of {module_name}: {', '.join(map(repr, unknown))}")
-    kernels = [kernel for kernel in guarded_kernels(module_name) if not _uncached(kernel)]
+    kernels = [kernel for kernel in defined if not _uncached(kernel)]
     if not kernels:
         return
     guard = _SourceGuard(module_name, kernels)

@@ -134,7 +134,7 @@ class EnvArguments:
         if self.difficulty is not None:
             # The level's knobs on every persona, and its reward unless one is given.
             level = get_difficulty(self.difficulty)
-            resolved = tuple(dataclasses.replace(p, params=level.apply(p.params)) for p in resolved)
+            resolved = level.personas_at(resolved)
             if reward is None:
                 reward = level.reward
         return SitToStandConfig(

@@ -37,7 +37,14 @@ from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS, sample_person
 from estimator.kalman import NOMINAL_COLUMNS
 from estimator.particle import SwitchingParticleFilter
 
-__all__ = ["NOISES_PER_PARTICLE", "SwitchingEstimator", "SwitchingOptions", "nominal_person", "switching_filter"]
+__all__ = [
+    "NOISES_PER_PARTICLE",
+    "SwitchingEstimator",
+    "SwitchingOptions",
+    "level_filter",
+    "nominal_person",
+    "switching_filter",
+]
 
 NOISES_PER_PARTICLE = 3
 """Normals :func:`person_substep` reads: acceleration, intention and the chain's uniform (no sensor noise)."""
@@ -209,6 +216,23 @@ def _seed_of(rng: np.random.Generator) -> int:
     return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "little")
 
 
+def level_filter(
+    timing: Timing,
+    realism: Realism,
+    rngs: Sequence[np.random.Generator],
+    options: SwitchingOptions | dict[str, Any] | None = None,
+) -> SwitchingParticleFilter:
+    """A switching particle filter of ``len(rngs)`` envs on the hypotheses of ``options.difficulty``'s level.
+
+    :func:`switching_filter` over :func:`hypothesis_bank`: what the envs' ``estimator="switching"``
+    runs, and what ``estimator.experiment``'s ``switching`` estimator runs on the paper's trials.
+    """
+    options = _as_options(options)
+    difficulty = None if options.difficulty is None else get_difficulty(options.difficulty)
+    rows = hypothesis_bank(len(rngs), difficulty, realism, timing, options)
+    return switching_filter(rows, timing, rngs, options)
+
+
 class SwitchingEstimator:
     """The switching particle filter as an env core's multiple-model estimator.
 
@@ -236,10 +260,8 @@ class SwitchingEstimator:
         options: SwitchingOptions | dict[str, Any] | None = None,
     ) -> None:
         self.options = _as_options(options)
-        difficulty = None if self.options.difficulty is None else get_difficulty(self.options.difficulty)
-        rows = hypothesis_bank(n_envs, difficulty, realism, timing, self.options)
         own = [np.random.default_rng(i) for i in range(n_envs)]
-        self.filter = switching_filter(rows, timing, own, self.options)
+        self.filter = level_filter(timing, realism, own, self.options)
         self._true_people = true_people
         self._rngs = rngs
         # The multiple-model interface's Kalman rows (written by the core at resets): not read here.

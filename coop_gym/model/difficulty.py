@@ -32,9 +32,11 @@ leaning has room to answer. Unsafe lifts are priced so that no gamble pays
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from coop_gym.model.params import PersonParams
+from coop_gym.model.personas import Persona
 
 __all__ = ["DIFFICULTIES", "Difficulty", "get_difficulty"]
 
@@ -72,6 +74,10 @@ class Difficulty:
     # (lift whenever P(success) > 1/3) is gone.
     unsafe_penalty: float = 10.0
     premature_penalty: float = 1.0
+
+    def personas_at(self, personas: Sequence[Persona]) -> tuple[Persona, ...]:
+        """``personas`` with their parameters at this level (:meth:`apply`; names and variation kept)."""
+        return tuple(dataclasses.replace(p, params=self.apply(p.params)) for p in personas)
 
     def apply(self, person: PersonParams) -> PersonParams:
         """``person`` at this level (every other parameter as it was)."""

@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr
 
-from coop_gym.model.difficulty import get_difficulty
+from coop_gym.envs.switching import level_filter
 from estimator.experiment.banks import (
     bank_log_likelihoods,
     drive_model,
@@ -325,15 +325,11 @@ def _imm(inputs: _Inputs) -> NDArray[np.float64]:
 
 def _switching(inputs: _Inputs) -> NDArray[np.float64]:
     """The switching particle filter (the envs' ``estimator="switching"``) on the level's person."""
-    from coop_gym.envs.switching import SwitchingOptions, hypothesis_bank, switching_filter
-
     config = inputs.data.config
-    options = SwitchingOptions(difficulty=config.difficulty)
     n = inputs.position.shape[0]
-    level = None if config.difficulty is None else get_difficulty(config.difficulty)
-    bank = hypothesis_bank(n, level, config.realism, config.timing, options)
     seeds = np.random.SeedSequence([inputs.data.seed, SWITCHING_STREAM]).spawn(n)
-    pf = switching_filter(bank, config.timing, [np.random.default_rng(s) for s in seeds], options)
+    rngs = [np.random.default_rng(s) for s in seeds]
+    pf = level_filter(config.timing, config.realism, rngs, {"difficulty": config.difficulty})
     pf.reset(np.arange(n), inputs.position[:, 0])
     return pf.run(inputs.force, inputs.verbal, inputs.position)
 

@@ -309,8 +309,7 @@ def _draw_subjects(
     """The subjects: each a persona drawn from the pool, then a person around it, then the realism switches."""
     pool = resolve_personas(config.personas)
     if config.difficulty is not None:
-        level = get_difficulty(config.difficulty)
-        pool = tuple(dataclasses.replace(p, params=level.apply(p.params)) for p in pool)
+        pool = get_difficulty(config.difficulty).personas_at(pool)
     personas, subjects = [], []
     for _ in range(config.n_subjects):
         persona = pool[int(rng.integers(len(pool)))]
