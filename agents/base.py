@@ -19,10 +19,12 @@ from numpy.typing import NDArray
 # The action encoding is the env contract's (coop_gym.envs.contract), re-exported for the agents.
 from coop_gym.envs.contract import (
     LIFT,
+    PUSH_BY_NAME,
     PUSH_FIRM,
     PUSH_NONE,
     PUSH_SOFT,
     VERBAL_BACK,
+    VERBAL_BY_NAME,
     VERBAL_FORWARD,
     VERBAL_NONE,
     WAIT,
@@ -31,10 +33,12 @@ from coop_gym.envs.contract import (
 
 __all__ = [
     "LIFT",
+    "PUSH_BY_NAME",
     "PUSH_FIRM",
     "PUSH_NONE",
     "PUSH_SOFT",
     "VERBAL_BACK",
+    "VERBAL_BY_NAME",
     "VERBAL_FORWARD",
     "VERBAL_NONE",
     "WAIT",

@@ -17,16 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.base import (
-    LIFT,
-    PUSH_FIRM,
-    PUSH_NONE,
-    PUSH_SOFT,
-    VERBAL_BACK,
-    VERBAL_FORWARD,
-    VERBAL_NONE,
-    WAIT,
-)
+from agents.base import LIFT, PUSH_BY_NAME, PUSH_NONE, VERBAL_BY_NAME, VERBAL_NONE, WAIT
 from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.compiled.checks import check_flag, check_number
@@ -37,8 +28,6 @@ __all__ = ["TUNED_BLIND", "BlindAgent", "BlindSettings", "CuePhase"]
 _DEFAULT_LEAN_M = LiftCriteria().success_lean_m
 
 
-_PUSHES = {"none": PUSH_NONE, "soft": PUSH_SOFT, "firm": PUSH_FIRM}
-_VERBALS = {"none": VERBAL_NONE, "forward": VERBAL_FORWARD, "back": VERBAL_BACK}
 # Slack on the schedule's phase boundaries: elapsed_s arrives as float32 (off by ~1e-6 s at 30 s),
 # far below the 0.1-s agent step, so a phase of 1.0 s lasts exactly ten steps.
 _CLOCK_SLACK_S = 1e-3
@@ -63,10 +52,10 @@ class CuePhase:
 
     def __post_init__(self) -> None:
         """Validate choices and ranges."""
-        if self.push not in _PUSHES:
-            raise ValueError(f"CuePhase.push must be one of {list(_PUSHES)}, got {self.push!r}")
-        if self.verbal not in _VERBALS:
-            raise ValueError(f"CuePhase.verbal must be one of {list(_VERBALS)}, got {self.verbal!r}")
+        if self.push not in PUSH_BY_NAME:
+            raise ValueError(f"CuePhase.push must be one of {list(PUSH_BY_NAME)}, got {self.push!r}")
+        if self.verbal not in VERBAL_BY_NAME:
+            raise ValueError(f"CuePhase.verbal must be one of {list(VERBAL_BY_NAME)}, got {self.verbal!r}")
         check_number("CuePhase.duration_s", self.duration_s, 0.1, 3600.0)
         check_flag("CuePhase.lift", self.lift)
 
@@ -115,8 +104,8 @@ class BlindSettings:
 
     def __post_init__(self) -> None:
         """Validate choices and ranges (each error names its field)."""
-        if self.push not in _PUSHES:
-            raise ValueError(f"BlindSettings.push must be one of {list(_PUSHES)}, got {self.push!r}")
+        if self.push not in PUSH_BY_NAME:
+            raise ValueError(f"BlindSettings.push must be one of {list(PUSH_BY_NAME)}, got {self.push!r}")
         for name in ("words", "release_on_lean", "repeat", "final_lift"):
             check_flag(f"BlindSettings.{name}", getattr(self, name))
         check_number("BlindSettings.lean_m", self.lean_m, 0.0, 1.0)
@@ -171,8 +160,8 @@ class _BlindTable:
         for r, s in enumerate(settings):
             phases = s.phases
             ends[r, : len(s.schedule)] = np.cumsum([p.duration_s for p in s.schedule])
-            push[r, : len(phases)] = [_PUSHES[p.push] for p in phases]
-            verbal[r, : len(phases)] = [_VERBALS[p.verbal] for p in phases]
+            push[r, : len(phases)] = [PUSH_BY_NAME[p.push] for p in phases]
+            verbal[r, : len(phases)] = [VERBAL_BY_NAME[p.verbal] for p in phases]
             lift_ok[r, : len(phases)] = [p.lift for p in phases]
 
         def column(get: Any) -> NDArray[Any]:

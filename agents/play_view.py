@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.envs.contract import PUSH_FIRM, VERBAL_BACK, VERBAL_FORWARD
+from coop_gym.envs.contract import PUSH_BY_NAME, PUSH_FIRM, VERBAL_BACK, VERBAL_FORWARD
 from coop_gym.envs.rendering import SitToStandRenderer
 
 __all__ = ["KEY_HELP", "PlayView", "Summary"]
@@ -40,7 +40,6 @@ _OUTCOME_COLOURS = {
     "premature": (224, 130, 20),
     "timeout": (110, 116, 128),
 }
-_PUSH_NAMES = ("none", "soft", "firm")
 
 
 @dataclass(frozen=True)
@@ -126,7 +125,7 @@ class PlayView:
         y = self.frame_h + 12
         self._text(f"seed {seed}   t = {time_s:4.1f} s   {status}", (12, y), 24)
         self._text("push:", (12, y + 36), 24)
-        for level, name in enumerate(_PUSH_NAMES):
+        for level, name in enumerate(PUSH_BY_NAME):
             colour = _PUSH if level == push else _MUTED
             self._text(f"[{level + 1}] {name}", (80 + 90 * level, y + 36), 24, colour)
         self._text(f"last words: {said or '-'}", (12, y + 68), 24)

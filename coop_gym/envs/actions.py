@@ -24,10 +24,12 @@ __all__ = [
     "CMD_COLUMNS",
     "LIFT",
     "N_FLAT_ACTIONS",
+    "PUSH_BY_NAME",
     "PUSH_FIRM",
     "PUSH_NONE",
     "PUSH_SOFT",
     "VERBAL_BACK",
+    "VERBAL_BY_NAME",
     "VERBAL_FORWARD",
     "VERBAL_NONE",
     "WAIT",
@@ -50,6 +52,10 @@ N_FLAT_ACTIONS = math.prod(ACTION_SHAPE)
 PUSH_NONE, PUSH_SOFT, PUSH_FIRM = 0, 1, 2
 VERBAL_NONE, VERBAL_BACK, VERBAL_FORWARD = 0, 1, 2
 WAIT, LIFT = 0, 1
+PUSH_BY_NAME = {"none": PUSH_NONE, "soft": PUSH_SOFT, "firm": PUSH_FIRM}
+"""Each push component value by the name settings and displays give it, in value order."""
+VERBAL_BY_NAME = {"none": VERBAL_NONE, "back": VERBAL_BACK, "forward": VERBAL_FORWARD}
+"""Each verbal component value by the name settings give it, in value order."""
 _VERBAL_FROM_INDEX = np.array([0.0, -1.0, 1.0])  # none, lean back, lean forward
 
 CMD_COLUMNS: tuple[str, ...] = ("push_force_n", "verbal_cue", "lift", "active")
