@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
@@ -18,23 +15,15 @@ from coop_gym.envs.core import SitToStandCore
 from coop_gym.envs.reset import draw_reset, start_episodes
 from coop_gym.envs.step import step_all
 from coop_gym.envs.vector import SitToStandVectorEnv
-
-ROOT = Path(__file__).resolve().parents[2]
-ENV_IDS = ("CoopGym/SitToStand-v0", "CoopGym/SitToStandIMM-v0", "CoopGym/SitToStandHard-v1")
+from tests.compiled.fresh import ENV_IDS, ROLLOUT, ROOT, environment, run_python, write_toy_package
 
 
 def _run(code: str, *args: str, cache: Path | None, switch: str = "1", path: Path = ROOT) -> str:
-    """``code`` run in a fresh process, with an empty Numba cache folder ``cache`` (None: this one's)."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(path), str(ROOT)])}
+    """The last line ``code`` prints in a fresh process, with the empty Numba cache folder ``cache`` (None: ours)."""
+    env = environment(path, **{ENV_SWITCH: switch})
     if cache is not None:
         env["NUMBA_CACHE_DIR"] = str(cache)
-    env.pop("NUMBA_DISABLE_JIT", None)
-    env[ENV_SWITCH] = switch
-    out = subprocess.run(
-        [sys.executable, "-c", code, *args], cwd=path, env=env, capture_output=True, text=True, timeout=600
-    )
-    assert out.returncode == 0, out.stderr
-    return out.stdout.strip().splitlines()[-1]
+    return run_python(code, *args, env=env, cwd=path).splitlines()[-1]
 
 
 def _core(n: int) -> SitToStandCore:
@@ -59,23 +48,10 @@ def test_the_python_twins_of_the_reset_and_step_kernels_give_the_compiled_number
         np.testing.assert_array_equal(cores[0].obs, cores[1].obs)
 
 
-ROLLOUT = textwrap.dedent(
+ROLLOUT_AS_PYTHON = ROLLOUT + textwrap.dedent(
     """
-    import json, sys
-    import gymnasium as gym
-    import numpy as np
-    import coop_gym
     from coop_gym.compiled import background
     from coop_gym.envs.step import step_all
-    out = {}
-    for env_id in sys.argv[1:]:
-        env = gym.make(env_id)
-        obs, info = env.reset(seed=11)
-        rows = [obs.tolist()]
-        for push, verbal in np.random.default_rng(4).integers(0, 3, size=(8, 2)):
-            obs, reward, terminated, truncated, info = env.step([int(push), int(verbal), 0])
-            rows.append([*obs.tolist(), reward, info["true_x_m"], info["true_xi"]])
-        out[env_id] = rows
     out["ran_as_python"] = not step_all.signatures
     if background._compiler is not None:
         background._compiler.process.kill()  # the test needs no compiled kernels
@@ -85,9 +61,9 @@ ROLLOUT = textwrap.dedent(
 
 
 def test_a_cold_start_steps_the_envs_as_python_on_the_compiled_numbers(tmp_path: Path) -> None:
-    python = json.loads(_run(ROLLOUT, *ENV_IDS, cache=tmp_path / "cold"))
+    python = json.loads(_run(ROLLOUT_AS_PYTHON, *ENV_IDS, cache=tmp_path / "cold"))
     assert python.pop("ran_as_python")
-    compiled = json.loads(_run(ROLLOUT, *ENV_IDS, cache=None, switch="0"))
+    compiled = json.loads(_run(ROLLOUT_AS_PYTHON, *ENV_IDS, cache=None, switch="0"))
     assert not compiled.pop("ran_as_python")
     assert python == compiled
 
@@ -113,10 +89,7 @@ TOY_RUN = textwrap.dedent(
 
 
 def _toy(tmp_path: Path, guard: str = "guard_kernel_cache(__name__)") -> None:
-    package = tmp_path / "toy"
-    package.mkdir()
-    (package / "__init__.py").write_text("")
-    (package / "kern.py").write_text(TOY.replace("guard_kernel_cache(__name__)", guard))
+    write_toy_package(tmp_path, kern=TOY.replace("guard_kernel_cache(__name__)", guard))
 
 
 def test_a_kernel_missing_from_the_cache_runs_as_python_until_the_background_process_compiled_it(

@@ -16,8 +16,8 @@ import pytest
 
 from coop_gym.compiled.background import ENV_SWITCH
 from coop_gym.compiled.cache import guarded_kernels, project_sources
+from tests.compiled.fresh import ROOT, environment, run_python, write_toy_package
 
-ROOT = Path(__file__).resolve().parents[2]
 KERNEL_PACKAGES = ("coop_gym", "estimator")
 
 
@@ -63,13 +63,13 @@ def test_every_cached_kernel_of_the_project_is_guarded() -> None:
     )
 
 
+def _compiled_here(*paths: Path, **variables: str) -> dict[str, str]:
+    # Kernels compile in the calling process: these tests are about the cache.
+    return environment(*paths, **variables, **{ENV_SWITCH: "0"})
+
+
 def _run(code: str, path: Path) -> str:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(path), str(ROOT)])}
-    env.pop("NUMBA_DISABLE_JIT", None)
-    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
-    out = subprocess.run([sys.executable, "-c", code], cwd=path, env=env, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    return out.stdout.strip()
+    return run_python(code, env=_compiled_here(path), cwd=path, timeout=300)
 
 
 def test_importing_the_project_touches_no_cache_file() -> None:
@@ -84,19 +84,21 @@ def test_importing_the_project_touches_no_cache_file() -> None:
     assert _run(code, ROOT) == "False"
 
 
+_GAIN = "from numba import njit\n\n@njit(inline='always')\ndef gain():\n    return {}\n"
+
+
 def test_editing_an_inlined_dependency_recompiles_the_kernel(tmp_path: Path) -> None:
-    package = tmp_path / "toy"
-    package.mkdir()
-    (package / "__init__.py").write_text("")
-    (package / "dep.py").write_text("from numba import njit\n\n@njit(inline='always')\ndef gain():\n    return 1\n")
-    (package / "kern.py").write_text(
-        "from numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\nfrom toy.dep import gain\n\n"
-        "@njit(cache=True)\ndef kernel():\n    return 10 * gain()\n\nguard_kernel_cache(__name__)\n"
+    write_toy_package(
+        tmp_path,
+        dep=_GAIN.format(1),
+        kern="from numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n"
+        "from toy.dep import gain\n\n"
+        "@njit(cache=True)\ndef kernel():\n    return 10 * gain()\n\nguard_kernel_cache(__name__)\n",
     )
     code = "from toy.kern import kernel; print(kernel(), kernel.stats.cache_hits)"
     assert _run(code, tmp_path).split()[0] == "10"
     assert _run(code, tmp_path).split() != ["10", "[]"]  # second run: from the cache
-    (package / "dep.py").write_text("from numba import njit\n\n@njit(inline='always')\ndef gain():\n    return 2\n")
+    (tmp_path / "toy" / "dep.py").write_text(_GAIN.format(2))
     assert _run(code, tmp_path).split()[0] == "20"
 
 
@@ -155,11 +157,7 @@ print(json.dumps({"file": coop_gym.__file__, "rows": rows,
 def test_a_read_only_install_runs_uncached_with_one_warning(tmp_path: Path) -> None:
     site, env = _read_only_copy(tmp_path)
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
-    out = subprocess.run(
-        [sys.executable, "-c", READ_ONLY_RUN], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600
-    )
-    assert out.returncode == 0, out.stderr
-    result = json.loads(out.stdout.strip().splitlines()[-1])
+    result = json.loads(run_python(READ_ONLY_RUN, env=env, cwd=tmp_path).splitlines()[-1])
     assert Path(result["file"]).is_relative_to(site)
     cache_warnings = [w for w in result["warnings"] if w.startswith("KernelCacheWarning")]
     assert len(cache_warnings) == 1, result["warnings"]
@@ -188,18 +186,12 @@ def test_kernels_of_modules_outside_the_compiled_boundary_keep_numbas_error(tmp_
 
 def _toy_package(tmp_path: Path, kernels: str) -> dict[str, str]:
     """Package ``toy`` with module ``kern`` (``kernels``, guarded) under ``tmp_path``; the environment to run it in."""
-    package = tmp_path / "toy"
-    package.mkdir()
-    (package / "__init__.py").write_text("")
-    (package / "kern.py").write_text(
-        f"import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
-        f"{kernels}\n\nguard_kernel_cache(__name__)\n"
+    write_toy_package(
+        tmp_path,
+        kern="import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+        f"{kernels}\n\nguard_kernel_cache(__name__)\n",
     )
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
-    env["NUMBA_CACHE_DIR"] = str(tmp_path / "cache")
-    env.pop("NUMBA_DISABLE_JIT", None)
-    env[ENV_SWITCH] = "0"  # compiled here: these tests are about the cache
-    return env
+    return _compiled_here(tmp_path, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
 
 
 def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path: Path) -> None:
@@ -220,9 +212,7 @@ def test_a_cache_folder_that_fails_later_costs_one_warning_not_the_run(tmp_path:
             print(kernel(3), other(3.0), [w.category.__name__ for w in caught])
         """
     )
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip().split(maxsplit=2) == ["6", "7.0", "['KernelCacheWarning']"]
+    assert run_python(code, env=env, timeout=300).split(maxsplit=2) == ["6", "7.0", "['KernelCacheWarning']"]
 
 
 def test_a_warm_start_loads_kernels_without_numbas_registries_or_parsing_sources(tmp_path: Path) -> None:
@@ -243,12 +233,8 @@ def test_a_warm_start_loads_kernels_without_numbas_registries_or_parsing_sources
         print(kernel(4).tolist(), "numba.np.arraymath" in sys.modules, len(parsed))
         """
     )
-    runs = [
-        subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
-        for _ in range(2)
-    ]
-    assert all(run.returncode == 0 for run in runs), runs[-1].stderr
-    cold, warm = (run.stdout.split("]")[1].split() for run in runs)
+    outputs = [run_python(code, env=env, timeout=300) for _ in range(2)]
+    cold, warm = (output.split("]")[1].split() for output in outputs)
     assert cold[0] == "True" and int(cold[1]) > 0  # compiled: registries imported, sources parsed
     assert warm == ["False", "0"]
-    assert runs[1].stdout.startswith("[0.0, 0.5, 1.0, 1.5]")
+    assert outputs[1].startswith("[0.0, 0.5, 1.0, 1.5]")

@@ -9,36 +9,11 @@ debug run reproduces a compiled run draw for draw.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import textwrap
-from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-ENV_IDS = ("CoopGym/SitToStand-v0", "CoopGym/SitToStandIMM-v0", "CoopGym/SitToStandHard-v1")
-
-ROLLOUT = textwrap.dedent(
-    """
-    import json, sys
-    import gymnasium as gym
-    import numpy as np
-    import coop_gym
-    out = {}
-    for env_id in sys.argv[1:]:
-        env = gym.make(env_id)
-        obs, info = env.reset(seed=11)
-        rows = [obs.tolist()]
-        actions = np.random.default_rng(4).integers(0, 3, size=(8, 3))
-        for push, verbal, _ in actions:
-            obs, reward, terminated, truncated, info = env.step([int(push), int(verbal), 0])
-            rows.append([*obs.tolist(), reward, info["true_x_m"], info["true_xi"]])
-        out[env_id] = rows
-    print(json.dumps(out))
-    """
-)
+from tests.compiled.fresh import ENV_IDS, ROLLOUT, environment, run_python
 
 DRAWS = textwrap.dedent(
     """
@@ -64,15 +39,8 @@ DRAWS = textwrap.dedent(
 
 
 def _run(code: str, *args: str, disable_jit: bool) -> object:
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    env.pop("NUMBA_DISABLE_JIT", None)
-    if disable_jit:
-        env["NUMBA_DISABLE_JIT"] = "1"
-    out = subprocess.run(
-        [sys.executable, "-c", code, *args], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600
-    )
-    assert out.returncode == 0, out.stderr
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    env = environment(NUMBA_DISABLE_JIT="1") if disable_jit else environment()
+    return json.loads(run_python(code, *args, env=env).splitlines()[-1])
 
 
 def test_debug_mode_draws_are_the_generators() -> None:
@@ -89,6 +57,7 @@ def test_debug_mode_draws_are_the_generators() -> None:
 
 
 def test_debug_mode_runs_the_envs_like_the_compiled_run() -> None:
-    debug = _run(ROLLOUT, *ENV_IDS, disable_jit=True)
-    compiled = _run(ROLLOUT, *ENV_IDS, disable_jit=False)
+    rollout = ROLLOUT + "print(json.dumps(out))\n"
+    debug = _run(rollout, *ENV_IDS, disable_jit=True)
+    compiled = _run(rollout, *ENV_IDS, disable_jit=False)
     assert debug == compiled
