@@ -76,6 +76,17 @@ def run_main(main: Callable[[list[str]], Any], argv: list[str]) -> tuple[Any, st
     return code, err.getvalue()
 
 
+def assert_exit_2_naming(code: Any, err: str, match: str) -> None:
+    """Exit status 2, and ``match`` found in stderr."""
+    assert code == 2, f"exit status {code!r}, stderr: {err}"
+    assert re.search(match, err), f"stderr does not name the problem: {err!r}"
+
+
+def _params(cases: list[tuple[str, str, list[str], str]]) -> list[Any]:
+    """``(cli, argv, match)`` of each case, its id ``"cli: case"``."""
+    return [pytest.param(cli, argv, match, id=f"{cli}: {case}") for cli, case, argv, match in cases]
+
+
 # (command line, case id, argv, regex the stderr must match)
 CASES: list[tuple[str, str, list[str], str]] = [
     ("train.py", "unknown flag", ["--bogus"], r"Unrecognized options: --bogus"),
@@ -371,18 +382,13 @@ def artifacts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     return make_artifacts(tmp_path_factory.mktemp("artifacts"))
 
 
-@pytest.mark.parametrize(
-    ("cli", "argv", "match"),
-    [(c[0], c[2], c[3]) for c in MODEL_CASES],
-    ids=[f"{c[0]}: {c[1]}" for c in MODEL_CASES],
-)
+@pytest.mark.parametrize(("cli", "argv", "match"), _params(MODEL_CASES))
 def test_bad_model_exits_2_with_one_line_before_any_work(
     cli: str, argv: list[str], match: str, artifacts: dict[str, str]
 ) -> None:
     argv = [a.format(**artifacts) for a in argv]
     code, err = run_main(_main_of(cli), argv)
-    assert code == 2, f"exit status {code!r}, stderr: {err}"
-    assert re.search(match, err), err
+    assert_exit_2_naming(code, err, match)
     assert "Traceback" not in err
     message = [line for line in err.splitlines() if "error" in line]
     assert len(message) == 1, err  # one line names the problem (argparse may add its usage above it)
@@ -423,22 +429,14 @@ def _main_of(cli: str) -> Callable[[list[str]], Any]:
     return main  # type: ignore[no-any-return]
 
 
-@pytest.mark.parametrize(
-    ("cli", "argv", "match"), [(c[0], c[2], c[3]) for c in CASES], ids=[f"{c[0]}: {c[1]}" for c in CASES]
-)
+@pytest.mark.parametrize(("cli", "argv", "match"), _params(CASES))
 def test_bad_flag_exits_2_naming_the_problem(cli: str, argv: list[str], match: str) -> None:
-    code, err = run_main(_main_of(cli), argv)
-    assert code == 2, f"exit status {code!r}, stderr: {err}"
-    assert re.search(match, err), f"stderr does not name the problem: {err!r}"
+    assert_exit_2_naming(*run_main(_main_of(cli), argv), match)
 
 
-@pytest.mark.parametrize(
-    ("cli", "argv", "match"),
-    # Every CLI checks its output paths before any work (train.py --out, evaluate --csv/--json-out/--plot,
-    # protocol --plot/--plot-confusion).
-    [pytest.param(c[0], c[2], c[3]) for c in LATE_CASES],
-    ids=[f"{c[0]}: {c[1]}" for c in LATE_CASES],
-)
+# Every CLI checks its output paths before any work (train.py --out, evaluate --csv/--json-out/--plot,
+# protocol --plot/--plot-confusion).
+@pytest.mark.parametrize(("cli", "argv", "match"), _params(LATE_CASES))
 def test_bad_output_path_exits_2_before_the_work(cli: str, argv: list[str], match: str, tmp_path: Path) -> None:
     (tmp_path / "a_file").write_text("not a folder")
     argv = [a.replace("{blocked}", str(tmp_path / "a_file" / "sub")) for a in argv]
@@ -446,8 +444,7 @@ def test_bad_output_path_exits_2_before_the_work(cli: str, argv: list[str], matc
         code, err = run_main(_main_of(cli), argv)
     except OSError as exc:  # the path was only tried after the work was done
         pytest.fail(f"{cli} {' '.join(argv)}: raised {exc!r} after the work instead of exiting 2 up front")
-    assert code == 2, f"exit status {code!r}, stderr: {err}"
-    assert re.search(match, err), err
+    assert_exit_2_naming(code, err, match)
 
 
 END_TO_END = {
