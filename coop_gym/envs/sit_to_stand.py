@@ -17,8 +17,11 @@ from coop_gym.envs.core import SitToStandCore
 from coop_gym.envs.info import InfoBuilder
 from coop_gym.envs.observation import FEATURES, observation_features
 from coop_gym.envs.report import EPISODE_END, REPORT
+from coop_gym.model.params import Cues, Timing
+from coop_gym.model.personas import Persona
 
 __all__ = [
+    "ConfiguredEnv",
     "SitToStandEnv",
     "make_core",
     "observation_features",  # the contract's, for the importers of this module (agents.scripted)
@@ -88,7 +91,41 @@ def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, ste
     )
 
 
-class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
+class ConfiguredEnv:
+    """What the single and the vector env take from their :class:`~coop_gym.envs.arguments.SitToStandConfig`.
+
+    The settings clients read (``config``, ``render_mode``, ``observation_mode``, ``action_type``,
+    ``personas``, ``timing``, ``cues``, ``features``), the simulation ``core`` of the batch, and the
+    action decoder, observer and info builder every step calls.
+    """
+
+    config: SitToStandConfig
+    render_mode: str | None
+    observation_mode: str
+    action_type: str
+    personas: tuple[Persona, ...]
+    timing: Timing
+    cues: Cues
+    features: tuple[str, ...]
+    core: SitToStandCore
+
+    def _take_config(self, config: SitToStandConfig, n_envs: int) -> None:
+        """Hold ``config``'s settings and build a core of ``n_envs`` envs and the step's helpers."""
+        self.config = config
+        self.render_mode = config.render_mode
+        self.observation_mode = config.observation_mode
+        self.action_type = config.action_type
+        self.personas = config.personas
+        self.timing = config.timing
+        self.cues = config.cues
+        self.features = config.features
+        self.core = make_core(config, n_envs)
+        self._actions = ActionDecoder(config.action_type, config.cues)
+        self._observe = config.observer()
+        self._info = InfoBuilder(config)
+
+
+class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
     r"""A robot caregiver helps an older adult stand up -- once the person is cooperative.
 
     ## Description
@@ -236,24 +273,13 @@ class SitToStandEnv(gym.Env[NDArray[np.float32], Any]):
         arguments = EnvArguments.from_keywords(type(self).__name__, kwargs)
         config = arguments.resolve(self.metadata["render_modes"])
         self.difficulty = arguments.difficulty
-        self.config = config
-        self.render_mode = config.render_mode
-        self.observation_mode = config.observation_mode
-        self.action_type = config.action_type
-        self.personas = config.personas
-        self.timing = config.timing
-        self.cues = config.cues
-        self.core = make_core(config, 1)
-        self.features = config.features
+        self._take_config(config, 1)
         self.observation_space = config.observation_space()  # type: ignore[assignment]
         self.action_space = config.action_space()
         # Hot-path views and tables, built once (each step reads them instead of recomputing).
-        self._actions = ActionDecoder(config.action_type, config.cues)
         self._cmd = self.core.cmd
         self._obs_row = self.core.obs[0]
         self._report_row = self.core.report[0]
-        self._observe = config.observer()
-        self._info = InfoBuilder(config)
         self._needs_reset = True
         self._stepped = False
         self._outcome = int(Outcome.NONE)

@@ -15,17 +15,16 @@ from numpy.typing import NDArray
 from coop_gym.compiled.checks import is_integer
 from coop_gym.compiled.rng import G_STATE
 from coop_gym.compiled.seeding import MAX_BATCH_SEED
-from coop_gym.envs.actions import CMD, ActionDecoder
+from coop_gym.envs.actions import CMD
 from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import check_threads
-from coop_gym.envs.info import InfoBuilder
 from coop_gym.envs.report import REPORT, count_steps_and_end_episodes
-from coop_gym.envs.sit_to_stand import make_core, render_state_for
+from coop_gym.envs.sit_to_stand import ConfiguredEnv, render_state_for
 
 __all__ = ["SitToStandVectorEnv"]
 
 
-class SitToStandVectorEnv(VectorEnv):
+class SitToStandVectorEnv(ConfiguredEnv, VectorEnv):
     r"""``N`` sit-to-stand episodes stepped by one compiled call: :class:`SitToStandEnv`, batched.
 
     The same simulation core as the single env (see its docstring for the task, the
@@ -113,26 +112,15 @@ class SitToStandVectorEnv(VectorEnv):
             raise ValueError(f"max_episode_steps must be a positive int or None, got {max_episode_steps!r}")
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}  # type: ignore[misc]
-        self.config = config
         self.num_envs = n = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
-        self.render_mode = config.render_mode
-        self.observation_mode = config.observation_mode
-        self.action_type = config.action_type
-        self.personas = config.personas
-        self.timing = config.timing
-        self.cues = config.cues
-        self.features = config.features
-        self.core = make_core(config, n)
+        self._take_config(config, n)
         self.core.set_threads(threads)
         self.threads = threads
         self.single_observation_space = config.observation_space()
         self.single_action_space = config.action_space()
         self.observation_space = batch_space(self.single_observation_space, n)
         self.action_space = batch_space(self.single_action_space, n)
-        self._observe = config.observer()
-        self._info = InfoBuilder(config)
-        self._actions = ActionDecoder(config.action_type, config.cues)
         self._episode_steps = np.zeros(n, dtype=np.int64)
         self._done = np.zeros(n, dtype=bool)  # finished, waiting for an (auto)reset
         self._started = np.zeros(n, dtype=bool)  # reset at least once
