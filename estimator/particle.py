@@ -130,7 +130,11 @@ def _summarise(
             mean[k] += w[i] * particles[i, position_column + k]
 
 
-@njit(cache=True, error_model="numpy")
+# Not cached on disk: ``transition`` is a first-class function, whose Numba type is keyed by the
+# dispatcher object, so no other process would find the cached copy (each added one more to the
+# index, which grew without bound). It compiles once per process, in the calling process: one
+# call filters a whole sequence, far longer as Python than its compile takes.
+@njit(error_model="numpy")
 def _filter(
     transition: Any,
     particles: NDArray[np.float64],
@@ -432,4 +436,4 @@ def reference_run(
     return out
 
 
-guard_kernel_cache(__name__, compile_here=("_filter",))  # one call filters a whole sequence
+guard_kernel_cache(__name__)
