@@ -33,7 +33,7 @@ from coop_gym.model.dynamics import (
     person_substep,
 )
 from coop_gym.model.params import PersonParams, Realism, Timing
-from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS, sample_person
+from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS, get_persona, sample_person
 from estimator.kalman import NOMINAL_COLUMNS
 from estimator.particle import SwitchingParticleFilter
 
@@ -73,6 +73,10 @@ class SwitchingOptions:
             ``hypothesis_spread`` variation (a caregiver who has not met the person is unsure of
             how compliant, strong and persuadable they are).
         hypothesis_spread: Std of the log of each varied parameter of a drawn hypothesis.
+        personas: The personas the hypotheses are drawn around (names; default the training
+            personas): a caregiver's idea of the people it will meet. Leaving one out and
+            scoring on it (``python -m agents.tune_belief``) measures what meeting an unknown
+            kind of person costs.
         compliance_range: A drawn hypothesis's effective push compliance (``k2`` times the
             stiffness factor of its mode) is further scaled by a factor log-uniform in
             ``[1 / compliance_range, compliance_range]``: how far a push moves a person who does
@@ -91,6 +95,7 @@ class SwitchingOptions:
     hypotheses: int = 128
     hypothesis_spread: float = 0.7
     compliance_range: float = 8.0
+    personas: tuple[str, ...] = TRAIN_PERSONAS
     true_person: bool = False
     difficulty: str | Difficulty | None = None
 
@@ -105,6 +110,11 @@ class SwitchingOptions:
         check_number("SwitchingOptions.hypothesis_spread", self.hypothesis_spread, 0.0, 2.0)
         check_number("SwitchingOptions.compliance_range", self.compliance_range, 1.0, 100.0)
         check_flag("SwitchingOptions.true_person", self.true_person)
+        if isinstance(self.personas, str) or not self.personas:
+            raise ValueError(f"SwitchingOptions.personas must be a non-empty sequence of names, got {self.personas!r}")
+        for name in self.personas:
+            get_persona(name)
+        object.__setattr__(self, "personas", tuple(self.personas))
 
 
 def _as_options(options: SwitchingOptions | dict[str, Any] | None) -> SwitchingOptions:
@@ -126,9 +136,9 @@ def nominal_person(difficulty: Difficulty | None, realism: Realism) -> PersonPar
     return person.with_realism(realism)
 
 
-def training_mode_prior() -> tuple[float, float, float]:
-    """``P(xi = -1, 0, +1)`` at an episode's start, averaged over the training personas."""
-    coop = [PERSONAS[name].params.cooperativeness for name in TRAIN_PERSONAS]
+def mode_prior(personas: Sequence[str] = TRAIN_PERSONAS) -> tuple[float, float, float]:
+    """``P(xi = -1, 0, +1)`` at an episode's start, averaged over ``personas`` (names)."""
+    coop = [PERSONAS[name].params.cooperativeness for name in personas]
     p_unc = float(np.mean([c.initial_p_uncooperative for c in coop]))
     p_coop = float(np.mean([c.initial_p_cooperative for c in coop]))
     return (p_unc, 1.0 - p_unc - p_coop, p_coop)
@@ -159,7 +169,7 @@ def switching_filter(
         xi_column=STATE.xi,
         rngs=rngs,
         n_particles=options.n_particles,
-        mode_prior=training_mode_prior(),
+        mode_prior=mode_prior(options.personas),
         lean_std_m=options.lean_std_m,
         reading_std_m=options.reading_std_m,
         resample_fraction=options.resample_fraction,
@@ -175,13 +185,13 @@ HYPOTHESES_SEED = 20_220_523
 def hypothesis_rows(
     options: SwitchingOptions, difficulty: Difficulty | None, realism: Realism, timing: Timing
 ) -> NDArray[np.float64]:
-    """(K, C) packed parameter hypotheses: the nominal person, or people drawn around the training personas."""
+    """(K, C) packed parameter hypotheses: the nominal person, or people drawn around ``options.personas``."""
     if options.hypotheses == 1:
         return pack_person(nominal_person(difficulty, realism), timing)[None]
     rng = np.random.default_rng(HYPOTHESES_SEED)
     rows = []
     for k in range(options.hypotheses):
-        persona = PERSONAS[TRAIN_PERSONAS[k % len(TRAIN_PERSONAS)]]
+        persona = PERSONAS[options.personas[k % len(options.personas)]]
         person = sample_person(dataclasses.replace(persona, variation_relative_std=options.hypothesis_spread), rng)
         scale = math.exp(rng.uniform(-1.0, 1.0) * math.log(options.compliance_range))
         bio = person.biomechanics
@@ -202,7 +212,8 @@ def hypothesis_bank(
 ) -> NDArray[np.float64]:
     """(N, K, C) every env's parameter hypotheses (:func:`hypothesis_rows`): one bank, shared by every env."""
     bank = hypothesis_rows(options or SwitchingOptions(), difficulty, realism, timing)
-    return np.ascontiguousarray(np.broadcast_to(bank, (n_envs, *bank.shape)))
+    # A copy (never the broadcast view): resets write each env's true person into its rows.
+    return np.array(np.broadcast_to(bank, (n_envs, *bank.shape)))
 
 
 def _seed_of(rng: np.random.Generator) -> int:

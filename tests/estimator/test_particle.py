@@ -97,11 +97,40 @@ def test_reset_reseeds_in_place_and_takes_true_people():
         ({"reading_std_m": 0.0}, "reading_std_m"),
         ({"hypotheses": 0}, "hypotheses"),
         ({"mode_jitter_per_s": math.nan}, "mode_jitter_per_s"),
+        ({"personas": ()}, "personas"),
+        ({"personas": "typical"}, "personas"),
+        ({"personas": ["typical", "nobody"]}, "unknown persona 'nobody'"),
     ],
 )
 def test_bad_options_name_the_field(kwargs, message):
     with pytest.raises(ValueError, match=message):
         SwitchingOptions(**kwargs)
+
+
+def test_hypotheses_are_drawn_around_the_named_personas():
+    from coop_gym.envs.switching import mode_prior
+    from coop_gym.model.personas import TRAIN_PERSONAS
+
+    default = hypothesis_bank(1, HARD, Realism(), TIMING, SwitchingOptions())
+    named = hypothesis_bank(1, HARD, Realism(), TIMING, SwitchingOptions(personas=list(TRAIN_PERSONAS)))
+    np.testing.assert_array_equal(default, named)  # the default is the training personas
+    stoic_out = [name for name in TRAIN_PERSONAS if name != "stoic"]
+    without = hypothesis_bank(1, HARD, Realism(), TIMING, SwitchingOptions(personas=stoic_out))
+    assert not np.array_equal(default, without)
+    np.testing.assert_allclose(mode_prior(["anxious"]), (0.8, 0.2, 0.0))  # anxious people start uncooperative
+    np.testing.assert_allclose(sum(mode_prior()), 1.0)
+
+
+def test_a_single_env_takes_its_true_person():
+    import gymnasium as gym
+
+    import coop_gym  # noqa: F401  (registers the ids)
+
+    env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching", estimator_options={"true_person": True})
+    env.reset(seed=0)
+    core = env.unwrapped.core
+    np.testing.assert_array_equal(core.mm.filter.params[0, 0], core.params[0])
+    assert np.isfinite(env.step(env.action_space.sample())[0]).all()
 
 
 def test_bad_inputs_raise_and_change_nothing():
