@@ -7,19 +7,24 @@ under pushing -- so a lean is evidence of cooperation only as far as the person 
 The caregiver has no displacement rule of its own (unlike :class:`agents.scripted.ProbingCaregiver`,
 which lifts on a forward answer of ``answer_m``); it only chooses which cue to give:
 
-1. **recruit**: a gentle push with "lean forward" for ``burst_s`` (a guided push is what turns
-   a person cooperative, and pushing too long wears the willingness down);
+1. **recruit**: a gentle push with "lean forward" for ``burst_s``, ended as soon as
+   ``P(xi = +1) >= recruited_p`` (a guided push is what turns a person cooperative, and
+   pushing on wears the willingness down);
 2. **settle**: silence for ``settle_s`` (the push's own motion dies out);
 3. **probe**: "lean forward" with no push -- a cooperative person answers, a passive one does not
    move, a resisting one leans back -- watched for ``window_s``; then probe again while
    ``P(xi = +1) >= reprobe_p``, else recruit again.
 
-It lifts, in any phase, once ``P(xi = +1) >= lift_p`` and the shoulder estimate is at least
-``lean_m`` (what a safe lift needs of the posture: the success criterion of
-:class:`coop_gym.envs.config.LiftCriteria`, 0.15 m, plus a margin for the reading).
+It lifts while it watches a probe's answer, once ``P(xi = +1) >= lift_p`` and the shoulder
+estimate is at least ``lean_m`` (what a safe lift needs of the posture: the success criterion
+of :class:`coop_gym.envs.config.LiftCriteria`, 0.15 m, plus a margin for the reading). Not
+during a burst or the settle after it: there the body still moves under the push, and a filter
+that has the body slightly wrong reads that motion as the answer.
 
-The settings were chosen on the TRAINING personas (``python -m agents.tune_belief``) and are
-scored on the held-out ones by :mod:`agents.evaluate`.
+The settings were chosen on the TRAINING personas, each played with a filter whose hypotheses
+were drawn around the OTHER training personas (``python -m agents.tune_belief``: meeting a kind
+of person the caregiver has not seen is what the held-out personas test), and are scored on
+the held-out ones by :mod:`agents.evaluate`.
 
 Example:
     >>> import gymnasium as gym
@@ -53,7 +58,8 @@ class BeliefSettings:
     Attributes:
         lift_p: Lift once ``P(xi = +1)`` is at least this (and the lean is ``lean_m``).
         lean_m: The shoulder estimate a lift needs [m].
-        burst_s: Length of a recruiting burst (soft push + "lean forward") [s].
+        burst_s: Longest recruiting burst (soft push + "lean forward") [s].
+        recruited_p: End a burst early once ``P(xi = +1)`` is at least this.
         settle_s: Silence between the burst and the probe [s].
         window_s: How long a probe is watched before the next cue [s].
         reprobe_p: After a probe window, probe again (no push) while ``P(xi = +1)`` is at least this.
@@ -61,14 +67,15 @@ class BeliefSettings:
 
     lift_p: float = 0.85
     lean_m: float = 0.16
-    burst_s: float = 1.0
+    burst_s: float = 2.0
+    recruited_p: float = 0.5
     settle_s: float = 0.3
     window_s: float = 1.0
     reprobe_p: float = 0.5
 
     def __post_init__(self) -> None:
         """Validate ranges."""
-        for name in ("lift_p", "reprobe_p"):
+        for name in ("lift_p", "recruited_p", "reprobe_p"):
             check_number(f"BeliefSettings.{name}", getattr(self, name), 0.0, 1.0)
         check_number("BeliefSettings.lean_m", self.lean_m, 0.0, 1.0)
         for name in ("burst_s", "settle_s", "window_s"):
@@ -88,11 +95,12 @@ class BeliefCaregiver(ScriptedAgent):
     ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
         s = self.settings
         p_cooperative = self._column(obs, "p_cooperative")
-        lift = (p_cooperative >= s.lift_p) & (self._column(obs, "x_hat_m") >= s.lean_m)
-        age = now - memory.phase_start_s
         phase = memory.phase.copy()  # transitions are decided on the phase at the start of the step
-        # Recruit -> settle after one burst; settle -> probe (ask "lean forward" without a push).
-        memory.enter((phase == self.RECRUIT) & (age >= s.burst_s - EPS_S), self.SETTLE, now)
+        lift = (phase == self.PROBE) & (p_cooperative >= s.lift_p) & (self._column(obs, "x_hat_m") >= s.lean_m)
+        age = now - memory.phase_start_s
+        # Recruit -> settle after one burst, or once recruited; settle -> probe (ask "lean forward" without a push).
+        burst_over = (age >= s.burst_s - EPS_S) | (p_cooperative >= s.recruited_p)
+        memory.enter((phase == self.RECRUIT) & burst_over, self.SETTLE, now)
         asking = (phase == self.SETTLE) & (age >= s.settle_s - EPS_S)
         # A probe's window is over: ask again while cooperation is likely, else recruit again.
         over = (phase == self.PROBE) & (age >= s.window_s - EPS_S) & ~lift

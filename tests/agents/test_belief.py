@@ -38,19 +38,29 @@ def test_recruits_settles_then_probes_with_words_alone():
 
 
 def test_probes_again_without_pushing_while_cooperation_is_likely():
-    settings = BeliefSettings(lift_p=0.9, burst_s=0.5, settle_s=0.3, window_s=1.0, reprobe_p=0.5)
+    settings = BeliefSettings(lift_p=0.9, burst_s=0.5, recruited_p=1.0, settle_s=0.3, window_s=1.0, reprobe_p=0.5)
     actions = _play(BeliefCaregiver(FEATURES, settings=settings), p_cooperative=0.7)
     assert [a[0] for a in actions[8:]] == [PUSH_NONE] * 32
     assert [a[1] for a in actions[8:40:10]] == [VERBAL_FORWARD] * 4
 
 
+def test_ends_the_burst_once_the_person_is_likely_recruited():
+    settings = BeliefSettings(lift_p=0.9, burst_s=2.0, recruited_p=0.5, settle_s=0.3, window_s=1.0)
+    pushes = {p: [a[0] for a in _play(BeliefCaregiver(FEATURES, settings=settings), p, steps=10)] for p in (0.4, 0.6)}
+    assert pushes[0.4] == [PUSH_SOFT] * 10  # not yet likely: the whole burst
+    assert pushes[0.6] == [PUSH_NONE] * 10  # likely recruited: no push, settle then probe
+
+
 @pytest.mark.parametrize(("p", "x", "lifts"), [(0.9, 0.2, True), (0.9, 0.1, False), (0.5, 0.3, False)])
-def test_lifts_on_the_estimate_and_the_posture(p, x, lifts):
-    agent = BeliefCaregiver(FEATURES, settings=BeliefSettings(lift_p=0.85, lean_m=0.16))
-    action, _ = agent.predict(_obs(1.0, p, x)[0])
-    assert (action[2] == LIFT) == lifts
-    if lifts:
-        assert action[0] == PUSH_NONE and action[1] == VERBAL_NONE
+def test_lifts_on_the_estimate_and_the_posture_while_watching_a_probe(p, x, lifts):
+    settings = BeliefSettings(lift_p=0.85, lean_m=0.16, burst_s=0.5, recruited_p=1.0, settle_s=0.3)
+    actions = _play(BeliefCaregiver(FEATURES, settings=settings), p, x, steps=20)
+    lifted = [k for k, a in enumerate(actions) if a[2] == LIFT]
+    # Not in the burst (steps 0-4) nor the settle (5-7), whatever the estimate: the probe is asked at
+    # step 8 and its answer watched from step 9.
+    assert lifted == (list(range(9, 20)) if lifts else [])
+    for k in lifted:
+        assert actions[k][0] == PUSH_NONE and actions[k][1] == VERBAL_NONE
 
 
 def test_needs_the_filter_and_checks_its_settings():
@@ -58,5 +68,7 @@ def test_needs_the_filter_and_checks_its_settings():
         BeliefCaregiver(observation_features("belief", "kalman"))
     with pytest.raises(ValueError, match="lift_p"):
         BeliefSettings(lift_p=1.5)
+    with pytest.raises(ValueError, match="recruited_p"):
+        BeliefSettings(recruited_p=-0.1)
     with pytest.raises(ValueError, match="window_s"):
         BeliefSettings(window_s=-1.0)
