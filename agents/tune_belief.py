@@ -39,15 +39,11 @@ def settings_grid() -> list[BeliefSettings]:
     it makes visible.
     """
     return [
-        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p)
-        for recruited_p in (0.5, 1.0)
-        for burst_s in (1.0, 2.0)
+        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p) for recruited_p in (0.5, 1.0) for burst_s in (1.0, 2.0)
     ]
 
 
-def leave_one_out(
-    settings: BeliefSettings, env_id: str, episodes: int, seed: int = TUNING_SEED
-) -> tuple[float, float]:
+def leave_one_out(settings: BeliefSettings, env_id: str, episodes: int, seed: int = TUNING_SEED) -> tuple[float, float]:
     """Mean success and unsafe rates over the training personas, each met by a filter that has not seen it.
 
     Args:

@@ -33,7 +33,7 @@ def test_mypy_is_clean() -> None:
 
 
 def test_every_kernel_uses_numpys_error_model() -> None:
-    """``coop_gym/compiled/__init__.py``: every project kernel is ``@njit(cache=True, error_model="numpy")``."""
+    """Every project kernel is ``@njit(cache=True, error_model="numpy")`` but one (``coop_gym.compiled``)."""
     import re
 
     decorators = []
@@ -43,5 +43,9 @@ def test_every_kernel_uses_numpys_error_model() -> None:
                 if re.match(r"\s*@(numba\.)?(njit|jit)\b", line):
                     decorators.append((f"{path.relative_to(ROOT)}:{number}", line.strip()))
     assert len(decorators) >= 30, decorators  # the scan finds the kernels
+    # The one kernel not cached on disk: the particle filter, which takes its transition as a
+    # first-class function (estimator/particle.py says why a cached copy is never found).
+    uncached = [(where, line) for where, line in decorators if line == '@njit(error_model="numpy")']
+    assert [where.split(":")[0] for where, _ in uncached] == ["estimator/particle.py"], uncached
     wrong = [(where, line) for where, line in decorators if 'cache=True, error_model="numpy"' not in line]
-    assert not wrong, wrong
+    assert wrong == uncached, wrong

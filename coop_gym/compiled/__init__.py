@@ -17,7 +17,9 @@ Every kernel is ``@njit(cache=True, error_model="numpy")``: NumPy's error model 
 ZeroDivisionError check (and its message formatting) that Python's model compiles into every
 division (seconds of every cold compile) and changes no result of a division by a
 non-zero number; where a divisor can be zero the kernels test it first
-(``tests/test_style.py`` holds every kernel to it).
+(``tests/test_style.py`` holds every kernel to it). The one kernel without ``cache=True`` is
+the particle filter's, whose first-class function argument Numba cannot find in a disk
+cache (``estimator/particle.py``).
 
 Imports nothing of ``coop_gym``, ``estimator`` or ``agents``; both the model/env side and
 the filters may import it.
