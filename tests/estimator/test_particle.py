@@ -1,13 +1,15 @@
 import math
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
-from coop_gym.envs.switching import SwitchingOptions, hypothesis_bank, switching_filter
+import coop_gym  # noqa: F401  (registers the ids)
+from coop_gym.envs.switching import SwitchingOptions, hypothesis_bank, mode_prior, switching_filter
 from coop_gym.model.difficulty import get_difficulty
 from coop_gym.model.dynamics import person_substep, simulate
 from coop_gym.model.params import Realism, Timing
-from coop_gym.model.personas import PERSONAS
+from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS
 from estimator.particle import reference_run
 
 TIMING = Timing()
@@ -108,9 +110,6 @@ def test_bad_options_name_the_field(kwargs, message):
 
 
 def test_hypotheses_are_drawn_around_the_named_personas():
-    from coop_gym.envs.switching import mode_prior
-    from coop_gym.model.personas import TRAIN_PERSONAS
-
     default = hypothesis_bank(1, HARD, Realism(), TIMING, SwitchingOptions())
     named = hypothesis_bank(1, HARD, Realism(), TIMING, SwitchingOptions(personas=list(TRAIN_PERSONAS)))
     np.testing.assert_array_equal(default, named)  # the default is the training personas
@@ -122,10 +121,6 @@ def test_hypotheses_are_drawn_around_the_named_personas():
 
 
 def test_a_single_env_takes_its_true_person():
-    import gymnasium as gym
-
-    import coop_gym  # noqa: F401  (registers the ids)
-
     env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching", estimator_options={"true_person": True})
     env.reset(seed=0)
     core = env.unwrapped.core
@@ -149,10 +144,6 @@ def test_bad_inputs_raise_and_change_nothing():
 
 
 def _play(estimator, seed, steps=40, **kwargs):
-    import gymnasium as gym
-
-    import coop_gym  # noqa: F401
-
     env = gym.make("CoopGym/SitToStandHard-v1", estimator=estimator, **kwargs)
     obs, info = env.reset(seed=seed)
     truth, observed = [info["true_x_m"]], [obs]
@@ -182,10 +173,6 @@ def test_the_env_estimate_is_deterministic_and_leaves_the_person_alone():
 
 
 def test_env_options_reach_the_filter_and_bad_ones_are_named():
-    import gymnasium as gym
-
-    import coop_gym  # noqa: F401
-
     small = {"n_particles": 32, "hypotheses": 8}
     env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching", estimator_options=small)
     env.reset(seed=0)
