@@ -25,6 +25,22 @@ from estimator.nominal import NominalModel
 FILTER_STEPS = 100_000
 CHUNK = 10_000  # covariances are checked chunk by chunk to keep memory small
 
+
+def _noise_levels(camera: float, process: float, prior: float) -> NominalModel:
+    """The default model with every noise at one level per kind: the camera's std, the four
+    process stds and the three prior stds (the position's prior is the camera's own)."""
+    process_stds = (
+        "velocity_process_std_m_per_s",
+        "intention_process_std_m",
+        "cooperativeness_process_std",
+        "position_process_std_m",
+    )
+    prior_stds = ("initial_velocity_std_m_per_s", "initial_intention_std_m", "initial_cooperativeness_std")
+    return NominalModel(
+        position_noise_std_m=camera, **dict.fromkeys(process_stds, process), **dict.fromkeys(prior_stds, prior)
+    )
+
+
 EXTREME_MODELS: dict[str, NominalModel] = {
     "default": NominalModel(),
     "stiff, dt 20 ms": NominalModel(damping_rate_per_s=100.0, voluntary_gain_per_s2=1000.0),
@@ -36,27 +52,9 @@ EXTREME_MODELS: dict[str, NominalModel] = {
         push_gain_m_per_s_n=1.0,
         verbal_gain_m_per_s=10.0,
     ),
-    "near-zero noise": NominalModel(
-        position_noise_std_m=1e-6,
-        velocity_process_std_m_per_s=0.0,
-        intention_process_std_m=0.0,
-        cooperativeness_process_std=0.0,
-        position_process_std_m=0.0,
-        initial_velocity_std_m_per_s=1e-6,
-        initial_intention_std_m=1e-6,
-        initial_cooperativeness_std=1e-6,
-    ),
+    "near-zero noise": _noise_levels(camera=1e-6, process=0.0, prior=1e-6),
     "tiny R, large prior": NominalModel(position_noise_std_m=1e-6, initial_velocity_std_m_per_s=10.0),
-    "large noise": NominalModel(
-        position_noise_std_m=1.0,
-        velocity_process_std_m_per_s=1.0,
-        intention_process_std_m=1.0,
-        cooperativeness_process_std=1.0,
-        position_process_std_m=1.0,
-        initial_velocity_std_m_per_s=10.0,
-        initial_intention_std_m=10.0,
-        initial_cooperativeness_std=10.0,
-    ),
+    "large noise": _noise_levels(camera=1.0, process=1.0, prior=10.0),
 }
 
 
@@ -156,6 +154,17 @@ def _persona(name: str, **levels: Any) -> Persona:
     return Persona(name, name, PersonParams(**levels), 0.15)
 
 
+def _noisy_persona(name: str, body: float, intention: float, camera: float, force: float) -> Persona:
+    """A persona with every noise of the person set: the body's acceleration noise, the intention's
+    diffusion, and the camera's and force sensor's stds."""
+    return _persona(
+        name,
+        biomechanics=Biomechanics(accel_noise_std_m_per_s2=body),
+        intention=Intention(noise_std_m_per_sqrt_s=intention),
+        sensors=Sensors(position_noise_std_m=camera, force_noise_std_n=force),
+    )
+
+
 EXTREME_PERSONAS: dict[str, tuple[Persona, dict[str, Any]]] = {
     "very stiff": (
         _persona("stiff", biomechanics=Biomechanics(damping_rate_per_s=90.0, voluntary_gain_per_s2=900.0)),
@@ -175,24 +184,8 @@ EXTREME_PERSONAS: dict[str, tuple[Persona, dict[str, Any]]] = {
         ),
         {"realism": Realism(saturation=False)},
     ),
-    "no noise": (
-        _persona(
-            "noiseless",
-            biomechanics=Biomechanics(accel_noise_std_m_per_s2=0.0),
-            intention=Intention(noise_std_m_per_sqrt_s=0.0),
-            sensors=Sensors(position_noise_std_m=0.0, force_noise_std_n=0.0),
-        ),
-        {},
-    ),
-    "large noise": (
-        _persona(
-            "noisy",
-            biomechanics=Biomechanics(accel_noise_std_m_per_s2=10.0),
-            intention=Intention(noise_std_m_per_sqrt_s=1.0),
-            sensors=Sensors(position_noise_std_m=1.0, force_noise_std_n=100.0),
-        ),
-        {},
-    ),
+    "no noise": (_noisy_persona("noiseless", body=0.0, intention=0.0, camera=0.0, force=0.0), {}),
+    "large noise": (_noisy_persona("noisy", body=10.0, intention=1.0, camera=1.0, force=100.0), {}),
 }
 
 
