@@ -89,6 +89,24 @@ def _as_array(values: list[Any]) -> np.ndarray:
     return array
 
 
+def _append_step(
+    rows: dict[str, list[Any]],
+    infos: dict[str, list[Any]],
+    obs: Any,
+    reward: Any,
+    terminated: Any,
+    truncated: Any,
+    info: dict[str, Any],
+) -> None:
+    """Record one step's results: ``rows`` by name, ``infos`` by flattened ``info.`` key."""
+    rows["obs"].append(obs)
+    rows["reward"].append(reward)
+    rows["terminated"].append(terminated)
+    rows["truncated"].append(truncated)
+    for key, value in _flatten(info).items():
+        infos.setdefault(f"info.{key}", []).append(value)
+
+
 def _record_single(env_id: str, seed: int) -> dict[str, np.ndarray]:
     env = gym.make(env_id)
     actions = _actions(env_id, seed, (SINGLE_STEPS,))
@@ -97,12 +115,7 @@ def _record_single(env_id: str, seed: int) -> dict[str, np.ndarray]:
     infos: dict[str, list[Any]] = {f"info.{k}": [] for k in _flatten(info)}
     for t in range(SINGLE_STEPS):
         obs, reward, terminated, truncated, info = env.step(actions[t])
-        rows["obs"].append(obs)
-        rows["reward"].append(reward)
-        rows["terminated"].append(terminated)
-        rows["truncated"].append(truncated)
-        for key, value in _flatten(info).items():
-            infos.setdefault(f"info.{key}", []).append(value)
+        _append_step(rows, infos, obs, reward, terminated, truncated, info)
         if terminated or truncated:
             obs, _ = env.reset()
             rows["obs"].append(obs)
@@ -118,12 +131,9 @@ def _record_vector(env_id: str) -> dict[str, np.ndarray]:
     infos: dict[str, list[Any]] = {}
     for t in range(VECTOR_STEPS):
         obs, reward, terminated, truncated, info = envs.step(actions[t])
-        rows["obs"].append(obs)
-        rows["reward"].append(reward)
-        rows["terminated"].append(terminated)
-        rows["truncated"].append(truncated)
-        for key, value in _flatten(info).items():
-            infos.setdefault(f"info.{key}", []).append(np.asarray(value).copy())
+        # The vector env reuses its info arrays from step to step: keep copies.
+        info = {key: np.asarray(value).copy() for key, value in _flatten(info).items()}
+        _append_step(rows, infos, obs, reward, terminated, truncated, info)
     envs.close()
     return {k: _as_array(v) for k, v in {**rows, **infos}.items()}
 
