@@ -1,0 +1,120 @@
+"""Score candidate hard levels: the hard level's knobs changed, every baseline chosen again on it.
+
+The hard level's knobs (:class:`coop_gym.model.difficulty.Difficulty`) were chosen against the
+one-routine blind family; a level's headroom has to be measured against the best blind policy
+*for that level*, so each candidate here gets the whole choice again, on the TRAINING personas:
+
+* the widened blind search (:func:`agents.tune_baselines.search_blind`, ``--final-episodes``
+  per finalist);
+* the prober's grid (:func:`agents.tune_baselines.tune` over ``prober_grid``, ``--prober-episodes``
+  per setting), beside the prober's shipped settings;
+
+then scores the blind winner, both probers and the belief caregiver (its shipped settings, its
+filter at the candidate level) on ``--held-out-episodes`` seeded episodes of the held-out
+personas (seeds 0..N-1, the same for every row), and prints one line per agent (the oracle,
+who sees ``xi``, too) and the candidate's value of reading the mind (oracle - blind) and the
+best reader's gain over blind. A candidate is the shipped level with some knobs replaced, as JSON::
+
+    python scripts/level_candidates.py --knobs '{}' '{"pushed_lapse_rate_per_s": 2.0}'
+
+The candidate replaces ``DIFFICULTIES["hard"]`` in this process only (every env made here with
+``difficulty="hard"`` plays it); the registered ids are untouched. A candidate takes about ten
+minutes of one core.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+
+import tyro
+
+ENV_ID = "CoopGym/SitToStandHard-v1"
+
+
+@dataclass
+class Args:
+    """Command-line arguments; each field's docstring is its ``--help``."""
+
+    knobs: list[str] = field(default_factory=lambda: ["{}"])
+    """Candidates: JSON objects of ``Difficulty`` fields to replace on the shipped hard level."""
+    final_episodes: int = 500
+    """Training episodes per finalist of the blind search."""
+    prober_episodes: int = 200
+    """Training episodes per setting of the prober's grid."""
+    held_out_episodes: int = 1000
+    """Held-out episodes per agent."""
+
+
+def candidate(knobs: dict[str, float]) -> object:
+    """The shipped hard level with ``knobs`` replaced (unknown field names raise ``TypeError``)."""
+    from coop_gym.model.difficulty import DIFFICULTIES
+
+    return dataclasses.replace(DIFFICULTIES["hard"], **knobs)
+
+
+def score(knobs: dict[str, float], args: Args) -> None:
+    """Choose the baselines again on the candidate level and print their held-out scores."""
+    from agents.belief import BeliefCaregiver
+    from agents.evaluate import evaluate
+    from agents.scripted import BlindAgent, ProbingCaregiver
+    from agents.tune_baselines import describe, prober_grid, search_blind, tune
+    from coop_gym.envs.contract import observation_features
+    from coop_gym.model import difficulty
+
+    shipped = difficulty.DIFFICULTIES["hard"]
+    difficulty.DIFFICULTIES["hard"] = candidate(knobs)
+    try:
+        t0 = time.perf_counter()
+        blind = search_blind(ENV_ID, None, final_episodes=args.final_episodes, log=lambda *_: None)[0][0]
+        probers = tune(
+            lambda s: ProbingCaregiver(settings=s), list(prober_grid()), ENV_ID, episodes=args.prober_episodes
+        )
+        agents = {
+            "oracle": ("oracle", None),
+            "blind (chosen here)": (BlindAgent(settings=blind), None),
+            "prober (shipped settings)": (ProbingCaregiver(), None),
+            "prober (chosen here)": (ProbingCaregiver(settings=probers[0][0]), None),
+            "belief": (BeliefCaregiver(observation_features("belief", "switching")), {"estimator": "switching"}),
+        }
+        print(f"candidate {json.dumps(knobs)}: blind {describe(blind)}; prober {dataclasses.asdict(probers[0][0])}")
+        rates = {}
+        for name, (agent, env_kwargs) in agents.items():
+            r = evaluate(agent, ENV_ID, "test", args.held_out_episodes, 0, env_kwargs=env_kwargs, name=name)
+            lo, hi = r.interval("success")
+            rates[name] = r.success_rate
+            print(
+                f"  {name:>26}: success {100 * r.success_rate:5.1f} % [{100 * lo:.1f}, {100 * hi:.1f}]  "
+                f"unsafe {100 * r.unsafe_rate:.1f} %  premature {100 * r.premature_rate:.1f} %  "
+                f"timeout {100 * r.timeout_rate:.1f} %"
+            )
+        blind_rate = rates["blind (chosen here)"]
+        best_reader = max(rates["prober (chosen here)"], rates["belief"])
+        print(
+            f"  value of reading the mind {100 * (rates['oracle'] - blind_rate):+.1f} points; "
+            f"best reader chosen on the training personas {100 * (best_reader - blind_rate):+.1f} over blind "
+            f"({time.perf_counter() - t0:.0f} s)",
+            flush=True,
+        )
+    finally:
+        difficulty.DIFFICULTIES["hard"] = shipped
+
+
+def main() -> None:
+    """Score every candidate in turn."""
+    args = tyro.cli(Args)
+    for text in args.knobs:
+        knobs = json.loads(text)
+        if not isinstance(knobs, dict):
+            raise SystemExit(f"--knobs: expected JSON objects of Difficulty fields, got {text!r}")
+        try:
+            candidate(knobs)  # a bad field fails here, before ten minutes of search
+        except (TypeError, ValueError) as error:
+            raise SystemExit(f"--knobs {text}: {error}") from None
+        score(knobs, args)
+
+
+if __name__ == "__main__":
+    main()
