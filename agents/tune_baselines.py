@@ -46,8 +46,9 @@ Candidates are scored many at a time in one natively batched vector env
 ``i % episodes``, the episodes :func:`agents.evaluate.evaluate` would play). The winners
 are kept in :data:`agents.scripted.TUNED_BLIND` and scored by :mod:`agents.evaluate` on the
 held-out personas with fresh seeds (``--personas test``, seeds from 0).
-``python -m agents.tune_baselines prober`` searches :class:`agents.scripted.ProbingCaregiver`
-(36 settings, 300 episodes each). Rerun both after a model change.
+``python -m agents.tune_baselines prober --level LEVEL`` searches :class:`agents.scripted.ProbingCaregiver`
+(36 settings, 300 episodes each of the training personas); the winners are kept in
+:data:`agents.scripted.TUNED_PROBER`. Rerun both after a model change.
 """
 
 from __future__ import annotations
