@@ -42,7 +42,7 @@ class Args:
     """Candidates: JSON objects of ``Difficulty`` fields to replace on the shipped hard level."""
     final_episodes: int = 500
     """Training episodes per finalist of the blind search."""
-    prober_episodes: int = 200
+    prober_episodes: int = 300
     """Training episodes per setting of the prober's grid."""
     held_out_episodes: int = 1000
     """Held-out episodes per agent."""
