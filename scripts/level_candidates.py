@@ -7,7 +7,7 @@ one-routine blind family; a level's headroom has to be measured against the best
 * the widened blind search (:func:`agents.tune_baselines.search_blind`, ``--final-episodes``
   per finalist);
 * the prober's grid (:func:`agents.tune_baselines.tune` over ``prober_grid``, ``--prober-episodes``
-  per setting), beside the prober's shipped settings;
+  per setting), beside the prober at the shipped level's settings (printed, not counted);
 
 then scores the blind winner, both probers and the belief caregiver (its shipped settings, its
 filter at the candidate level) on ``--held-out-episodes`` seeded episodes of the held-out
@@ -28,8 +28,12 @@ import dataclasses
 import json
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import tyro
+
+if TYPE_CHECKING:
+    from coop_gym.model.difficulty import Difficulty
 
 ENV_ID = "CoopGym/SitToStandHard-v1"
 
@@ -48,17 +52,17 @@ class Args:
     """Held-out episodes per agent."""
 
 
-def candidate(knobs: dict[str, float]) -> object:
+def candidate(knobs: dict[str, Any]) -> Difficulty:
     """The shipped hard level with ``knobs`` replaced (unknown field names raise ``TypeError``)."""
     from coop_gym.model.difficulty import DIFFICULTIES
 
     return dataclasses.replace(DIFFICULTIES["hard"], **knobs)
 
 
-def score(knobs: dict[str, float], args: Args) -> None:
+def score(knobs: dict[str, Any], args: Args) -> None:
     """Choose the baselines again on the candidate level and print their held-out scores."""
     from agents.belief import BeliefCaregiver
-    from agents.evaluate import evaluate
+    from agents.evaluate import evaluate, headroom
     from agents.scripted import BlindAgent, ProbingCaregiver
     from agents.tune_baselines import describe, prober_grid, search_blind, tune
     from coop_gym.envs.contract import observation_features
@@ -72,32 +76,31 @@ def score(knobs: dict[str, float], args: Args) -> None:
         probers = tune(
             lambda s: ProbingCaregiver(settings=s), list(prober_grid()), ENV_ID, episodes=args.prober_episodes
         )
-        agents = {
+        # Named as agents.evaluate.headroom knows them: the value of reading the mind and the best
+        # reader's gain come with their paired intervals. The prober at the shipped level's settings
+        # is printed beside them, not counted (it was not chosen on this candidate).
+        agents: dict[str, tuple[Any, dict[str, Any] | None]] = {
             "oracle": ("oracle", None),
-            "blind (chosen here)": (BlindAgent(settings=blind), None),
-            "prober (shipped settings)": (ProbingCaregiver(), None),
-            "prober (chosen here)": (ProbingCaregiver(settings=probers[0][0]), None),
+            "blind": (BlindAgent(settings=blind), None),
+            "prober": (ProbingCaregiver(settings=probers[0][0]), None),
             "belief": (BeliefCaregiver(observation_features("belief", "switching")), {"estimator": "switching"}),
+            "prober at the shipped level's settings": (ProbingCaregiver(), None),
         }
         print(f"candidate {json.dumps(knobs)}: blind {describe(blind)}; prober {dataclasses.asdict(probers[0][0])}")
-        rates = {}
+        results = []
         for name, (agent, env_kwargs) in agents.items():
             r = evaluate(agent, ENV_ID, "test", args.held_out_episodes, 0, env_kwargs=env_kwargs, name=name)
             lo, hi = r.interval("success")
-            rates[name] = r.success_rate
+            results.append(r)
             print(
-                f"  {name:>26}: success {100 * r.success_rate:5.1f} % [{100 * lo:.1f}, {100 * hi:.1f}]  "
+                f"  {name:>38}: success {100 * r.success_rate:5.1f} % [{100 * lo:.1f}, {100 * hi:.1f}]  "
                 f"unsafe {100 * r.unsafe_rate:.1f} %  premature {100 * r.premature_rate:.1f} %  "
                 f"timeout {100 * r.timeout_rate:.1f} %"
             )
-        blind_rate = rates["blind (chosen here)"]
-        best_reader = max(rates["prober (chosen here)"], rates["belief"])
-        print(
-            f"  value of reading the mind {100 * (rates['oracle'] - blind_rate):+.1f} points; "
-            f"best reader chosen on the training personas {100 * (best_reader - blind_rate):+.1f} over blind "
-            f"({time.perf_counter() - t0:.0f} s)",
-            flush=True,
-        )
+        room = headroom(results[:-1])
+        for line in room.lines() if room is not None else ():
+            print(f"  {line}")
+        print(f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
     finally:
         difficulty.DIFFICULTIES["hard"] = shipped
 
