@@ -2,8 +2,9 @@
 
 ``python train.py`` with no arguments trains PPO on ``CoopGym/SitToStandHard-v1`` (the hard
 level, where reading the mind decides the outcome; training personas only), evaluates it and
-every scripted baseline -- the mental-state-blind policy, the probing caregiver, the oracle on the oracle
-observation of the same episodes -- on the held-out test personas over 1000 seeded
+every scripted baseline -- the mental-state-blind policy, the probing caregiver, the belief
+caregiver on the switching filter's estimate, the oracle on the oracle observation of the same
+episodes -- on the held-out test personas over 1000 seeded
 episodes, prints the comparison table (with each agent's mind-reading score) and saves
 everything in one run folder::
 
@@ -91,7 +92,7 @@ class Args:
     """skip training: evaluate --model against the baselines"""
     model: str | None = None
     """saved model (a run folder or its model.zip) for --eval-only"""
-    baselines: str = "random,lift_at_once,push_then_lift,handbook,blind,prober,oracle"
+    baselines: str = "random,lift_at_once,push_then_lift,handbook,blind,prober,belief,oracle"
     """scripted agents to compare with, joined by ','; with blind and oracle: the mind-reading score"""
     eval_points: int = 8
     """evaluations during training for the learning curve (min(200, eval_episodes) episodes each; 0: none)"""

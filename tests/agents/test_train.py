@@ -50,6 +50,7 @@ def test_run_folder_is_complete_and_the_model_loads(first_run):
         "handbook",
         "blind",
         "prober",
+        "belief",
         "oracle",
     ]
     # The report says what the benchmark measures: oracle - best blind, best non-oracle - best blind.
