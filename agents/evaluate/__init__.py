@@ -135,7 +135,8 @@ def evaluate(
             agents) or the name of a scripted agent (built for the env; the oracle gets
             the oracle observation, see :func:`env_kwargs_for`).
         env_id: Registered env id.
-        personas: ``"train"``, ``"test"``, ``"all"``, a persona name or a list of names.
+        personas: ``"train"``, ``"train_wide"``, ``"test"``, ``"all"``, a persona name or a
+            list of names (:func:`coop_gym.model.personas.resolve_personas`).
         episodes: Number of episodes; episode ``k`` is seeded ``seed + k``.
         seed: Seed of episode 0.
         n_envs: Episodes played side by side (at most ``episodes``).
@@ -153,10 +154,12 @@ def evaluate(
             observation does not match the env's.
     """
     _check_counts(episodes, n_envs, seed, backend)
-    persona_names = tuple(p.name for p in resolve_personas(personas if isinstance(personas, str) else list(personas)))
+    resolved = resolve_personas(personas if isinstance(personas, str) else list(personas))
+    persona_names = tuple(p.name for p in resolved)
     label = name or (agent if isinstance(agent, str) else getattr(agent, "name", type(agent).__name__))
     kwargs = env_kwargs_for(agent, env_id, env_kwargs) if isinstance(agent, str) else dict(env_kwargs or {})
-    kwargs["personas"] = list(persona_names)
+    # The personas themselves, not their names: "train_wide" keeps its training names with a wider spread.
+    kwargs["personas"] = list(resolved)
     slots = make_slots(env_id, min(n_envs, episodes), kwargs, backend)
     start_time = time.perf_counter()
     try:

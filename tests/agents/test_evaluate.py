@@ -119,6 +119,28 @@ def test_records_match_a_hand_rollout():
     assert record.duration_s == pytest.approx(info["elapsed_s"])
 
 
+def _hand_return(env_id: str, personas: str, seed: int) -> float:
+    env = gym.make(env_id, personas=personas)
+    agent = HandbookCaregiver.for_env(env)
+    obs, _ = env.reset(seed=seed)
+    total, done = 0.0, False
+    while not done:
+        obs, reward, terminated, truncated, _ = env.step(agent.predict(obs)[0])
+        total, done = total + float(reward), terminated or truncated
+    return total
+
+
+def test_train_wide_plays_the_wider_spread_not_just_the_names():
+    """``personas="train_wide"`` is the training personas with a wider spread, as the env plays it."""
+    env_id = "CoopGym/SitToStandHard-v1"
+    wide = evaluate("handbook", env_id, "train_wide", episodes=24, seed=5, n_envs=8)
+    narrow = evaluate("handbook", env_id, "train", episodes=24, seed=5, n_envs=8)
+    assert wide.personas == narrow.personas  # the same names ...
+    assert [r.episode_return for r in wide.records] != [r.episode_return for r in narrow.records]  # ... other people
+    for k in range(3):
+        assert wide.records[k].episode_return == pytest.approx(_hand_return(env_id, "train_wide", 5 + k))
+
+
 def test_agent_objects_and_mismatches():
     env = gym.make("CoopGym/SitToStandOracle-v0")
     oracle = OracleAgent.for_env(env)
