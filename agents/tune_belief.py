@@ -8,7 +8,9 @@ each one's success and unsafe rates and the best (most successes, then fewest un
 Each training persona is played with a filter whose parameter hypotheses are drawn around the
 OTHER training personas (``SwitchingOptions.personas``): leave one persona out. The held-out
 personas are people the caregiver has not met, and a filter scored only on the people its
-hypotheses were drawn around would choose settings that lean on knowing them. The winner is
+hypotheses were drawn around would choose settings that lean on knowing them. ``--wide``
+plays each persona with the wider spread ``train.py`` trains on (``train_wide``): people further
+from the five, who test the same choice on bodies the filter's hypotheses cover less well. The winner is
 :class:`agents.belief.BeliefSettings`' default; it is scored on the held-out personas by
 ``python -m agents.evaluate --compare belief,...`` with the filter's default hypotheses (all the
 training personas).
@@ -17,6 +19,7 @@ training personas).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -25,7 +28,7 @@ from agents.belief import BeliefCaregiver, BeliefSettings
 from agents.evaluate import evaluate
 from agents.tune_baselines import TUNING_SEED
 from coop_gym.envs.contract import observation_features
-from coop_gym.model.personas import TRAIN_PERSONAS
+from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS, WIDE_VARIATION_STD
 
 __all__ = ["leave_one_out", "main", "settings_grid"]
 
@@ -43,7 +46,9 @@ def settings_grid() -> list[BeliefSettings]:
     ]
 
 
-def leave_one_out(settings: BeliefSettings, env_id: str, episodes: int, seed: int = TUNING_SEED) -> tuple[float, float]:
+def leave_one_out(
+    settings: BeliefSettings, env_id: str, episodes: int, seed: int = TUNING_SEED, *, wide: bool = False
+) -> tuple[float, float]:
     """Mean success and unsafe rates over the training personas, each met by a filter that has not seen it.
 
     Args:
@@ -51,11 +56,16 @@ def leave_one_out(settings: BeliefSettings, env_id: str, episodes: int, seed: in
         env_id: Registered env id.
         episodes: Episodes per training persona (episode ``k`` seeded ``seed + k``).
         seed: Seed of each persona's episode 0.
+        wide: Play each persona with the ``train_wide`` spread (:data:`WIDE_VARIATION_STD`,
+            what ``train.py`` trains on) instead of its own.
     """
     rates = []
-    for persona in TRAIN_PERSONAS:
-        others = [name for name in TRAIN_PERSONAS if name != persona]
+    for name in TRAIN_PERSONAS:
+        others = [other for other in TRAIN_PERSONAS if other != name]
         options = {"personas": others}
+        persona = PERSONAS[name]
+        if wide:
+            persona = dataclasses.replace(persona, variation_relative_std=WIDE_VARIATION_STD)
         result = evaluate(
             BeliefCaregiver(observation_features("belief", "switching"), settings=settings),
             env_id, [persona], episodes, seed, env_kwargs={"estimator": "switching", "estimator_options": options},
@@ -70,12 +80,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m agents.tune_belief", description=main.__doc__)
     parser.add_argument("--env", default="CoopGym/SitToStandHard-v1")
     parser.add_argument("--episodes", type=int, default=128, help="episodes per training persona")
+    parser.add_argument("--wide", action="store_true", help="each persona with train.py's train_wide spread")
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes must be positive, got {args.episodes}")
     rows = []
     for settings in settings_grid():
-        success, unsafe = leave_one_out(settings, args.env, args.episodes)
+        success, unsafe = leave_one_out(settings, args.env, args.episodes, wide=args.wide)
         rows.append((success, -unsafe, settings))
         print(f"{success:.3f} success, {unsafe:.3f} unsafe: {settings}", flush=True)
     best = max(rows, key=lambda row: row[:2])

@@ -59,7 +59,7 @@ from agents.evaluate.results import (
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.compiled.checks import check_integer
-from coop_gym.model.personas import resolve_personas
+from coop_gym.model.personas import Persona, resolve_personas
 
 __all__ = [
     "BLIND_AGENTS",
@@ -117,7 +117,7 @@ def env_kwargs_for(agent_name: str, env_id: str, env_kwargs: dict[str, Any] | No
 def evaluate(
     agent: Agent | str,
     env_id: str = DEFAULT_ENV_ID,
-    personas: str | Sequence[str] = "test",
+    personas: str | Sequence[str | Persona] = "test",
     episodes: int = 1000,
     seed: int = 0,
     *,
@@ -136,7 +136,8 @@ def evaluate(
             the oracle observation, see :func:`env_kwargs_for`).
         env_id: Registered env id.
         personas: ``"train"``, ``"train_wide"``, ``"test"``, ``"all"``, a persona name or a
-            list of names (:func:`coop_gym.model.personas.resolve_personas`).
+            list of names or :class:`~coop_gym.model.personas.Persona` objects
+            (:func:`coop_gym.model.personas.resolve_personas`).
         episodes: Number of episodes; episode ``k`` is seeded ``seed + k``.
         seed: Seed of episode 0.
         n_envs: Episodes played side by side (at most ``episodes``).
