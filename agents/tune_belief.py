@@ -9,8 +9,8 @@ Each training persona is played with a filter whose parameter hypotheses are dra
 OTHER training personas (``SwitchingOptions.personas``): leave one persona out. The held-out
 personas are people the caregiver has not met, and a filter scored only on the people its
 hypotheses were drawn around would choose settings that lean on knowing them. ``--wide``
-plays each persona with the wider spread ``train.py`` trains on (``train_wide``): people further
-from the five, who test the same choice on bodies the filter's hypotheses cover less well. The winner is
+plays each persona with the wider spread ``train.py`` trains on (``train_wide``): people
+further from the five, whose bodies the filter's hypotheses cover less well. The winner is
 :class:`agents.belief.BeliefSettings`' default; it is scored on the held-out personas by
 ``python -m agents.evaluate --compare belief,...`` with the filter's default hypotheses (all the
 training personas).

@@ -2,9 +2,9 @@ r"""Ship a trained model as a pretrained caregiver: copy it into ``agents/pretra
 
 The card (``agents/pretrained/NAME.json``) holds what a user needs to trust the model: the env
 it plays (id and kwargs), how it was trained, and its held-out table -- the model beside the
-best blind policy, the prober, the belief caregiver and the oracle on the same ``--episodes`` seeded episodes of the
-``test`` personas, each with success, unsafe, premature and timeout rates (95 % Wilson
-intervals) and the mind-reading score -- exactly what ::
+best blind policy, the prober, the belief caregiver and the oracle on the same ``--episodes``
+seeded episodes of the ``test`` personas, each with success, unsafe, premature and timeout
+rates (95 % Wilson intervals) and the mind-reading score -- exactly what ::
 
     python -m agents.evaluate --model pretrained:NAME --compare blind,push_then_lift,prober,belief,oracle \
         --personas test --episodes 1000 --seed 0
@@ -29,8 +29,8 @@ from typing import Any
 import tyro
 
 BASELINES = ("blind", "push_then_lift", "prober", "belief", "oracle")
-"""The agents beside the model: the blind family's two best, the two readers (the prober's displacement rule,
-the belief caregiver's estimator) and the oracle."""
+"""The agents beside the model: the blind family's two best, the two readers (the prober's
+displacement rule, the belief caregiver's estimator) and the oracle."""
 PRETRAINED = Path(__file__).resolve().parents[1] / "agents" / "pretrained"
 
 
