@@ -84,8 +84,12 @@ def _counts(result: Any) -> dict[str, Any]:
 
 
 def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, Any]:
-    """The card's training section, from the training summary (train.py's or the script's)."""
-    return {
+    """The card's training section, from the training summary (train.py's or the script's).
+
+    A card's own training section is a summary too: carding a model again keeps its
+    ``defaults`` line (the settings in words), which no training summary writes.
+    """
+    section = {
         "command": args.command,
         "seed": training.get("seed", 0),
         "timesteps": training["timesteps"],
@@ -94,6 +98,9 @@ def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, An
         "wall_time_s": round(float(training["wall_time_s"]), 1),
         "hyperparams": f"agents/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']",
     }
+    if "defaults" in training:
+        section["defaults"] = training["defaults"]
+    return section
 
 
 def _evaluation(args: Args, label: str, results: list[Any]) -> dict[str, Any]:
