@@ -135,9 +135,7 @@ def evaluate(
             agents) or the name of a scripted agent (built for the env; the oracle gets
             the oracle observation, see :func:`env_kwargs_for`).
         env_id: Registered env id.
-        personas: ``"train"``, ``"train_wide"``, ``"test"``, ``"all"``, a persona name or a
-            list of names or :class:`~coop_gym.model.personas.Persona` objects
-            (:func:`coop_gym.model.personas.resolve_personas`).
+        personas: What :func:`~coop_gym.model.personas.resolve_personas` takes (the env plays those people).
         episodes: Number of episodes; episode ``k`` is seeded ``seed + k``.
         seed: Seed of episode 0.
         n_envs: Episodes played side by side (at most ``episodes``).
@@ -156,11 +154,9 @@ def evaluate(
     """
     _check_counts(episodes, n_envs, seed, backend)
     resolved = resolve_personas(personas if isinstance(personas, str) else list(personas))
-    persona_names = tuple(p.name for p in resolved)
     label = name or (agent if isinstance(agent, str) else getattr(agent, "name", type(agent).__name__))
     kwargs = env_kwargs_for(agent, env_id, env_kwargs) if isinstance(agent, str) else dict(env_kwargs or {})
-    # The personas themselves, not their names: "train_wide" keeps its training names with a wider spread.
-    kwargs["personas"] = list(resolved)
+    kwargs["personas"] = list(resolved)  # the people, not their names: "train_wide" is named as "train"
     slots = make_slots(env_id, min(n_envs, episodes), kwargs, backend)
     start_time = time.perf_counter()
     try:
@@ -171,7 +167,7 @@ def evaluate(
     return EvaluationResult(
         agent=str(label),
         env_id=env_id,
-        personas=persona_names,
+        personas=tuple(p.name for p in resolved),
         seed=seed,
         records=tuple(records),
         wall_time_s=time.perf_counter() - start_time,
