@@ -9,7 +9,8 @@ which lifts on a forward answer of ``answer_m``); it only chooses which cue to g
 
 1. **recruit**: a gentle push with "lean forward" for ``burst_s``, ended as soon as
    ``P(xi = +1) >= recruited_p`` (a guided push is what turns a person cooperative, and
-   pushing on wears the willingness down);
+   pushing on wears the willingness down), or, with ``recruit_until_m`` set, once the
+   shoulder estimate reaches it (room left to answer a probe; off by default);
 2. **settle**: silence for ``settle_s`` (the push's own motion dies out);
 3. **probe**: "lean forward" with no push -- a cooperative person answers, a passive one does not
    move, a resisting one leans back -- watched for ``window_s``; then probe again while
@@ -63,6 +64,9 @@ class BeliefSettings:
         settle_s: Silence between the burst and the probe [s].
         window_s: How long a probe is watched before the next cue [s].
         reprobe_p: After a probe window, probe again (no push) while ``P(xi = +1)`` is at least this.
+        recruit_until_m: End a burst once the shoulder estimate reaches this [m]; None: no
+            limit. Not chosen: on the training personas it changes nothing beyond the noise
+            (docs/HARD_LEVEL.md, "The belief caregiver").
     """
 
     lift_p: float = 0.85
@@ -72,12 +76,15 @@ class BeliefSettings:
     settle_s: float = 0.3
     window_s: float = 1.0
     reprobe_p: float = 0.5
+    recruit_until_m: float | None = None
 
     def __post_init__(self) -> None:
         """Validate ranges."""
         for name in ("lift_p", "recruited_p", "reprobe_p"):
             check_number(f"BeliefSettings.{name}", getattr(self, name), 0.0, 1.0)
         check_number("BeliefSettings.lean_m", self.lean_m, 0.0, 1.0)
+        if self.recruit_until_m is not None:
+            check_number("BeliefSettings.recruit_until_m", self.recruit_until_m, 0.0, 1.0)
         for name in ("burst_s", "settle_s", "window_s"):
             check_number(f"BeliefSettings.{name}", getattr(self, name), 0.0, 60.0)
 
@@ -94,12 +101,14 @@ class BeliefCaregiver(ScriptedAgent):
         self, obs: NDArray[np.float64], memory: PhaseState, now: NDArray[np.float64]
     ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
         s = self.settings
-        p_cooperative = self._column(obs, "p_cooperative")
+        p_cooperative, x_hat_m = self._column(obs, "p_cooperative"), self._column(obs, "x_hat_m")
         phase = memory.phase.copy()  # transitions are decided on the phase at the start of the step
-        lift = (phase == self.PROBE) & (p_cooperative >= s.lift_p) & (self._column(obs, "x_hat_m") >= s.lean_m)
+        lift = (phase == self.PROBE) & (p_cooperative >= s.lift_p) & (x_hat_m >= s.lean_m)
         age = now - memory.phase_start_s
         # Recruit -> settle after one burst, or once recruited; settle -> probe (ask "lean forward" without a push).
         burst_over = (age >= s.burst_s - EPS_S) | (p_cooperative >= s.recruited_p)
+        if s.recruit_until_m is not None:
+            burst_over |= x_hat_m >= s.recruit_until_m
         memory.enter((phase == self.RECRUIT) & burst_over, self.SETTLE, now)
         asking = (phase == self.SETTLE) & (age >= s.settle_s - EPS_S)
         # A probe's window is over: ask again while cooperation is likely, else recruit again.

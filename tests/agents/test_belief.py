@@ -51,6 +51,17 @@ def test_ends_the_burst_once_the_person_is_likely_recruited():
     assert pushes[0.6] == [PUSH_NONE] * 10  # likely recruited: no push, settle then probe
 
 
+def test_a_push_limit_ends_the_burst_once_the_shoulder_is_that_far_forward():
+    settings = BeliefSettings(lift_p=0.9, burst_s=2.0, recruited_p=1.0, settle_s=0.3, recruit_until_m=0.3)
+    pushes = {
+        x: [a[0] for a in _play(BeliefCaregiver(FEATURES, settings=settings), 0.1, x, steps=10)] for x in (0.2, 0.3)
+    }
+    assert pushes[0.2] == [PUSH_SOFT] * 10  # short of the limit: the whole burst
+    assert pushes[0.3] == [PUSH_NONE] * 10  # at the limit: no push, settle then probe
+    unlimited = BeliefSettings(lift_p=0.9, burst_s=2.0, recruited_p=1.0, settle_s=0.3)
+    assert [a[0] for a in _play(BeliefCaregiver(FEATURES, settings=unlimited), 0.1, 0.3, steps=10)] == [PUSH_SOFT] * 10
+
+
 @pytest.mark.parametrize(("p", "x", "lifts"), [(0.9, 0.2, True), (0.9, 0.1, False), (0.5, 0.3, False)])
 def test_lifts_on_the_estimate_and_the_posture_while_watching_a_probe(p, x, lifts):
     settings = BeliefSettings(lift_p=0.85, lean_m=0.16, burst_s=0.5, recruited_p=1.0, settle_s=0.3)
@@ -72,3 +83,5 @@ def test_needs_the_filter_and_checks_its_settings():
         BeliefSettings(recruited_p=-0.1)
     with pytest.raises(ValueError, match="window_s"):
         BeliefSettings(window_s=-1.0)
+    with pytest.raises(ValueError, match="recruit_until_m"):
+        BeliefSettings(recruit_until_m=-0.1)
