@@ -19,7 +19,6 @@ training personas).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -28,7 +27,7 @@ from agents.belief import BeliefCaregiver, BeliefSettings
 from agents.evaluate import evaluate
 from agents.tune_baselines import TUNING_SEED
 from coop_gym.envs.contract import observation_features
-from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS, WIDE_VARIATION_STD
+from coop_gym.model.personas import TRAIN_PERSONAS, resolve_personas
 
 __all__ = ["leave_one_out", "main", "settings_grid"]
 
@@ -56,16 +55,14 @@ def leave_one_out(
         env_id: Registered env id.
         episodes: Episodes per training persona (episode ``k`` seeded ``seed + k``).
         seed: Seed of each persona's episode 0.
-        wide: Play each persona with the ``train_wide`` spread (:data:`WIDE_VARIATION_STD`,
-            what ``train.py`` trains on) instead of its own.
+        wide: Play the ``train_wide`` set (each persona with
+            :data:`coop_gym.model.personas.WIDE_VARIATION_STD`, what ``train.py`` trains on)
+            instead of the personas' own spread.
     """
     rates = []
-    for name in TRAIN_PERSONAS:
-        others = [other for other in TRAIN_PERSONAS if other != name]
+    for persona in resolve_personas("train_wide" if wide else "train"):
+        others = [name for name in TRAIN_PERSONAS if name != persona.name]
         options = {"personas": others}
-        persona = PERSONAS[name]
-        if wide:
-            persona = dataclasses.replace(persona, variation_relative_std=WIDE_VARIATION_STD)
         result = evaluate(
             BeliefCaregiver(observation_features("belief", "switching"), settings=settings),
             env_id, [persona], episodes, seed, env_kwargs={"estimator": "switching", "estimator_options": options},
