@@ -143,7 +143,7 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
         # pushing, ask, and read the answer -- and a wider spread of people: on the training
         # personas' own +/-20 % one of three seeds learned their exact push compliance and
         # lifted 9.8 % of held-out people unsafely, reading a frail person's pushed lean as
-        # cooperation (README, "Difficulty levels": the seeds measured both ways).
+        # cooperation (docs/agents.md, "Why the wider spread").
         # 8 x 512 stays: on the hard level 64 x 64 learned less (77-82 % held-out against 85 %).
         "CoopGym/SitToStandHard-v1": _PPO.replace(
             env_id="CoopGym/SitToStandHard-v1", total_timesteps=1_000_000, personas="train_wide"

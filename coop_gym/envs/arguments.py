@@ -95,7 +95,7 @@ class EnvArguments:
     render_mode: str | None = None
     difficulty: str | Difficulty | None = None
     # The vector env's compiled step: at most this many threads (None, the default: the cores
-    # this process may use; README, "Threads").
+    # this process may use; docs/BENCHMARKS.md, "Threads").
     threads: int | None = None
     observation_scale: str = "none"
     info_mode: str = "default"

@@ -147,7 +147,7 @@ WIDE_VARIATION_STD = 0.5
 x0.61 around each training persona instead of about +/-20 % (domain randomisation). A policy trained on the
 narrow spread learns the training personas' exact push compliance; on the hard level one
 of three PPO seeds then read a held-out frail person's pushed lean as cooperation
-(README, "Difficulty levels")."""
+(docs/agents.md, "Why the wider spread")."""
 
 _SETS: dict[str, tuple[str, ...]] = {
     "train": TRAIN_PERSONAS,

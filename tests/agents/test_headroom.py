@@ -56,7 +56,7 @@ def test_hard_level_keeps_its_headroom_against_the_widest_blind_search(hard: dic
 
 
 def test_easy_level_does_not_test_the_mind() -> None:
-    # The honest sentence of the README, measured: on the paper's model the lean is enough.
+    # docs/environments.md, "Difficulty levels", measured: on the paper's model the lean is enough.
     results = [evaluate(name, "CoopGym/SitToStandEasy-v1", "test", 200, 0) for name in ("oracle", "blind")]
     room = headroom(results)
     assert room is not None and room.value_of_reading_the_mind <= 0.05

@@ -1,7 +1,7 @@
 """RL Baselines3 Zoo end to end: train with the shipped YAML on a tiny budget, then ``rl_zoo3.enjoy`` it.
 
 Skipped when rl_zoo3 is not installed (``pip install -e ".[zoo]"``; the ``[test]`` extra
-includes it). The commands are the README's, with a tiny ``-n``.
+includes it). The commands are docs/integrations.md's, with a tiny ``-n``.
 """
 
 from __future__ import annotations

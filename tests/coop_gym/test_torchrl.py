@@ -62,7 +62,7 @@ def test_gym_env_reads_the_single_envs_numeric_info() -> None:
 @pytest.mark.slow  # eight worker processes, each importing torch and compiling coop_gym: minutes on 2 cores
 def test_gym_env_with_num_envs_rolls_out_numeric_infos() -> None:
     # GymEnv(num_envs=N) steps Gymnasium's AsyncVectorEnv in its NEXT_STEP mode, which TorchRL
-    # 0.14.1 reads without the final infos (outcome_code 0 at episode ends): the README points
+    # 0.14.1 reads without the final infos (outcome_code 0 at episode ends): docs/integrations.md points
     # to GymWrapper over make_vec instead. This checks only that the numeric info is read in.
     env = torchrl_gym.GymEnv("coop_gym:CoopGym/SitToStand-v0", num_envs=8, info_mode="numeric")
     try:
