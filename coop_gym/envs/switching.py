@@ -41,8 +41,10 @@ __all__ = [
     "NOISES_PER_PARTICLE",
     "SwitchingEstimator",
     "SwitchingOptions",
+    "hypothesis_people",
     "level_filter",
     "nominal_person",
+    "pack_at_level",
     "switching_filter",
 ]
 
@@ -182,25 +184,41 @@ HYPOTHESES_SEED = 20_220_523
 """Seed of the draw of parameter hypotheses: one fixed bank, the same for every env and run."""
 
 
-def hypothesis_rows(
-    options: SwitchingOptions, difficulty: Difficulty | None, realism: Realism, timing: Timing
-) -> NDArray[np.float64]:
-    """(K, C) packed parameter hypotheses: the nominal person, or people drawn around ``options.personas``."""
-    if options.hypotheses == 1:
-        return pack_person(nominal_person(difficulty, realism), timing)[None]
+def hypothesis_people(options: SwitchingOptions) -> list[PersonParams]:
+    """The ``options.hypotheses`` people drawn around ``options.personas``, before a level's knobs.
+
+    Each is drawn with ``hypothesis_spread`` variation, its push compliance then scaled
+    log-uniformly in ``[1 / compliance_range, compliance_range]``; one fixed draw
+    (:data:`HYPOTHESES_SEED`), the same for every env and run.
+    """
     rng = np.random.default_rng(HYPOTHESES_SEED)
-    rows = []
+    people = []
     for k in range(options.hypotheses):
         persona = PERSONAS[options.personas[k % len(options.personas)]]
         person = sample_person(dataclasses.replace(persona, variation_relative_std=options.hypothesis_spread), rng)
         scale = math.exp(rng.uniform(-1.0, 1.0) * math.log(options.compliance_range))
         bio = person.biomechanics
         bio = dataclasses.replace(bio, push_compliance_m_per_s2_n=bio.push_compliance_m_per_s2_n * scale)
-        person = dataclasses.replace(person, biomechanics=bio)
-        if difficulty is not None:
-            person = difficulty.apply(person)
-        rows.append(pack_person(person.with_realism(realism), timing))
-    return np.stack(rows)
+        people.append(dataclasses.replace(person, biomechanics=bio))
+    return people
+
+
+def pack_at_level(
+    person: PersonParams, difficulty: Difficulty | None, realism: Realism, timing: Timing
+) -> NDArray[np.float64]:
+    """``person`` with ``difficulty``'s knobs and ``realism``, packed into a parameter row (:func:`pack_person`)."""
+    if difficulty is not None:
+        person = difficulty.apply(person)
+    return pack_person(person.with_realism(realism), timing)
+
+
+def hypothesis_rows(
+    options: SwitchingOptions, difficulty: Difficulty | None, realism: Realism, timing: Timing
+) -> NDArray[np.float64]:
+    """(K, C) packed parameter hypotheses: the nominal person, or :func:`hypothesis_people` at the level."""
+    if options.hypotheses == 1:
+        return pack_person(nominal_person(difficulty, realism), timing)[None]
+    return np.stack([pack_at_level(person, difficulty, realism, timing) for person in hypothesis_people(options)])
 
 
 def hypothesis_bank(
