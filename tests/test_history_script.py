@@ -1,0 +1,52 @@
+"""scripts/history.py: the body posterior carried from one episode of a person to the next."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+from agents.belief import BeliefCaregiver
+from coop_gym.envs.switching import SwitchingOptions, hypothesis_people
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("history_script", ROOT / "scripts" / "history.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["history_script"] = module  # dataclasses resolve the module by name
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_first_episode_is_the_same_and_only_later_ones_meet_the_carried_bank() -> None:
+    history = _script()
+    args = history.Args(residents=1, episodes=2)
+    nominal, nominal_known = history.meet("frail", 3, "nominal", args)
+    carried, carried_known = history.meet("frail", 3, "carried", args)
+    assert nominal[0] == carried[0]  # same person, seed and bank until the first carry-over
+    assert np.isnan(nominal_known).all() and 1.0 <= carried_known[0] <= SwitchingOptions().hypotheses
+    assert np.all(carried_known[1:] > 0)  # posterior means over the person's gains
+
+
+def test_the_carried_bank_is_drawn_from_the_posterior_over_the_hypotheses() -> None:
+    history = _script()
+    env = gym.make(history.ENV_ID, estimator="switching", personas=["frail"])
+    agent = BeliefCaregiver.for_env(env)
+    history._play(env, agent, 5)
+    pf = env.unwrapped.core.mm.filter
+    before = pf.params[0].copy()
+    weights = np.exp(pf.log_w[0] - pf.log_w[0].max())
+    posterior = np.bincount(pf.particles[0, :, -1].astype(int), weights=weights / weights.sum(), minlength=len(before))
+    alive = set(np.flatnonzero(posterior > 1e-12).tolist())
+    bank, known = history._carry_over(env, hypothesis_people(SwitchingOptions()), np.random.default_rng(0), 0.0)
+    after = pf.params[0]
+    # Every new row is one of the old bank's, and only hypotheses that held weight are drawn.
+    drawn = {int(np.flatnonzero((before == row).all(axis=1))[0]) for row in after}
+    assert drawn <= alive and len(drawn) < len(before)
+    assert len(bank) == len(before) and 1.0 <= known[0] <= len(before)
+    env.close()
