@@ -43,10 +43,31 @@ def test_the_carried_bank_is_drawn_from_the_posterior_over_the_hypotheses() -> N
     weights = np.exp(pf.log_w[0] - pf.log_w[0].max())
     posterior = np.bincount(pf.particles[0, :, -1].astype(int), weights=weights / weights.sum(), minlength=len(before))
     alive = set(np.flatnonzero(posterior > 1e-12).tolist())
-    bank, known = history._carry_over(env, hypothesis_people(SwitchingOptions()), np.random.default_rng(0), 0.0)
+    bank, known = history._carry_over(
+        env.unwrapped.core, hypothesis_people(SwitchingOptions()), np.random.default_rng(0), 0.0
+    )
     after = pf.params[0]
     # Every new row is one of the old bank's, and only hypotheses that held weight are drawn.
     drawn = {int(np.flatnonzero((before == row).all(axis=1))[0]) for row in after}
     assert drawn <= alive and len(drawn) < len(before)
     assert len(bank) == len(before) and 1.0 <= known[0] <= len(before)
+    env.close()
+
+
+def test_the_recorded_episodes_weigh_the_persons_own_body_above_the_typical_one() -> None:
+    history = _script()
+    body = history.sample_person(history.PERSONAS["frail"], np.random.default_rng(1))
+    person = history.Persona("frail", "one resident", body, variation_relative_std=0.0)
+    env = gym.make(history.ENV_ID, estimator="switching", personas=[person])
+    core = env.unwrapped.core
+    core.mm = recorder = history._Recorder(core.mm)
+    agent = BeliefCaregiver.for_env(env)
+    for seed in (11, 12):
+        history._play(env, agent, seed)
+    episodes = recorder.recorded()
+    assert len(episodes) == 2 and all(inputs.shape[0] == 3 and inputs.shape[1] > 10 for _, inputs in episodes)
+    own = np.log([getattr(getattr(body, level), name) for level, name, _ in history.BODY])
+    typical = np.log([getattr(getattr(history.PERSONAS["typical"].params, lv), n) for lv, n, _ in history.BODY])
+    weights = history._log_weights(core, episodes, np.stack([own, typical]), seed=0)
+    assert weights[0] > weights[1]
     env.close()
