@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from agents.play import DEFAULT_ENV_ID, play, scripted_keys  # noqa: E402
+from agents.play import DEFAULT_CSV, DEFAULT_ENV_ID, play, scripted_keys  # noqa: E402
 
 # Two paused frames, then Space and "lean forward"; soft push from 1.0 s; "lean forward"
 # again at 2.5 s; lift at 5.1 s; Enter closes the summary.
@@ -43,18 +43,25 @@ def main() -> int:
     from PIL import Image
 
     frames: list[NDArray[np.uint8]] = []
+    here = Path.cwd()
     with tempfile.TemporaryDirectory() as scratch:
-        (episode,) = play(
-            args.env,
-            args.seed,
-            "test",
-            Path(scratch) / "played.csv",  # the recording is not a human score: keep it out of runs/
-            fps=0,
-            episodes=1,
-            keys=scripted_keys(SCRIPT),
-            window=False,
-            on_frame=frames.append,
-        )
+        # The recording is not a human score: its CSV goes to a scratch folder, under the default
+        # relative path, so the summary frame says what a player sees ("saved to runs/played.csv").
+        os.chdir(scratch)
+        try:
+            (episode,) = play(
+                args.env,
+                args.seed,
+                "test",
+                DEFAULT_CSV,
+                fps=0,
+                episodes=1,
+                keys=scripted_keys(SCRIPT),
+                window=False,
+                on_frame=frames.append,
+            )
+        finally:
+            os.chdir(here)
     size = (round(frames[0].shape[1] * args.scale), round(frames[0].shape[0] * args.scale))
     images = [Image.fromarray(f).resize(size, Image.Resampling.LANCZOS) for f in frames]
     # One shared palette keeps the file small; the scene's colours are few.
