@@ -154,8 +154,8 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
             algo="recurrent_ppo",
             env_id="CoopGym/SitToStandRaw-v0",
             n_envs=8,
-            # Measured: 98.9 % success on 1000 held-out episodes after 300k steps (~10 min at
-            # ~520 steps/s on one core; the LSTM makes it ~15x slower per step than PPO).
+            # 300k steps: the LSTM learns -v0 from the measurements alone in that budget (held-out
+            # score: docs/agents.md, "Other algorithms"); it is far slower per step than PPO's MLP.
             total_timesteps=300_000,
             policy="MlpLstmPolicy",
             normalize=True,
@@ -177,7 +177,7 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
             algo="dqn",
             env_id="CoopGym/SitToStandDiscrete-v0",
             n_envs=4,
-            # Measured: 99.2-99.4 % success, 0 unsafe on 1000 held-out episodes (2 seeds, ~70 s each).
+            # Held-out score of this budget: docs/agents.md, "Other algorithms".
             total_timesteps=500_000,
             policy="MlpPolicy",
             normalize=True,
