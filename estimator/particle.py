@@ -304,6 +304,14 @@ class SwitchingParticleFilter:
         """(N, 3) posterior mean of ``[x, xdot, eta]`` after the last step."""
         return self._mean.copy()
 
+    def hypothesis_posterior(self) -> NDArray[np.float64]:
+        """(N, K) the weight each parameter hypothesis holds now: its particles' weights summed."""
+        w = np.exp(self.log_w - self.log_w.max(axis=1, keepdims=True))
+        w /= w.sum(axis=1, keepdims=True)
+        k = self.params.shape[1]
+        labels = self.particles[:, :, -1].astype(np.int64)
+        return np.stack([np.bincount(labels[e], weights=w[e], minlength=k) for e in range(self.n_envs)])
+
     def reset(
         self,
         indices: ArrayLike,

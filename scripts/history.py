@@ -121,6 +121,12 @@ class _Recorder:
         return [(first, np.concatenate(chunks, axis=1)) for first, chunks in self.episodes if chunks]
 
 
+def _packed(core: Any, people: list[PersonParams]) -> NDArray[np.float64]:
+    """(K, C) ``people`` at the hard level, with the env's realism and time base, as filter hypotheses."""
+    level = get_difficulty("hard")
+    return np.stack([pack_at_level(person, level, core.realism, core.timing) for person in people])
+
+
 def _body(log_values: NDArray[np.float64]) -> PersonParams:
     """The typical person with the :data:`BODY` values ``exp(log_values)`` (each within its field's range)."""
     base = PERSONAS["typical"].params
@@ -139,18 +145,15 @@ def _log_weights(core: Any, episodes: list, candidates: NDArray[np.float64], see
     The switching filter is run again over each episode's cues and readings with the candidates
     as its hypotheses (:data:`PARTICLES_EACH` particles each, all starting equal).
     """
-    level = get_difficulty("hard")
-    rows = np.stack([pack_at_level(_body(c), level, core.realism, core.timing) for c in candidates])
     n = len(candidates)
     options = SwitchingOptions(n_particles=PARTICLES_EACH * n, hypotheses=n)
+    rows = _packed(core, [_body(c) for c in candidates])
     pf = switching_filter(rows[None], core.timing, [np.random.default_rng(seed)], options)
     total = np.zeros(n)
     for e, (first, inputs) in enumerate(episodes):
         pf.reset([0], [first], seeds=[seed + e])
         pf.run(inputs[0][None], inputs[1][None], inputs[2][None])
-        w = np.exp(pf.log_w[0] - pf.log_w[0].max())
-        posterior = np.bincount(pf.particles[0, :, -1].astype(int), weights=w / w.sum(), minlength=n)
-        total += np.log(posterior + 1e-300)
+        total += np.log(pf.hypothesis_posterior()[0] + 1e-300)
     return total
 
 
@@ -181,9 +184,8 @@ def _draw(mean: NDArray, std: NDArray, n: int, rng: np.random.Generator) -> NDAr
 def _identified(core: Any, recorder: _Recorder, rng: np.random.Generator) -> NDArray[np.float64]:
     """Identify the body from the episodes so far and give the filter a bank drawn around it."""
     mean, std = identify_body(core, recorder.recorded(), rng)
-    level = get_difficulty("hard")
     bank = [_body(c) for c in _draw(mean, std, SwitchingOptions().hypotheses, rng)]
-    recorder.filter.params[0] = np.stack([pack_at_level(p, level, core.realism, core.timing) for p in bank])
+    recorder.filter.params[0] = _packed(core, bank)
     names = [name for _, name, _ in BODY]
     true_row = core.params[0]
     return np.array([math.nan, *(math.exp(mean[names.index(g)]) / true_row[getattr(PERSON, g)] for g in GAINS)])
@@ -209,15 +211,12 @@ def _carry_over(core: Any, bank: list[PersonParams], rng: np.random.Generator, r
         each of :data:`GAINS`, its posterior mean over the person's true value.
     """
     pf = core.mm.filter
-    log_w = pf.log_w[0]
-    w = np.exp(log_w - log_w.max())
-    posterior = np.bincount(pf.particles[0, :, -1].astype(int), weights=w / w.sum(), minlength=len(bank))
+    posterior = pf.hypothesis_posterior()[0]
     columns = [getattr(PERSON, name) for name in GAINS]
     factors = posterior @ pf.params[0][:, columns] / core.params[0, columns]
     picked = rng.choice(len(bank), size=len(bank), p=posterior)
     bank = [bank[h] if roughen == 0.0 else _roughened(bank[h], rng, roughen) for h in picked]
-    level = get_difficulty("hard")
-    pf.params[0] = np.stack([pack_at_level(p, level, core.realism, core.timing) for p in bank])
+    pf.params[0] = _packed(core, bank)
     return bank, np.array([1.0 / float(np.sum(posterior**2)), *factors])
 
 

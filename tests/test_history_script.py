@@ -40,8 +40,8 @@ def test_the_carried_bank_is_drawn_from_the_posterior_over_the_hypotheses() -> N
     history._play(env, agent, 5)
     pf = env.unwrapped.core.mm.filter
     before = pf.params[0].copy()
-    weights = np.exp(pf.log_w[0] - pf.log_w[0].max())
-    posterior = np.bincount(pf.particles[0, :, -1].astype(int), weights=weights / weights.sum(), minlength=len(before))
+    posterior = pf.hypothesis_posterior()[0]
+    assert posterior.shape == (len(before),) and abs(posterior.sum() - 1.0) < 1e-12
     alive = set(np.flatnonzero(posterior > 1e-12).tolist())
     bank, known = history._carry_over(
         env.unwrapped.core, hypothesis_people(SwitchingOptions()), np.random.default_rng(0), 0.0

@@ -52,6 +52,23 @@ def test_kernel_equals_the_numpy_reference(jitter):
     assert a.rngs[0].random() == b.rngs[0].random()
 
 
+def test_hypothesis_posterior_sums_each_hypothesis_particles_weights():
+    cp, cv, traj = _trial(1, steps=60)
+    y = np.stack([traj.measured_position_m, traj.measured_position_m + 0.01])
+    pf = _filter(n_particles=64, hypotheses=8)
+    pf.reset(np.arange(2), y[:, 0])
+    before = pf.hypothesis_posterior()
+    np.testing.assert_allclose(before, 1.0 / 8, rtol=0, atol=1e-12)  # 8 particles each, equal weights
+    pf.run(np.stack([cp[:60]] * 2), np.stack([cv[:60]] * 2), y)
+    after = pf.hypothesis_posterior()
+    for e in range(2):
+        w = np.exp(pf.log_w[e]) / np.exp(pf.log_w[e]).sum()
+        labels = pf.particles[e, :, -1]
+        expected = [w[labels == h].sum() for h in range(8)]
+        np.testing.assert_allclose(after[e], expected, rtol=1e-12, atol=1e-15)
+    assert not np.allclose(after, before)  # the readings weighed the hypotheses
+
+
 @pytest.mark.parametrize("xi", [-1, 0, 1])
 def test_reads_the_answer_to_words_alone(xi):
     # The person's mode held through a guided push and a words-only probe: the filter's MAP
