@@ -132,7 +132,11 @@ def _as_options(options: SwitchingOptions | dict[str, Any] | None) -> SwitchingO
 
 def nominal_person(difficulty: Difficulty | None, realism: Realism) -> PersonParams:
     """The person a caregiver assumes: the ``typical`` persona at ``difficulty``, with ``realism``."""
-    person = PERSONAS["typical"].params
+    return _at_level(PERSONAS["typical"].params, difficulty, realism)
+
+
+def _at_level(person: PersonParams, difficulty: Difficulty | None, realism: Realism) -> PersonParams:
+    """``person`` with ``difficulty``'s knobs and ``realism``."""
     if difficulty is not None:
         person = difficulty.apply(person)
     return person.with_realism(realism)
@@ -207,9 +211,7 @@ def pack_at_level(
     person: PersonParams, difficulty: Difficulty | None, realism: Realism, timing: Timing
 ) -> NDArray[np.float64]:
     """``person`` with ``difficulty``'s knobs and ``realism``, packed into a parameter row (:func:`pack_person`)."""
-    if difficulty is not None:
-        person = difficulty.apply(person)
-    return pack_person(person.with_realism(realism), timing)
+    return pack_person(_at_level(person, difficulty, realism), timing)
 
 
 def hypothesis_rows(
