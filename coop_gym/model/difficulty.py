@@ -56,6 +56,10 @@ class Difficulty:
         refusal_rate_per_s: ``Cooperativeness.refusal_rate_per_s`` [1/s].
         guided_push_scale: Multiplies ``Cooperativeness.guided_push_rate_per_s``.
         words_alone_scale: Multiplies ``Cooperativeness.words_alone_rate_per_s``.
+        push_compliance_scale: Multiplies ``Biomechanics.push_compliance_m_per_s2_n``: how far
+            a push bends anyone, whatever they think.
+        stiffness_factor_unresponsive: ``Biomechanics.stiffness_factor_unresponsive``; None
+            keeps the persona's (1 = an unresponsive person is bent as far as a willing one).
         unsafe_penalty: ``RewardWeights.unsafe`` of the level.
         premature_penalty: ``RewardWeights.premature`` of the level.
     """
@@ -69,6 +73,8 @@ class Difficulty:
     refusal_rate_per_s: float = 0.0
     guided_push_scale: float = 1.0
     words_alone_scale: float = 1.0
+    push_compliance_scale: float = 1.0
+    stiffness_factor_unresponsive: float | None = None
     # Safety priced like safety: with +1 for a success, a lift that risks an unsafe outcome
     # pays only if P(success) > 10 * P(unsafe) (+ P(premature)): the deadline gamble of -v0
     # (lift whenever P(success) > 1/3) is gone.
@@ -99,7 +105,17 @@ class Difficulty:
             guided_push_rate_per_s=coop.guided_push_rate_per_s * self.guided_push_scale,
             words_alone_rate_per_s=coop.words_alone_rate_per_s * self.words_alone_scale,
         )
-        return dataclasses.replace(person, intention=intent, cooperativeness=coop)
+        body = person.biomechanics
+        body = dataclasses.replace(
+            body,
+            push_compliance_m_per_s2_n=body.push_compliance_m_per_s2_n * self.push_compliance_scale,
+            stiffness_factor_unresponsive=(
+                body.stiffness_factor_unresponsive
+                if self.stiffness_factor_unresponsive is None
+                else self.stiffness_factor_unresponsive
+            ),
+        )
+        return dataclasses.replace(person, biomechanics=body, intention=intent, cooperativeness=coop)
 
     @property
     def reward(self) -> dict[str, float]:

@@ -114,6 +114,20 @@ def test_levels_apply_their_knobs_to_every_persona_and_price_safety() -> None:
     assert env.unwrapped.config.reward.unsafe == 3.0
 
 
+def test_body_knobs_bend_an_unresponsive_person_further_and_are_off_by_default() -> None:
+    # The two body knobs (tried by scripts/level_candidates.py, used by no shipped level).
+    for level in DIFFICULTIES.values():
+        assert level.apply(PersonParams()).biomechanics == PersonParams().biomechanics
+    bendy = Difficulty("bendy", push_compliance_scale=2.0, stiffness_factor_unresponsive=1.0)
+    body = bendy.apply(PersonParams()).biomechanics
+    assert body.push_compliance_m_per_s2_n == 2.0 * PersonParams().biomechanics.push_compliance_m_per_s2_n
+    assert body.stiffness_factor_unresponsive == 1.0
+    plain, bent = (_push_then_release(dataclasses.replace(QUIET, biomechanics=b)) for b in (QUIET.biomechanics, body))
+    assert bent.max() > 1.8 * plain.max() > 0.0  # twice the compliance (QUIET's realism does not stiffen)
+    with pytest.raises(ValueError, match=r"Biomechanics\.push_compliance_m_per_s2_n"):
+        Difficulty("broken", push_compliance_scale=-1.0).apply(PersonParams())
+
+
 def test_unsafe_lift_never_pays_as_a_gamble() -> None:
     # A lift pays when P(success) * success > P(unsafe) * unsafe + P(premature) * premature. With
     # the -v0 weights a lift at P(success) = 0.9, P(unsafe) = 0.1 paid +0.7; at every -v1 level
