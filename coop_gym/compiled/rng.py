@@ -42,6 +42,9 @@ __all__ = [
     "G_NEXT_UINT32",
     "G_NEXT_UINT64",
     "G_STATE",
+    "LOW32",
+    "U1",
+    "U32",
     "ZIGGURAT_TABLES",
     "bit_generator_row",
     "integers",
@@ -116,12 +119,14 @@ _call_double: Any = run_as_python(
 _exp: Any = run_as_python(np.exp, math.exp)
 _log1p: Any = run_as_python(np.log1p, math.log1p)
 
-_U1 = np.uint64(1)
+# uint64 constants (a Python int beside a uint64 would make Numba compute in int64 or float);
+# U1, U32 and LOW32 serve coop_gym.compiled.seeding too.
+U1 = np.uint64(1)
+U32 = np.uint64(32)
+LOW32 = np.uint64(0xFFFFFFFF)
 _U8 = np.uint64(8)
-_U32 = np.uint64(32)
 _BYTE = np.uint64(0xFF)
 _MANTISSA = np.uint64(0x000FFFFFFFFFFFFF)
-_LOW32 = np.uint64(0xFFFFFFFF)
 
 
 @njit(cache=True, error_model="numpy")
@@ -137,8 +142,8 @@ def standard_normal(g: NDArray[np.uint64]) -> float:
         r = _call_uint64(g[G_NEXT_UINT64], g[G_STATE])
         idx = r & _BYTE
         r >>= _U8
-        sign = r & _U1
-        rabs = (r >> _U1) & _MANTISSA
+        sign = r & U1
+        rabs = (r >> U1) & _MANTISSA
         x = rabs * wi_double[idx]
         if sign:
             x = -x
@@ -150,7 +155,7 @@ def standard_normal(g: NDArray[np.uint64]) -> float:
                 xx = -ziggurat_nor_inv_r * _log1p(-random(g))
                 yy = -_log1p(-random(g))
                 if yy + yy > xx * xx:
-                    if (rabs >> _U8) & _U1:
+                    if (rabs >> _U8) & U1:
                         return -(ziggurat_nor_r + xx)
                     return ziggurat_nor_r + xx
         elif (fi_double[idx - 1] - fi_double[idx]) * random(g) + fi_double[idx] < _exp(-0.5 * x * x):
@@ -163,15 +168,15 @@ def integers(g: NDArray[np.uint64], high: int) -> int:
     span = np.uint64(high - 1)
     if span == 0:
         return 0
-    bound = span + _U1
+    bound = span + U1
     m = np.uint64(_call_uint32(g[G_NEXT_UINT32], g[G_STATE])) * bound
-    leftover = m & _LOW32
+    leftover = m & LOW32
     if leftover < bound:
-        threshold = (_LOW32 - span) % bound
+        threshold = (LOW32 - span) % bound
         while leftover < threshold:
             m = np.uint64(_call_uint32(g[G_NEXT_UINT32], g[G_STATE])) * bound
-            leftover = m & _LOW32
-    return int(m >> _U32)
+            leftover = m & LOW32
+    return int(m >> U32)
 
 
 def bit_generator_row(rng: np.random.Generator) -> NDArray[np.uint64]:

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from coop_gym.compiled.background import run_as_python
 from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.rng import G_STATE, bit_generator_row
+from coop_gym.compiled.rng import G_STATE, LOW32, U1, U32, bit_generator_row
 
 __all__ = ["LAYOUT", "MAX_BATCH_SEED", "MIN_BATCH_ENVS", "EnvGenerators", "seed_states"]
 
@@ -53,10 +53,7 @@ _MULT_B = np.uint64(0x58F38DED)
 _MIX_MULT_L = np.uint64(0xCA01F9DD)
 _MIX_MULT_R = np.uint64(0x4973F715)
 _XSHIFT = np.uint64(16)
-_MASK32 = np.uint64(0xFFFFFFFF)
 _U0 = np.uint64(0)
-_U1 = np.uint64(1)
-_U32 = np.uint64(32)
 _U63 = np.uint64(63)
 _POOL_SIZE = 4
 # PCG64's 128-bit LCG multiplier (numpy/random/src/pcg64/pcg64.h), as high and low words.
@@ -66,30 +63,30 @@ _MULT_LOW = np.uint64(4865540595714422341)
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _hashmix(value: np.uint64, hash_const: NDArray[np.uint64]) -> np.uint64:
-    value = (value ^ hash_const[0]) & _MASK32
-    hash_const[0] = (hash_const[0] * _MULT_A) & _MASK32
-    value = (value * hash_const[0]) & _MASK32
+    value = (value ^ hash_const[0]) & LOW32
+    hash_const[0] = (hash_const[0] * _MULT_A) & LOW32
+    value = (value * hash_const[0]) & LOW32
     return value ^ (value >> _XSHIFT)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _mix(x: np.uint64, y: np.uint64) -> np.uint64:
-    result = (_MIX_MULT_L * x - _MIX_MULT_R * y) & _MASK32
+    result = (_MIX_MULT_L * x - _MIX_MULT_R * y) & LOW32
     return result ^ (result >> _XSHIFT)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _mul64(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     # The 128-bit product of two 64-bit words, as (high, low), from 32-bit halves.
-    a_lo, a_hi = a & _MASK32, a >> _U32
-    b_lo, b_hi = b & _MASK32, b >> _U32
+    a_lo, a_hi = a & LOW32, a >> U32
+    b_lo, b_hi = b & LOW32, b >> U32
     lo_lo = a_lo * b_lo
     hi_lo = a_hi * b_lo
     lo_hi = a_lo * b_hi
     hi_hi = a_hi * b_hi
-    cross = (lo_lo >> _U32) + (hi_lo & _MASK32) + lo_hi
-    high = hi_hi + (hi_lo >> _U32) + (cross >> _U32)
-    low = (cross << _U32) | (lo_lo & _MASK32)
+    cross = (lo_lo >> U32) + (hi_lo & LOW32) + lo_hi
+    high = hi_hi + (hi_lo >> U32) + (cross >> U32)
+    low = (cross << U32) | (lo_lo & LOW32)
     return high, low
 
 
@@ -101,7 +98,7 @@ def _lcg_step(
     high, low = _mul64(state_low, _MULT_LOW)
     high = high + state_low * _MULT_HIGH + state_high * _MULT_LOW
     new_low = low + inc_low
-    carry = _U1 if new_low < low else _U0
+    carry = U1 if new_low < low else _U0
     return high + inc_high + carry, new_low
 
 
@@ -121,8 +118,8 @@ def seed_states(seeds: NDArray[np.uint64], out: NDArray[np.uint64]) -> None:
     for r in range(seeds.shape[0]):
         seed = seeds[r]
         # _coerce_to_uint32_array: 0 is one word [0]; else the nonzero 32-bit words, lowest first.
-        entropy[0] = seed & _MASK32
-        entropy[1] = seed >> _U32
+        entropy[0] = seed & LOW32
+        entropy[1] = seed >> U32
         n_entropy = 2 if entropy[1] != _U0 else 1
         hash_const[0] = _INIT_A
         for i in range(_POOL_SIZE):
@@ -133,19 +130,19 @@ def seed_states(seeds: NDArray[np.uint64], out: NDArray[np.uint64]) -> None:
                     pool[i_dst] = _mix(pool[i_dst], _hashmix(pool[i_src], hash_const))
         out_const = _INIT_B
         for i in range(8):
-            value = (pool[i % _POOL_SIZE] ^ out_const) & _MASK32
-            out_const = (out_const * _MULT_B) & _MASK32
-            value = (value * out_const) & _MASK32
+            value = (pool[i % _POOL_SIZE] ^ out_const) & LOW32
+            out_const = (out_const * _MULT_B) & LOW32
+            value = (value * out_const) & LOW32
             words[i] = value ^ (value >> _XSHIFT)
-        s_high = words[0] | (words[1] << _U32)
-        s_low = words[2] | (words[3] << _U32)
-        i_high = words[4] | (words[5] << _U32)
-        i_low = words[6] | (words[7] << _U32)
-        inc_high = (i_high << _U1) | (i_low >> _U63)
-        inc_low = (i_low << _U1) | _U1
+        s_high = words[0] | (words[1] << U32)
+        s_low = words[2] | (words[3] << U32)
+        i_high = words[4] | (words[5] << U32)
+        i_low = words[6] | (words[7] << U32)
+        inc_high = (i_high << U1) | (i_low >> _U63)
+        inc_low = (i_low << U1) | U1
         high, low = _lcg_step(_U0, _U0, inc_high, inc_low)
         low_sum = low + s_low
-        high = high + s_high + (_U1 if low_sum < low else _U0)
+        high = high + s_high + (U1 if low_sum < low else _U0)
         high, low = _lcg_step(high, low_sum, inc_high, inc_low)
         out[r, 0] = high
         out[r, 1] = low
