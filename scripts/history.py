@@ -10,8 +10,9 @@ belief caregiver on the hard level with its filter in one of four modes:
 
 * ``nominal``: every episode starts from the default bank (what the env does);
 * ``carried``: after each episode the bank is drawn again from the filter's posterior over its
-  hypotheses (the particles' weights summed per hypothesis), each drawn body's five varied
-  gains scaled by a log-normal factor of std ``--roughen`` (0: copied as they are);
+  hypotheses (the particles' weights summed per hypothesis), each drawn body's varied gains
+  scattered by a log-normal factor of std ``--roughen`` as a persona's people are
+  (:func:`coop_gym.model.personas.sample_person`; 0: copied as they are);
 * ``identified``: after each episode the body is identified from every episode so far
   (:func:`identify_body`: the filter run again over the recorded cues and readings, a search
   over bodies that keeps the ones it weighs highest), and the next bank is drawn around it;
@@ -52,7 +53,7 @@ from coop_gym.envs.switching import SwitchingOptions, hypothesis_people, pack_at
 from coop_gym.model.difficulty import get_difficulty
 from coop_gym.model.dynamics import PERSON
 from coop_gym.model.params import PersonParams
-from coop_gym.model.personas import PERSONAS, TEST_PERSONAS, VARIED_PARAMETERS, Persona, sample_person
+from coop_gym.model.personas import PERSONAS, TEST_PERSONAS, Persona, sample_person
 
 ENV_ID = "CoopGym/SitToStandHard-v1"
 MODES = ("nominal", "carried", "identified", "true")
@@ -191,18 +192,6 @@ def _identified(core: Any, recorder: _Recorder, rng: np.random.Generator) -> NDA
     return np.array([math.nan, *(math.exp(mean[names.index(g)]) / true_row[getattr(PERSON, g)] for g in GAINS)])
 
 
-def _roughened(person: PersonParams, rng: np.random.Generator, std: float) -> PersonParams:
-    """``person`` with each varied gain of biomechanics and intention scaled by ``exp(std z)``."""
-    levels = {}
-    for level in ("biomechanics", "intention"):
-        base = getattr(person, level)
-        names = VARIED_PARAMETERS[level]
-        levels[level] = dataclasses.replace(
-            base, **{n: float(getattr(base, n) * math.exp(std * rng.standard_normal())) for n in names}
-        )
-    return dataclasses.replace(person, **levels)
-
-
 def _carry_over(core: Any, bank: list[PersonParams], rng: np.random.Generator, roughen: float) -> tuple:
     """Draw the next bank from the filter's posterior over ``bank``.
 
@@ -215,7 +204,13 @@ def _carry_over(core: Any, bank: list[PersonParams], rng: np.random.Generator, r
     columns = [getattr(PERSON, name) for name in GAINS]
     factors = posterior @ pf.params[0][:, columns] / core.params[0, columns]
     picked = rng.choice(len(bank), size=len(bank), p=posterior)
-    bank = [bank[h] if roughen == 0.0 else _roughened(bank[h], rng, roughen) for h in picked]
+    # Roughened: each body's varied gains scattered as a persona's people are.
+    bank = [
+        bank[h]
+        if roughen == 0.0
+        else sample_person(Persona("hypothesis", "", bank[h], variation_relative_std=roughen), rng)
+        for h in picked
+    ]
     pf.params[0] = _packed(core, bank)
     return bank, np.array([1.0 / float(np.sum(posterior**2)), *factors])
 

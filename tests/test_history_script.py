@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import sys
 from pathlib import Path
@@ -11,6 +12,8 @@ import numpy as np
 
 from agents.belief import BeliefCaregiver
 from coop_gym.envs.switching import SwitchingOptions, hypothesis_people
+from coop_gym.model.params import PersonParams
+from coop_gym.model.personas import VARIED_PARAMETERS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,4 +73,28 @@ def test_the_recorded_episodes_weigh_the_persons_own_body_above_the_typical_one(
     typical = np.log([getattr(getattr(history.PERSONAS["typical"].params, lv), n) for lv, n, _ in history.BODY])
     weights = history._log_weights(core, episodes, np.stack([own, typical]), seed=0)
     assert weights[0] > weights[1]
+    env.close()
+
+
+def test_a_roughened_bank_scatters_the_varied_gains_of_drawn_bodies_only() -> None:
+    history = _script()
+    env = gym.make(history.ENV_ID, estimator="switching", personas=["frail"])
+    history._play(env, BeliefCaregiver.for_env(env), 5)
+    old = hypothesis_people(SwitchingOptions())
+    bank, _ = history._carry_over(env.unwrapped.core, old, np.random.default_rng(0), 0.2)
+    varied = [(level, name) for level, names in VARIED_PARAMETERS.items() for name in names]
+
+    def rest(person: PersonParams) -> PersonParams:  # the person with every varied gain set to 1
+        levels = {level: dataclasses.replace(getattr(person, level), **dict.fromkeys(names, 1.0))
+                  for level, names in VARIED_PARAMETERS.items()}  # fmt: skip
+        return dataclasses.replace(person, **levels)
+
+    def logs(body: PersonParams, source: PersonParams) -> np.ndarray:
+        return np.log([getattr(getattr(body, lv), n) / getattr(getattr(source, lv), n) for lv, n in varied])
+
+    for body in bank:
+        # Drawn from a body of the old bank (the nearest): the same but for its varied gains,
+        # each scaled by a log-normal factor of std 0.2 (within 5 std), none left as it was.
+        nearest = min((logs(body, o) for o in old if rest(o) == rest(body)), key=lambda d: float(d @ d))
+        assert np.all(np.abs(nearest) < 1.0) and np.all(nearest != 0.0)
     env.close()
