@@ -57,9 +57,11 @@ class Difficulty:
         guided_push_scale: Multiplies ``Cooperativeness.guided_push_rate_per_s``.
         words_alone_scale: Multiplies ``Cooperativeness.words_alone_rate_per_s``.
         push_compliance_scale: Multiplies ``Biomechanics.push_compliance_m_per_s2_n``: how far
-            a push bends anyone, whatever they think.
+            a push bends anyone, whatever they think. Off (1) at every shipped level; a knob
+            for candidate levels (``scripts/level_candidates.py``, docs/HARD_LEVEL.md).
         stiffness_factor_unresponsive: ``Biomechanics.stiffness_factor_unresponsive``; None
             keeps the persona's (1 = an unresponsive person is bent as far as a willing one).
+            None at every shipped level, like ``push_compliance_scale``.
         unsafe_penalty: ``RewardWeights.unsafe`` of the level.
         premature_penalty: ``RewardWeights.premature`` of the level.
     """
