@@ -305,11 +305,12 @@ def _env_kwargs(
 
 
 def _agent_for(agent: Agent | str, env: gym.Env[Any, Any], env_id: str, seed: int | None) -> tuple[Agent, str]:
-    """``(agent, its name)``: a scripted agent built for ``env`` by name, or ``agent`` as given."""
+    """``(agent, its name)``: a scripted agent built for ``env`` (and its level) by name, or ``agent`` as given."""
     if not isinstance(agent, str):
         return agent, getattr(agent, "name", None) or type(agent).__name__
     try:
-        return make_scripted(agent, features_of(env), action_type_of(env), seed=seed), agent
+        level = getattr(env.unwrapped, "difficulty", None)  # the blind and probing settings chosen for it
+        return make_scripted(agent, features_of(env), action_type_of(env), seed=seed, level=level), agent
     except ValueError as exc:
         raise IncompatibleAgentError(f"{exc} (env {env_id})") from None
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +40,7 @@ from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.compiled.checks import check_number
 from coop_gym.envs.config import LiftCriteria
+from coop_gym.model.difficulty import DIFFICULTIES, Difficulty
 from estimator.judgment import ThresholdJudgment
 
 __all__ = [
@@ -394,18 +396,32 @@ def make_scripted(
     features: Sequence[str] | None = None,
     action_type: str = "multidiscrete",
     seed: int | None = None,
-    level: str | None = None,
+    level: str | Difficulty | None = None,
 ) -> ScriptedAgent:
     """Build a scripted agent by name (see :data:`SCRIPTED_AGENTS`).
 
-    ``level`` (a difficulty name, or None for the ``-v0`` ids) picks the blind and probing
-    caregivers' settings chosen for that level (:data:`TUNED_BLIND`, :data:`TUNED_PROBER`); the
-    other agents do not depend on it.
+    ``level`` (a difficulty or its name, or None for the ``-v0`` ids) picks the blind and
+    probing caregivers' settings chosen for that level (:data:`TUNED_BLIND`,
+    :data:`TUNED_PROBER`); the other agents do not depend on it. A level of your own has no
+    chosen settings: build ``BlindAgent(settings=...)`` or ``ProbingCaregiver(settings=...)``.
     """
     if name not in SCRIPTED_AGENTS:
         raise ValueError(f"unknown scripted agent {name!r}; known: {', '.join(SCRIPTED_AGENTS)}")
     if name == BlindAgent.name:
-        return BlindAgent(features, action_type, seed, settings=TUNED_BLIND[level or "v0"])
+        return BlindAgent(features, action_type, seed, settings=_chosen(TUNED_BLIND, "BlindAgent", level))
     if name == ProbingCaregiver.name:
-        return ProbingCaregiver(features, action_type, seed, settings=TUNED_PROBER[level or "v0"])
+        return ProbingCaregiver(features, action_type, seed, settings=_chosen(TUNED_PROBER, "ProbingCaregiver", level))
     return SCRIPTED_AGENTS[name](features, action_type, seed)
+
+
+def _chosen(table: dict[str, Any], agent: str, level: str | Difficulty | None) -> Any:
+    """The settings ``table`` holds for ``level``; ValueError naming a level it has none for."""
+    key = "v0" if level is None else level if isinstance(level, str) else level.name
+    if isinstance(level, Difficulty) and DIFFICULTIES.get(level.name) != level:
+        raise ValueError(
+            f"no {agent} settings were chosen for the level {level.name!r} (not a shipped level); "
+            f"build {agent}(settings=...) for it"
+        )
+    if key not in table:
+        raise ValueError(f"no {agent} settings were chosen for the level {key!r}; chosen for: {', '.join(table)}")
+    return table[key]

@@ -155,6 +155,18 @@ def test_oracle_gets_the_oracle_observation_on_the_default_id(tmp_path):
     assert result.steps == 3  # it would raise if the true xi were missing from its observation
 
 
+def test_a_named_caregiver_is_recorded_with_the_settings_chosen_for_the_level():
+    from agents.scripted import TUNED_BLIND, TUNED_PROBER
+
+    # As agents.evaluate plays them: the hard level's blind and probing settings on a hard id.
+    for env_id, level in (("CoopGym/SitToStandHard-v1", "hard"), (ENV_ID, "v0")):
+        env = gym.make(env_id)
+        assert record._agent_for("blind", env, env_id, 0)[0].settings == TUNED_BLIND[level]
+        assert record._agent_for("prober", env, env_id, 0)[0].settings == TUNED_PROBER[level]
+        env.close()
+    assert TUNED_BLIND["hard"] != TUNED_BLIND["v0"]
+
+
 def test_record_episode_runs_a_persona_and_stops_at_max_steps(tmp_path):
     result = record.record_episode("handbook", ENV_ID, 1, tmp_path, persona="frail", max_steps=8)
     assert result.steps == 8 and result.outcome == "none"  # stopped by max_steps, not by the episode

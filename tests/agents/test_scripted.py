@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import coop_gym  # noqa: F401
 from agents.base import encode_actions
+from agents.evaluate import evaluate
 from agents.scripted import (
     SCRIPTED_AGENTS,
+    TUNED_BLIND,
+    TUNED_PROBER,
     HandbookCaregiver,
     HandbookSettings,
     LiftAtOnceAgent,
@@ -21,6 +26,7 @@ from agents.scripted import (
     make_scripted,
 )
 from coop_gym.envs.sit_to_stand import observation_features
+from coop_gym.model.difficulty import DIFFICULTIES
 
 
 def rollout(agent, env, seed, options=None):
@@ -440,3 +446,20 @@ def test_bad_blind_settings_raise_naming_the_field(make, match):
 
     with pytest.raises(ValueError, match=match):
         make(BlindSettings, CuePhase)
+
+
+def test_a_level_of_ones_own_has_no_chosen_settings_and_says_so():
+    # A shipped level given as its Difficulty is its name; a changed one has no chosen settings.
+    assert make_scripted("blind", level=DIFFICULTIES["hard"]).settings == TUNED_BLIND["hard"]
+    assert make_scripted("prober", level="medium").settings == TUNED_PROBER["medium"]
+    mine = dataclasses.replace(DIFFICULTIES["hard"], lapse_rate_per_s=0.05)
+    for name, agent in (("blind", "BlindAgent"), ("prober", "ProbingCaregiver")):
+        with pytest.raises(ValueError, match=rf"no {agent} settings were chosen for the level 'hard' \(not a shipped"):
+            make_scripted(name, level=mine)
+    with pytest.raises(ValueError, match=r"no BlindAgent settings .* level 'brutal'; chosen for: v0, easy"):
+        make_scripted("blind", level="brutal")
+    # Through the one evaluation path: the error, not a KeyError; the other agents play the level.
+    with pytest.raises(ValueError, match="no BlindAgent settings"):
+        evaluate("blind", "CoopGym/SitToStandHard-v1", "test", 1, 0, env_kwargs={"difficulty": mine})
+    oracle = evaluate("oracle", "CoopGym/SitToStandHard-v1", "test", 4, 0, env_kwargs={"difficulty": mine})
+    assert oracle.success_rate == 1.0
