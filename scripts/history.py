@@ -73,6 +73,8 @@ BODY = (
 default bank's spread (0.7 on a gain's log; its push-compliance range of 8 is a log-uniform of
 std ``log(8) / sqrt(3) = 1.2``), and a disengaged person's stiffening, which the bank holds at
 the typical person's 0.5 (at most 1: no stiffening)."""
+BODY_NAMES = tuple(name for _, name, _ in BODY)
+"""The names of :data:`BODY`'s fields, in its order (the columns of a body's log values)."""
 ROUNDS, CANDIDATES, ELITE, PARTICLES_EACH = 6, 128, 16, 8
 """The search: rounds, bodies a round, the best kept to draw the next round, particles a body."""
 
@@ -177,7 +179,7 @@ def identify_body(core: Any, episodes: list, rng: np.random.Generator) -> tuple[
 
 def _draw(mean: NDArray, std: NDArray, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
     draws = mean + std * rng.standard_normal((n, len(mean)))
-    stiffening = [name for _, name, _ in BODY].index("stiffness_factor_unresponsive")
+    stiffening = BODY_NAMES.index("stiffness_factor_unresponsive")
     draws[:, stiffening] = np.minimum(draws[:, stiffening], 0.0)  # a factor of at most 1
     return draws
 
@@ -187,9 +189,8 @@ def _identified(core: Any, recorder: _Recorder, rng: np.random.Generator) -> NDA
     mean, std = identify_body(core, recorder.recorded(), rng)
     bank = [_body(c) for c in _draw(mean, std, SwitchingOptions().hypotheses, rng)]
     recorder.filter.params[0] = _packed(core, bank)
-    names = [name for _, name, _ in BODY]
     true_row = core.params[0]
-    return np.array([math.nan, *(math.exp(mean[names.index(g)]) / true_row[getattr(PERSON, g)] for g in GAINS)])
+    return np.array([math.nan, *(math.exp(mean[BODY_NAMES.index(g)]) / true_row[getattr(PERSON, g)] for g in GAINS)])
 
 
 def _carry_over(core: Any, bank: list[PersonParams], rng: np.random.Generator, roughen: float) -> tuple:
