@@ -148,6 +148,10 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
         "CoopGym/SitToStandHard-v1": _PPO.replace(
             env_id="CoopGym/SitToStandHard-v1", total_timesteps=1_000_000, personas="train_wide"
         ),
+        # The hard level's -v2 (slower recruiting, steadier willingness): the same settings.
+        "CoopGym/SitToStandHard-v2": _PPO.replace(
+            env_id="CoopGym/SitToStandHard-v2", total_timesteps=1_000_000, personas="train_wide"
+        ),
     },
     "recurrent_ppo": {
         "CoopGym/SitToStandRaw-v0": TrainingConfig(

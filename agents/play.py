@@ -24,7 +24,7 @@ your cues, and what the oracle (which sees the mental state) and the prober did 
 same person (same seed). Every finished episode is appended to ``--csv`` (see
 :mod:`agents.play_log`); :func:`score_played` scores such a file like an agent::
 
-    python -m agents.play                              # CoopGym/SitToStandHard-v1, held-out personas
+    python -m agents.play                              # CoopGym/SitToStandHard-v2, held-out personas
     python -m agents.play --pace turns --seed 7 --csv runs/me.csv
 
 Without ``--seed`` play starts at one past the largest seed already in the CSV for the
@@ -64,7 +64,7 @@ from coop_gym.model.personas import resolve_personas
 
 __all__ = ["DEFAULT_CSV", "DEFAULT_ENV_ID", "KEYS", "Controls", "main", "play", "score_played", "scripted_keys"]
 
-DEFAULT_ENV_ID = "CoopGym/SitToStandHard-v1"
+DEFAULT_ENV_ID = "CoopGym/SitToStandHard-v2"
 DEFAULT_CSV = "runs/played.csv"
 COMPARED = ("oracle", "prober")
 """Scripted agents replayed on each played seed for the summary."""

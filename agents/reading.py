@@ -1,8 +1,8 @@
 """How well each estimator reads the mind on a level, under a caregiver's cue sequence.
 
 ``python -m agents.reading --policy prober --episodes 2000`` plays the caregiver's first
-episode in each of ``episodes`` seeded envs of ``CoopGym/SitToStandHard-v1`` (held-out
-personas) and, on the very same substep readings and cues, runs side by side:
+episode in each of ``episodes`` seeded envs of ``--env`` (default ``CoopGym/SitToStandHard-v2``;
+held-out personas) and, on the very same substep readings and cues, runs side by side:
 
 * ``kalman`` -- the paper's filter (the env's own): its MAP mode is the thresholded estimate
   ``xi_hat`` (``+-0.3``, the paper's band); its ``P(xi = +1)`` is ``P(xi > 0.5)`` under
@@ -45,6 +45,7 @@ ESTIMATORS = ("kalman", "imm", "switching", "switching_true")
 LAGS_S = tuple(round(0.1 * k, 1) for k in range(0, 31))
 """Times since a words-only probe's onset at which the latency curve is read [s]."""
 _BINS = 10
+DEFAULT_ENV_ID = "CoopGym/SitToStandHard-v2"
 
 
 def _kalman_probabilities(xi_hat: NDArray[np.float64], xi_std: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -54,7 +55,7 @@ def _kalman_probabilities(xi_hat: NDArray[np.float64], xi_std: NDArray[np.float6
 
 
 def collect(
-    policy: str, episodes: int, env_id: str = "CoopGym/SitToStandHard-v1", personas: str = "test", seed: int = 0
+    policy: str, episodes: int, env_id: str = DEFAULT_ENV_ID, personas: str = "test", seed: int = 0
 ) -> dict[str, Any]:
     """Play the first episode of ``episodes`` envs (seeds ``seed + k``) and record every estimator per step."""
     venv: Any = gym.make_vec(
@@ -62,12 +63,13 @@ def collect(
     )
     core = venv.unwrapped.core
     features = venv.unwrapped.features
-    agent = make_scripted(policy, features=features, level="hard")
+    level = gym.spec(env_id).kwargs.get("difficulty")  # the env's level (None: the -v0 model)
+    agent = make_scripted(policy, features=features, level=level)
     obs, _ = venv.reset(seed=[seed + k for k in range(episodes)])
     n = episodes
     imm = IMMEstimator(core.nominal.copy(), core.report[:, 0].copy())
     truth_filter = SwitchingEstimator(
-        n, core.timing, core.realism, core.params, core.rngs, SwitchingOptions(difficulty="hard", true_person=True)
+        n, core.timing, core.realism, core.params, core.rngs, SwitchingOptions(difficulty=level, true_person=True)
     )
     truth_filter.reset(np.arange(n), core.report[:, 0].copy())
     col = {f: features.index(f) for f in features}
@@ -174,6 +176,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command line: see the module docstring."""
     parser = argparse.ArgumentParser(prog="python -m agents.reading", description=__doc__.splitlines()[0])
     parser.add_argument("--policy", default="prober", help="the scripted caregiver whose cues are played")
+    parser.add_argument("--env", default=DEFAULT_ENV_ID, help=f"a registered id (default {DEFAULT_ENV_ID})")
     parser.add_argument("--episodes", type=int, default=2000)
     parser.add_argument("--personas", default="test")
     parser.add_argument("--seed", type=int, default=0)
@@ -182,8 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes must be positive, got {args.episodes}")
-    summary = summarise(collect(args.policy, args.episodes, personas=args.personas, seed=args.seed))
-    print(f"{args.policy} cues, {args.episodes} episodes, {summary['steps']} steps ({args.personas} personas)")
+    summary = summarise(collect(args.policy, args.episodes, args.env, args.personas, args.seed))
+    print(f"{args.env}, {args.policy} cues, {args.episodes} episodes, {summary['steps']} steps ({args.personas} personas)")
     print(f"{'estimator':<16}{'balanced acc':>14}{'recall -1/0/+1':>22}{'ECE P(+1)':>11}{'acc@0.5s':>10}{'acc@1s':>8}")
     for name in ESTIMATORS:
         s = summary[name]

@@ -340,6 +340,8 @@ TUNED_PROBER: dict[str, ProbingSettings] = {
     # 85.7 % (the settings shipped before they were chosen this way, a 0.5-s burst, 0.3-s settle and 0.02-m
     # answer: 73.0 %, 22nd of 36).
     "hard": ProbingSettings(),
+    # 78.3 %.
+    "hard-v2": ProbingSettings(),
 }
 """The probing caregiver's settings chosen on each level's training personas (``v0``: the ``-v0`` ids)."""
 

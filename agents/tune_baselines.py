@@ -90,6 +90,7 @@ LEVEL_ENV_IDS: dict[str, str] = {
     "easy": "CoopGym/SitToStandEasy-v1",
     "medium": "CoopGym/SitToStandMedium-v1",
     "hard": "CoopGym/SitToStandHard-v1",
+    "hard-v2": "CoopGym/SitToStandHard-v2",
 }
 """The env id each level is tuned on."""
 
@@ -130,6 +131,7 @@ ORIGINAL_BLIND_WINNERS: dict[str, BlindSettings] = {
     "easy": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
     "medium": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=4.0),
     "hard": BlindSettings(push="soft", words=True, lean_m=0.3, min_time_s=0.0),
+    "hard-v2": BlindSettings(push="soft", words=True, lean_m=0.16, min_time_s=0.0),
 }
 """Each level's winner of the original family (:func:`original_blind_grid`, 300 training episodes each)."""
 

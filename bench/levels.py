@@ -1,6 +1,6 @@
 """The levels: every baseline caregiver on the same held-out episodes of each level.
 
-    python bench/levels.py [--episodes 2000] [--levels hard,medium,easy,v0] [--save [PATH]]
+    python bench/levels.py [--episodes 2000] [--levels hard-v2,hard,medium,easy,v0] [--save [PATH]]
 
 For each level id, the scripted caregivers (:data:`AGENTS`) and, on the hard level, the
 models shipped in ``agents/pretrained`` play the same ``--episodes`` seeded episodes (seeds
@@ -28,6 +28,7 @@ from result_files import add_save_argument, save
 from coop_gym.cli import positive_int
 
 LEVELS = {
+    "hard-v2": "CoopGym/SitToStandHard-v2",
     "hard": "CoopGym/SitToStandHard-v1",
     "medium": "CoopGym/SitToStandMedium-v1",
     "easy": "CoopGym/SitToStandEasy-v1",

@@ -33,7 +33,7 @@ from coop_gym.cli import positive_int
 ESTIMATORS = ("kalman", "multiple_model", "imm", "delay_aware", "persona_bank", "calibrated", "switching", "oracle")
 LEVEL_ESTIMATORS = ("kalman", "switching")
 """Run on every level: the paper's filter, and the switching particle filter of the level's person."""
-DIFFICULTIES = ("easy", "medium", "hard")
+DIFFICULTIES = ("easy", "medium", "hard", "hard-v2")
 
 
 def protocol(flags: list[str]) -> dict[str, Any]:

@@ -39,6 +39,9 @@ ENV_IDS: dict[str, dict[str, Any]] = {
     "CoopGym/SitToStandHardDiscrete-v1": {"difficulty": "hard", "action_type": "discrete"},
     "CoopGym/SitToStandHardIMM-v1": {"difficulty": "hard", "estimator": "imm"},
     "CoopGym/SitToStandHardHeldOut-v1": {"difficulty": "hard", "personas": "test"},
+    # v2: the hard level chosen again against the widened blind family (coop_gym.model.difficulty);
+    # the other ids take it as difficulty="hard-v2".
+    "CoopGym/SitToStandHard-v2": {"difficulty": "hard-v2"},
     # Unit: the same tasks with every observation feature scaled to about [-1, 1]
     # (contract.FEATURE_SCALES), learnable with a library's default settings; the physical
     # values are in info["unscaled_obs"]. New names, not a -v2 of the same ones: Gymnasium's

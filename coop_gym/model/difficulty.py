@@ -46,7 +46,7 @@ class Difficulty:
     """One difficulty level: the realism knobs it sets on every persona, and its reward.
 
     Attributes:
-        name: ``easy``, ``medium`` or ``hard``.
+        name: ``easy``, ``medium``, ``hard`` or ``hard-v2``.
         passive_follow_rate_per_s: ``Intention.passive_follow_rate_per_s`` [1/s].
         spontaneous_lean_rate_per_s: ``Intention.spontaneous_lean_rate_per_s`` [1/s].
         max_lean_m: ``Intention.max_m`` and ``Intention.spontaneous_lean_m`` [m]; None keeps
@@ -125,6 +125,20 @@ class Difficulty:
         return {"unsafe": self.unsafe_penalty, "premature": self.premature_penalty}
 
 
+# Values chosen by measurement (docs/HARD_LEVEL.md): oracle - best blind >= 30 points while a
+# probing caregiver beats the best blind policy by >= 15 (against the blind family of that time).
+_HARD = Difficulty(
+    "hard",
+    passive_follow_rate_per_s=2.0,
+    spontaneous_lean_rate_per_s=0.2,
+    max_lean_m=0.45,
+    lapse_rate_per_s=0.1,
+    pushed_lapse_rate_per_s=1.2,
+    refusal_rate_per_s=0.03,
+    guided_push_scale=0.8,
+    words_alone_scale=0.25,
+)
+
 DIFFICULTIES: dict[str, Difficulty] = {
     d.name: d
     for d in (
@@ -141,22 +155,16 @@ DIFFICULTIES: dict[str, Difficulty] = {
             guided_push_scale=0.9,
             words_alone_scale=0.5,
         ),
-        # Values chosen by measurement (docs/HARD_LEVEL.md): oracle - best blind >= 30 points
-        # while a probing caregiver beats the best blind policy by >= 15.
-        Difficulty(
-            "hard",
-            passive_follow_rate_per_s=2.0,
-            spontaneous_lean_rate_per_s=0.2,
-            max_lean_m=0.45,
-            lapse_rate_per_s=0.1,
-            pushed_lapse_rate_per_s=1.2,
-            refusal_rate_per_s=0.03,
-            guided_push_scale=0.8,
-            words_alone_scale=0.25,
-        ),
+        _HARD,
+        # The hard level again, against the widened blind family (docs/HARD_LEVEL.md, "Choosing the
+        # knobs again"): recruiting slower makes a pushed lean more often not yet cooperation (what
+        # costs blind), willingness steadier once won gives the readers back the lapses between
+        # their reading and the lift. Oracle - best blind >= 30 points with the belief caregiver
+        # the best reader.
+        dataclasses.replace(_HARD, name="hard-v2", guided_push_scale=0.45, lapse_rate_per_s=0.05),
     )
 }
-"""The levels of the ``-v1`` family."""
+"""The levels: ``easy``, ``medium`` and ``hard`` of the ``-v1`` ids, ``hard-v2`` of ``CoopGym/SitToStandHard-v2``."""
 
 
 def get_difficulty(name: str | Difficulty) -> Difficulty:

@@ -11,17 +11,24 @@ import numpy as np
 import pytest
 
 from agents.evaluate import OUTCOMES, EpisodeRecord, EvaluationResult, evaluate, headroom
-from agents.scripted import TUNED_BLIND, BlindAgent, BlindSettings, ProbingCaregiver, make_scripted
+from agents.scripted import TUNED_BLIND, TUNED_PROBER, BlindAgent, BlindSettings, ProbingCaregiver, make_scripted
+from coop_gym.model.difficulty import DIFFICULTIES
 from coop_gym.envs.sit_to_stand import observation_features
 
 EPISODES = 400  # per agent; the 95 % CI half-width of a rate near 50 % is ~5 points
 
 
+AGENTS = ("oracle", "blind", "prober", "belief", "handbook")
+
+
 @pytest.fixture(scope="module")
 def hard() -> dict[str, EvaluationResult]:
-    env_id = "CoopGym/SitToStandHard-v1"
-    agents = ("oracle", "blind", "prober", "belief", "handbook")
-    return {name: evaluate(name, env_id, "test", EPISODES, 0) for name in agents}
+    return {name: evaluate(name, "CoopGym/SitToStandHard-v1", "test", EPISODES, 0) for name in AGENTS}
+
+
+@pytest.fixture(scope="module")
+def hard_v2() -> dict[str, EvaluationResult]:
+    return {name: evaluate(name, "CoopGym/SitToStandHard-v2", "test", EPISODES, 0) for name in AGENTS}
 
 
 def test_hard_level_needs_the_mind_and_lets_it_be_read(hard: dict[str, EvaluationResult]) -> None:
@@ -45,14 +52,30 @@ def test_hard_level_needs_the_mind_and_lets_it_be_read(hard: dict[str, Evaluatio
     strict=True,
     reason="SPEC 'Headroom' / issue #23: oracle - best blind >= 30 points on hard, and a reader >= 15 over it. "
     "Against the widened blind family (a 1-s guided push, 2 s of words alone, repeated; lift on a 0.16-m lean) "
-    "the hard level gives +24.0 and +12.0 (the belief caregiver; 2000 held-out episodes); the candidate levels of "
-    "scripts/level_candidates.py trade the two against each other (docs/HARD_LEVEL.md).",
+    "the -v1 hard level gives +24.0 and +12.0 (the belief caregiver; 2000 held-out episodes); its -v2 meets both "
+    "(test_hard_v2_keeps_its_headroom_against_the_widest_blind_search).",
 )
 def test_hard_level_keeps_its_headroom_against_the_widest_blind_search(hard: dict[str, EvaluationResult]) -> None:
     room = headroom(list(hard.values()))
     assert room is not None
     assert room.value_of_reading_the_mind >= 0.30
     assert room.achieved_insight >= 0.15
+
+
+def test_hard_v2_keeps_its_headroom_against_the_widest_blind_search(hard_v2: dict[str, EvaluationResult]) -> None:
+    # The hard level's -v2 (recruiting slower, willingness steadier once won): the blind and probing
+    # settings chosen again on its training personas are the -v1 ones (TUNED_BLIND, TUNED_PROBER).
+    # 2000 held-out episodes (docs/HARD_LEVEL.md): value of reading the mind +32.8 points, the belief
+    # caregiver +16.8 over blind, the prober +13.6; on these 400: +33.3, +17.0, +15.0.
+    room = headroom(list(hard_v2.values()))
+    assert room is not None
+    assert room.oracle >= 0.99
+    assert room.value_of_reading_the_mind >= 0.30
+    assert room.best_reader_agent == "belief"
+    assert room.achieved_insight >= 0.15
+    assert hard_v2["prober"].success_rate >= hard_v2["blind"].success_rate + 0.10
+    for reader in ("prober", "belief"):
+        assert hard_v2[reader].unsafe_rate <= hard_v2["blind"].unsafe_rate + 0.01
 
 
 def test_easy_level_does_not_test_the_mind() -> None:
@@ -145,8 +168,8 @@ def test_headroom_arithmetic() -> None:
     assert headroom([result("ppo:run", 8)]) is None
 
 
-def test_tuned_blind_covers_every_level() -> None:
-    assert set(TUNED_BLIND) == {"v0", "easy", "medium", "hard"}
+def test_tuned_blind_and_prober_cover_every_level() -> None:
+    assert set(TUNED_BLIND) == set(TUNED_PROBER) == {"v0", *DIFFICULTIES}
 
 
 def test_the_blind_search_scores_candidates_as_the_evaluation_does() -> None:

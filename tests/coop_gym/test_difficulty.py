@@ -1,4 +1,4 @@
-"""The -v1 difficulty levels: each realism knob does what its docstring says, and the levels wire up."""
+"""The difficulty levels (-v1, and the hard level's -v2): each realism knob does what its docstring says, and the levels wire up."""
 
 from __future__ import annotations
 
@@ -12,6 +12,8 @@ import coop_gym  # noqa: F401
 from coop_gym.model.difficulty import DIFFICULTIES, Difficulty, get_difficulty
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cooperativeness, Intention, PersonParams, Realism
+from coop_gym.model.personas import PERSONAS
+from coop_gym.registration import ENV_IDS
 
 QUIET = PersonParams().with_realism(dataclasses.replace(Realism.off(), saturation=True))
 
@@ -134,9 +136,27 @@ def test_unsafe_lift_never_pays_as_a_gamble() -> None:
     # it is a loss: a 10 % risk of an unsafe lift is never worth taking.
     v0 = gym.make("CoopGym/SitToStand-v0").unwrapped.config.reward
     assert 0.9 * v0.success - 0.1 * v0.unsafe > 0.0
-    for level in DIFFICULTIES.values():
-        reward = gym.make(f"CoopGym/SitToStand{level.name.capitalize()}-v1").unwrapped.config.reward
+    level_ids = {kwargs["difficulty"]: env_id for env_id, kwargs in ENV_IDS.items() if kwargs.keys() == {"difficulty"}}
+    assert sorted(level_ids) == sorted(DIFFICULTIES)  # every level has its own id
+    for name, env_id in level_ids.items():
+        reward = gym.make(env_id).unwrapped.config.reward
+        assert reward.unsafe == DIFFICULTIES[name].unsafe_penalty
         assert 0.9 * reward.success - 0.1 * reward.unsafe < 0.0
+
+
+def test_hard_v2_is_the_hard_level_recruiting_slower_and_lapsing_less() -> None:
+    hard, v2 = DIFFICULTIES["hard"], DIFFICULTIES["hard-v2"]
+    changed = {"name", "guided_push_scale", "lapse_rate_per_s"}
+    for field in dataclasses.fields(Difficulty):
+        if field.name not in changed:
+            assert getattr(v2, field.name) == getattr(hard, field.name), field.name
+    assert v2.guided_push_scale < hard.guided_push_scale and v2.lapse_rate_per_s < hard.lapse_rate_per_s
+    env = gym.make("CoopGym/SitToStandHard-v2")
+    assert get_difficulty(env.unwrapped.difficulty) == v2
+    for persona in env.unwrapped.personas:
+        coop = persona.params.cooperativeness
+        assert coop.guided_push_rate_per_s == PERSONAS[persona.name].params.cooperativeness.guided_push_rate_per_s * 0.45
+        assert coop.lapse_rate_per_s == 0.05
 
 
 def test_unknown_difficulty_is_a_clear_error() -> None:

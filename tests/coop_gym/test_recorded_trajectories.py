@@ -5,7 +5,8 @@ This test replays fixed action sequences (drawn from their own seeded generator,
 spaces, so a Gymnasium upgrade cannot change them) through each ``-v0`` id, single env and the
 native vector env, and compares observations, rewards, termination, truncation and every info
 value to the recording in ``data/recorded_v0.npz`` exactly. A selection of the ``-v1`` ids
-(difficulty levels, oracle, IMM) is held the same way by ``data/recorded_v1.npz``.
+(difficulty levels, oracle, IMM) is held the same way by ``data/recorded_v1.npz``, and the
+``-v2`` id by ``data/recorded_v2.npz``.
 
 Bit for bit holds at one NumPy SIMD level: NumPy's AVX-512 ``exp`` differs from its AVX2 ``exp``
 in the last bit, and each person is drawn through ``np.exp``. The recording was made at the AVX2
@@ -16,6 +17,7 @@ Re-record (only when a change is *meant* to alter a version, which the versionin
 
     COOP_GYM_RECORD=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py     # -v0
     COOP_GYM_RECORD_V1=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py  # -v1
+    COOP_GYM_RECORD_V2=1 python -m pytest tests/coop_gym/test_recorded_trajectories.py  # -v2
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import coop_gym  # noqa: F401  (registers the ids)
 
 DATA = Path(__file__).parent / "data" / "recorded_v0.npz"
 DATA_V1 = Path(__file__).parent / "data" / "recorded_v1.npz"
+DATA_V2 = Path(__file__).parent / "data" / "recorded_v2.npz"
 V0_IDS = (
     "CoopGym/SitToStand-v0",
     "CoopGym/SitToStandRaw-v0",
@@ -49,6 +52,7 @@ V1_IDS = (
     "CoopGym/SitToStandHardOracle-v1",
     "CoopGym/SitToStandHardIMM-v1",
 )
+V2_IDS = ("CoopGym/SitToStandHard-v2",)
 SINGLE_SEEDS = (0, 3, 11)
 SINGLE_STEPS = 400  # crosses several episode ends (lifts and a 300-step truncation)
 VECTOR_SEED = 5
@@ -167,6 +171,8 @@ if os.environ.get("COOP_GYM_RECORD") == "1":  # pragma: no cover - re-recording 
     _record_all(DATA, V0_IDS)
 if os.environ.get("COOP_GYM_RECORD_V1") == "1":  # pragma: no cover - re-recording is a deliberate act
     _record_all(DATA_V1, V1_IDS)
+if os.environ.get("COOP_GYM_RECORD_V2") == "1":  # pragma: no cover - re-recording is a deliberate act
+    _record_all(DATA_V2, V2_IDS)
 
 
 def _load(path: Path) -> dict[str, np.ndarray]:
@@ -182,6 +188,11 @@ def recording() -> dict[str, np.ndarray]:
 @pytest.fixture(scope="module")
 def recording_v1() -> dict[str, np.ndarray]:
     return _load(DATA_V1)
+
+
+@pytest.fixture(scope="module")
+def recording_v2() -> dict[str, np.ndarray]:
+    return _load(DATA_V2)
 
 
 def _assert_replays(recording: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None) -> None:
@@ -210,6 +221,13 @@ def test_v1_trajectory_is_bit_identical_to_the_recording(
     recording_v1: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None
 ) -> None:
     _assert_replays(recording_v1, env_id, kind, seed)
+
+
+@pytest.mark.parametrize(("env_id", "kind", "seed"), _cases(V2_IDS), ids=lambda v: str(v))
+def test_v2_trajectory_is_bit_identical_to_the_recording(
+    recording_v2: dict[str, np.ndarray], env_id: str, kind: str, seed: int | None
+) -> None:
+    _assert_replays(recording_v2, env_id, kind, seed)
 
 
 def test_recording_covers_episode_ends(recording: dict[str, np.ndarray]) -> None:
