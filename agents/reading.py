@@ -186,7 +186,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.episodes < 1:
         parser.error(f"--episodes must be positive, got {args.episodes}")
     summary = summarise(collect(args.policy, args.episodes, args.env, args.personas, args.seed))
-    print(f"{args.env}, {args.policy} cues, {args.episodes} episodes, {summary['steps']} steps ({args.personas} personas)")
+    steps = summary["steps"]
+    print(f"{args.env}, {args.policy} cues, {args.episodes} episodes, {steps} steps ({args.personas} personas)")
     print(f"{'estimator':<16}{'balanced acc':>14}{'recall -1/0/+1':>22}{'ECE P(+1)':>11}{'acc@0.5s':>10}{'acc@1s':>8}")
     for name in ESTIMATORS:
         s = summary[name]

@@ -12,8 +12,8 @@ import pytest
 
 from agents.evaluate import OUTCOMES, EpisodeRecord, EvaluationResult, evaluate, headroom
 from agents.scripted import TUNED_BLIND, TUNED_PROBER, BlindAgent, BlindSettings, ProbingCaregiver, make_scripted
-from coop_gym.model.difficulty import DIFFICULTIES
 from coop_gym.envs.sit_to_stand import observation_features
+from coop_gym.model.difficulty import DIFFICULTIES
 
 EPISODES = 400  # per agent; the 95 % CI half-width of a rate near 50 % is ~5 points
 

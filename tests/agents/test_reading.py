@@ -28,7 +28,9 @@ def test_every_estimator_is_read_on_the_same_steps_and_summarised(env_id: str) -
         assert sum(row[3] for row in summary[name]["reliability"]) == summary["steps"]
 
 
-@pytest.mark.parametrize(("env_id", "level"), [("CoopGym/SitToStandHard-v2", "hard-v2"), ("CoopGym/SitToStand-v0", None)])
+@pytest.mark.parametrize(
+    ("env_id", "level"), [("CoopGym/SitToStandHard-v2", "hard-v2"), ("CoopGym/SitToStand-v0", None)]
+)
 def test_the_level_of_the_env_sets_the_caregiver_and_the_true_person_filter(monkeypatch, env_id, level) -> None:
     import agents.reading as reading
 

@@ -1,4 +1,4 @@
-"""The difficulty levels (-v1, and the hard level's -v2): each realism knob does what its docstring says, and the levels wire up."""
+"""The difficulty levels (-v1, the hard level's -v2): each realism knob does what its docstring says; the levels wire up."""
 
 from __future__ import annotations
 
@@ -155,7 +155,9 @@ def test_hard_v2_is_the_hard_level_recruiting_slower_and_lapsing_less() -> None:
     assert get_difficulty(env.unwrapped.difficulty) == v2
     for persona in env.unwrapped.personas:
         coop = persona.params.cooperativeness
-        assert coop.guided_push_rate_per_s == PERSONAS[persona.name].params.cooperativeness.guided_push_rate_per_s * 0.45
+        assert (
+            coop.guided_push_rate_per_s == PERSONAS[persona.name].params.cooperativeness.guided_push_rate_per_s * 0.45
+        )
         assert coop.lapse_rate_per_s == 0.05
 
 
