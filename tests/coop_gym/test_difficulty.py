@@ -1,4 +1,4 @@
-"""The difficulty levels (-v1, the hard level's -v2): each realism knob does what its docstring says; the levels wire up."""
+"""The difficulty levels (-v1, the hard -v2): each realism knob does what its docstring says; the levels wire up."""
 
 from __future__ import annotations
 
