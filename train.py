@@ -1,6 +1,6 @@
 """Train a robot-caregiver guidance agent, then score it against the scripted baselines.
 
-``python train.py`` with no arguments trains PPO on ``CoopGym/SitToStandHard-v1`` (the hard
+``python train.py`` with no arguments trains PPO on ``CoopGym/SitToStandHard-v2`` (the hard
 level, where reading the mind decides the outcome; training personas only), evaluates it and
 every scripted baseline -- the mental-state-blind policy, the probing caregiver, the belief
 caregiver on the switching filter's estimate, the oracle on the oracle observation of the same
@@ -71,7 +71,7 @@ class Args:
     algo: str = "ppo"
     """ppo (belief observation), recurrent_ppo (raw observation, LSTM) or dqn (flat Discrete actions)"""
     env: str | None = None
-    """env id to train on; None: the algorithm's own (agents/hyperparams.py; ppo: CoopGym/SitToStandHard-v1)"""
+    """env id to train on; None: the algorithm's own (agents/hyperparams.py; ppo: CoopGym/SitToStandHard-v2)"""
     timesteps: int | None = None
     """training env steps; None: the algorithm's budget (agents/hyperparams.py); with --resume, steps added"""
     n_envs: int | None = None

@@ -30,7 +30,7 @@ the held-out ones by :mod:`agents.evaluate`.
 Example:
     >>> import gymnasium as gym
     >>> import coop_gym
-    >>> env = gym.make("CoopGym/SitToStandHard-v1", estimator="switching")
+    >>> env = gym.make("CoopGym/SitToStandHard-v2", estimator="switching")
     >>> agent = BeliefCaregiver.for_env(env)
     >>> obs, _ = env.reset(seed=0)
     >>> action, _ = agent.predict(obs)

@@ -40,7 +40,7 @@ ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo", "dqn")
 
 DEFAULT_ENV_IDS: dict[str, str] = {
     # The hard level: where reading the mind decides the outcome (coop_gym/model/difficulty.py).
-    "ppo": "CoopGym/SitToStandHard-v1",
+    "ppo": "CoopGym/SitToStandHard-v2",
     # Measurements only: the policy must remember the cue responses itself (an LSTM).
     "recurrent_ppo": "CoopGym/SitToStandRaw-v0",
     # DQN needs a flat Discrete action space.

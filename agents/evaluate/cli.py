@@ -8,7 +8,7 @@ Kept here, the imports run one way (``cli -> rl -> evaluate``). Examples::
     python -m agents.evaluate --model runs/.../model.zip --json
     python -m agents.evaluate --model runs/...__rllib_ppo__.../    # an RLlib run folder
     python -m agents.evaluate --model pretrained:hard-ppo --compare blind,prober,oracle
-    python -m agents.evaluate --compare blind,prober,oracle --env CoopGym/SitToStandHard-v1 --human played.csv
+    python -m agents.evaluate --compare blind,prober,oracle --env CoopGym/SitToStandHard-v2 --human played.csv
     python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
         --csv out.csv --plot out.png
 

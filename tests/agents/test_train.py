@@ -34,7 +34,7 @@ def first_run(tmp_path_factory) -> Path:
 
 
 def test_run_folder_is_complete_and_the_model_loads(first_run):
-    assert first_run.name.startswith("CoopGym-SitToStandHard-v1__ppo__0__")  # the default: the hard level
+    assert first_run.name.startswith("CoopGym-SitToStandHard-v2__ppo__0__")  # the default: the hard level
     for name in ("COMPLETE", "results.json", "model.zip", "vecnormalize.pkl", "agent.json", "eval.json", "eval.csv"):
         assert (first_run / name).exists(), name
     for name in ("learning_curve.png", "outcome_rates.png"):
