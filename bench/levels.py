@@ -35,7 +35,7 @@ LEVELS = {
     "v0": "CoopGym/SitToStand-v0",
 }
 AGENTS = ("oracle", "blind", "prober", "belief", "handbook", "push_then_lift")
-PRETRAINED = {"hard": ("pretrained:hard-ppo", "pretrained:hard-ppo-switching")}
+PRETRAINED = {"hard-v2": ("pretrained:hard-v2-ppo",), "hard": ("pretrained:hard-ppo", "pretrained:hard-ppo-switching")}
 
 
 def level_report(env_id: str, agents: tuple[str, ...], episodes: int) -> dict[str, Any]:

@@ -15,7 +15,7 @@ NAMES = pretrained_names()
 
 
 def test_the_hard_level_models_ship():
-    assert {"hard-ppo", "hard-ppo-switching"} <= set(NAMES)
+    assert {"hard-ppo", "hard-ppo-switching", "hard-v2-ppo"} <= set(NAMES)
     for name in NAMES:
         card = pretrained_card(name)
         assert card["name"] == name and pretrained_model_path(name).is_file()
