@@ -145,13 +145,11 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
         # lifted 9.8 % of held-out people unsafely, reading a frail person's pushed lean as
         # cooperation (docs/agents.md, "Why the wider spread").
         # 8 x 512 stays: on the hard level 64 x 64 learned less (77-82 % held-out against 85 %).
-        "CoopGym/SitToStandHard-v1": _PPO.replace(
-            env_id="CoopGym/SitToStandHard-v1", total_timesteps=1_000_000, personas="train_wide"
-        ),
         # The hard level's -v2 (slower recruiting, steadier willingness): the same settings.
-        "CoopGym/SitToStandHard-v2": _PPO.replace(
-            env_id="CoopGym/SitToStandHard-v2", total_timesteps=1_000_000, personas="train_wide"
-        ),
+        **{
+            env_id: _PPO.replace(env_id=env_id, total_timesteps=1_000_000, personas="train_wide")
+            for env_id in ("CoopGym/SitToStandHard-v1", "CoopGym/SitToStandHard-v2")
+        },
     },
     "recurrent_ppo": {
         "CoopGym/SitToStandRaw-v0": TrainingConfig(

@@ -31,21 +31,28 @@ def hard_v2() -> dict[str, EvaluationResult]:
     return {name: evaluate(name, "CoopGym/SitToStandHard-v2", "test", EPISODES, 0) for name in AGENTS}
 
 
+def _needs_the_mind_and_lets_the_estimator_read_it(
+    results: dict[str, EvaluationResult], value: float, insight: float, prober_lead: float, unsafe_slack: float
+) -> None:
+    """The level's headroom against the best blind policy, the belief caregiver the best reader."""
+    room = headroom(list(results.values()))
+    assert room is not None
+    assert room.oracle >= 0.99
+    assert room.value_of_reading_the_mind >= value
+    # The estimator reads best: the caregiver that lifts on the switching filter's P(xi = +1).
+    assert room.best_reader_agent == "belief"
+    assert room.achieved_insight >= insight
+    assert results["prober"].success_rate >= results["blind"].success_rate + prober_lead
+    # Reading the mind is not bought with unsafe lifts.
+    for reader in ("prober", "belief"):
+        assert results[reader].unsafe_rate <= results["blind"].unsafe_rate + unsafe_slack
+
+
 def test_hard_level_needs_the_mind_and_lets_it_be_read(hard: dict[str, EvaluationResult]) -> None:
     # Every caregiver with its settings chosen on the training personas (TUNED_BLIND, TUNED_PROBER,
     # the belief caregiver's leave-one-out choice); 2000 held-out episodes measured value of reading
     # the mind +24.0 points, the belief caregiver +12.0 over blind, the prober +8.0 (docs/HARD_LEVEL.md).
-    room = headroom(list(hard.values()))
-    assert room is not None
-    assert room.oracle >= 0.9
-    assert room.value_of_reading_the_mind >= 0.18
-    # The estimator reads best: the caregiver that lifts on the switching filter's P(xi = +1).
-    assert room.best_reader_agent == "belief"
-    assert room.achieved_insight >= 0.08
-    assert hard["prober"].success_rate >= hard["blind"].success_rate + 0.03
-    # Reading the mind is not bought with unsafe lifts.
-    for reader in ("prober", "belief"):
-        assert hard[reader].unsafe_rate <= hard["blind"].unsafe_rate + 0.02
+    _needs_the_mind_and_lets_the_estimator_read_it(hard, value=0.18, insight=0.08, prober_lead=0.03, unsafe_slack=0.02)
 
 
 @pytest.mark.xfail(
@@ -67,15 +74,9 @@ def test_hard_v2_keeps_its_headroom_against_the_widest_blind_search(hard_v2: dic
     # settings chosen again on its training personas are the -v1 ones (TUNED_BLIND, TUNED_PROBER).
     # 2000 held-out episodes (docs/HARD_LEVEL.md): value of reading the mind +32.8 points, the belief
     # caregiver +16.8 over blind, the prober +13.6; on these 400: +33.3, +17.0, +15.0.
-    room = headroom(list(hard_v2.values()))
-    assert room is not None
-    assert room.oracle >= 0.99
-    assert room.value_of_reading_the_mind >= 0.30
-    assert room.best_reader_agent == "belief"
-    assert room.achieved_insight >= 0.15
-    assert hard_v2["prober"].success_rate >= hard_v2["blind"].success_rate + 0.10
-    for reader in ("prober", "belief"):
-        assert hard_v2[reader].unsafe_rate <= hard_v2["blind"].unsafe_rate + 0.01
+    _needs_the_mind_and_lets_the_estimator_read_it(
+        hard_v2, value=0.30, insight=0.15, prober_lead=0.10, unsafe_slack=0.01
+    )
 
 
 def test_easy_level_does_not_test_the_mind() -> None:
