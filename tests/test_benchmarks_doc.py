@@ -75,7 +75,7 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
         ("reset", ["--num-envs", "64", "--repeats", "1"], "reset.json", "reset"),
         ("render", ["--repeats", "1", "--frames", "10"], "render.json", "render"),
         ("soak", ["--steps", "640", "--num-envs", "8"], "soak.json", "soak"),
-        ("levels", ["--episodes", "4", "--levels", "hard", "--no-pretrained"], "levels.json", "levels"),
+        ("levels", ["--episodes", "4", "--levels", "hard-v2", "--no-pretrained"], "levels.json", "levels"),
         (
             "papers_experiment",
             ["--seeds", "2", "--estimators", "kalman", "--difficulties", "hard"],
