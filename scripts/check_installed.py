@@ -43,7 +43,7 @@ def main() -> None:
     top = installed_top_level()
     if top != EXPECTED_TOP_LEVEL:
         sys.exit(f"installed top-level names {sorted(top)}, expected {sorted(EXPECTED_TOP_LEVEL)}")
-    env = gym.make("CoopGym/SitToStandHard-v1")
+    env = gym.make("CoopGym/SitToStandHard-v2")
     env.reset(seed=0)
     env.action_space.seed(0)
     for _ in range(10):
