@@ -363,7 +363,7 @@ MODEL_CASES: list[tuple[str, str, list[str], str]] = [
         "train.py",
         "resume: model of another id",
         ["--resume", "{model}", "--env", _ORACLE, "--out", "{out}"],
-        r"--env 'CoopGym/SitToStandOracle-v0' \(the run has 'CoopGym/SitToStandHard-v1'\) contradict the saved run",
+        r"--env 'CoopGym/SitToStandOracle-v0' \(the run has 'CoopGym/SitToStandHard-v2'\) contradict the saved run",
     ),
     ("train.py", "resume: empty model.zip", ["--resume", "{empty}", "--out", "{out}"], r"--resume: could not load"),
     ("agents.evaluate", "empty model.zip", ["--model", "{empty}", "--episodes", "1"], r"--model .*: the file is empty"),
