@@ -44,6 +44,9 @@ __all__ = ["ESTIMATORS", "collect", "main", "summarise"]
 ESTIMATORS = ("kalman", "imm", "switching", "switching_true")
 LAGS_S = tuple(round(0.1 * k, 1) for k in range(0, 31))
 """Times since a words-only probe's onset at which the latency curve is read [s]."""
+MIN_STEPS_PER_LAG = 100
+"""Fewer steps at a lag than this leave the curve's point out (NaN): past a caregiver's probe window
+only the odd episode is still probing, and its few steps would draw a spike."""
 _BINS = 10
 DEFAULT_ENV_ID = "CoopGym/SitToStandHard-v2"
 
@@ -134,7 +137,8 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
         latency = []
         for lag in LAGS_S:
             sel = np.abs(probe_age - lag - 0.1) < 0.05  # the step that ends lag s after the onset
-            latency.append(float(np.mean(mode[sel] == truth[sel])) if sel.any() else math.nan)
+            enough = sel.sum() >= MIN_STEPS_PER_LAG
+            latency.append(float(np.mean(mode[sel] == truth[sel])) if enough else math.nan)
         out[name] = {
             "balanced_accuracy": float(np.mean(recalls)),
             "recall_by_mode": recalls,
@@ -198,7 +202,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with open(args.json_out, "w") as fh:
             json.dump(summary, fh, indent=1)
     if args.png:
-        _plot(summary, args.png, f"{args.policy} cues")
+        _plot(summary, args.png, f"{args.policy} cues, {args.env.removeprefix('CoopGym/')}")
     return 0
 
 

@@ -59,3 +59,18 @@ def test_command_line_writes_the_summary(tmp_path, capsys) -> None:
     assert set(json.loads(out.read_text())) >= {*ESTIMATORS, "steps", "lags_s"}
     with pytest.raises(SystemExit):
         main(["--episodes", "0"])
+
+
+def test_a_lag_with_too_few_steps_is_left_out_of_the_latency_curve() -> None:
+    from agents.reading import MIN_STEPS_PER_LAG
+
+    many, few = MIN_STEPS_PER_LAG, MIN_STEPS_PER_LAG - 1
+    # Steps 0.1 s after a probe's onset (lag 0.0) and 0.6 s after (lag 0.5); every estimator right.
+    age = np.r_[np.full(many, 0.1), np.full(few, 0.6)][:, None]
+    truth = np.ones_like(age)
+    data = {"live": np.ones(age.shape, dtype=bool), "true_xi": truth, "probe_age": age}
+    for name in ESTIMATORS:
+        data[name], data[f"p_up_{name}"] = truth, np.full(age.shape, 0.9)
+    latency = summarise(data)["kalman"]["latency_accuracy"]
+    assert latency[0] == 1.0
+    assert np.isnan(latency[5])  # 99 steps: left out
