@@ -30,6 +30,8 @@ class Args:
 
     out: str = "runs/hard-ppo-switching"
     """folder that receives model.zip and training.json"""
+    env: str = "CoopGym/SitToStandHard-v1"
+    """the hard level's id (default -v1, as hard-ppo-switching's recorded command; or CoopGym/SitToStandHard-v2)"""
     timesteps: int = 1_000_000
     """training env steps"""
     seed: int = 0
@@ -40,9 +42,6 @@ class Args:
     """push-compliance hypotheses of the switching filter"""
     threads: int = 1
     """torch CPU threads"""
-
-
-ENV_ID = "CoopGym/SitToStandHard-v1"
 
 
 def env_kwargs(args: Args) -> dict[str, object]:
@@ -62,11 +61,11 @@ def main() -> None:
     from agents.rl import make_model, make_train_env, save_agent
 
     torch.set_num_threads(args.threads)
-    config = hyperparams_for("ppo", ENV_ID)
+    config = hyperparams_for("ppo", args.env)
     kwargs = env_kwargs(args)
     out = Path(args.out)
     env = make_train_env(
-        ENV_ID,
+        args.env,
         config.n_envs,
         args.seed,
         personas=config.personas,
@@ -78,10 +77,10 @@ def main() -> None:
     started = time.perf_counter()
     model.learn(total_timesteps=args.timesteps)
     wall_time_s = time.perf_counter() - started
-    save_agent(model, out, algo="ppo", env_id=ENV_ID)
+    save_agent(model, out, algo="ppo", env_id=args.env)
     env.close()
     summary = {
-        "env_id": ENV_ID,
+        "env_id": args.env,
         "env_kwargs": kwargs,
         "seed": args.seed,
         "timesteps": int(model.num_timesteps),
