@@ -69,9 +69,9 @@ from agents.base import action_type_of, features_of
 from agents.evaluate import evaluate
 from agents.scripted import BlindAgent, BlindSettings, CuePhase, ProbingCaregiver, ProbingSettings, ScriptedAgent
 from coop_gym.envs.config import Outcome
+from coop_gym.registration import LEVEL_ENV_IDS
 
 __all__ = [
-    "LEVEL_ENV_IDS",
     "ORIGINAL_BLIND_WINNERS",
     "TUNING_SEED",
     "blind_grid",
@@ -85,14 +85,6 @@ __all__ = [
     "tune",
 ]
 
-LEVEL_ENV_IDS: dict[str, str] = {
-    "v0": "CoopGym/SitToStand-v0",
-    "easy": "CoopGym/SitToStandEasy-v1",
-    "medium": "CoopGym/SitToStandMedium-v1",
-    "hard": "CoopGym/SitToStandHard-v1",
-    "hard-v2": "CoopGym/SitToStandHard-v2",
-}
-"""The env id each level is tuned on."""
 
 TUNING_SEED = 1_000_000
 """Seed of the first tuning episode: far from the evaluation seeds (0, 1, ...)."""

@@ -26,14 +26,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.p
 from result_files import add_save_argument, save
 
 from coop_gym.cli import positive_int
+from coop_gym.registration import LEVEL_ENV_IDS
 
-LEVELS = {
-    "hard-v2": "CoopGym/SitToStandHard-v2",
-    "hard": "CoopGym/SitToStandHard-v1",
-    "medium": "CoopGym/SitToStandMedium-v1",
-    "easy": "CoopGym/SitToStandEasy-v1",
-    "v0": "CoopGym/SitToStand-v0",
-}
+LEVELS = dict(reversed(LEVEL_ENV_IDS.items()))
+"""Each level's id, the hardest first (hard-v2, hard, medium, easy, v0)."""
 AGENTS = ("oracle", "blind", "prober", "belief", "handbook", "push_then_lift")
 PRETRAINED = {"hard-v2": ("pretrained:hard-v2-ppo",), "hard": ("pretrained:hard-ppo", "pretrained:hard-ppo-switching")}
 

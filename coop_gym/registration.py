@@ -8,7 +8,7 @@ import gymnasium as gym
 
 from coop_gym.model.params import Timing
 
-__all__ = ["ENV_IDS", "register_envs"]
+__all__ = ["ENV_IDS", "LEVEL_ENV_IDS", "register_envs"]
 
 MAX_EPISODE_STEPS = Timing().max_episode_steps
 """30 s at one action per 0.1 s: the episode length of every registered id on its default timing.
@@ -58,6 +58,12 @@ ENV_IDS: dict[str, dict[str, Any]] = {
     },
     "CoopGym/SitToStandHardHeldOutUnit-v1": {"difficulty": "hard", "personas": "test", "observation_scale": "unit"},
 }
+
+LEVEL_ENV_IDS: dict[str, str] = {
+    "v0": "CoopGym/SitToStand-v0",
+    **{kwargs["difficulty"]: env_id for env_id, kwargs in ENV_IDS.items() if kwargs.keys() == {"difficulty"}},
+}
+"""The id of each level (``v0``: the paper's model; then each difficulty by name), from :data:`ENV_IDS`."""
 
 
 def register_envs() -> None:

@@ -13,7 +13,7 @@ from coop_gym.model.difficulty import DIFFICULTIES, Difficulty, get_difficulty
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cooperativeness, Intention, PersonParams, Realism
 from coop_gym.model.personas import PERSONAS
-from coop_gym.registration import ENV_IDS
+from coop_gym.registration import LEVEL_ENV_IDS
 
 QUIET = PersonParams().with_realism(dataclasses.replace(Realism.off(), saturation=True))
 
@@ -136,7 +136,7 @@ def test_unsafe_lift_never_pays_as_a_gamble() -> None:
     # it is a loss: a 10 % risk of an unsafe lift is never worth taking.
     v0 = gym.make("CoopGym/SitToStand-v0").unwrapped.config.reward
     assert 0.9 * v0.success - 0.1 * v0.unsafe > 0.0
-    level_ids = {kwargs["difficulty"]: env_id for env_id, kwargs in ENV_IDS.items() if kwargs.keys() == {"difficulty"}}
+    level_ids = {name: env_id for name, env_id in LEVEL_ENV_IDS.items() if name != "v0"}
     assert sorted(level_ids) == sorted(DIFFICULTIES)  # every level has its own id
     for name, env_id in level_ids.items():
         reward = gym.make(env_id).unwrapped.config.reward
