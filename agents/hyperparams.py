@@ -23,6 +23,7 @@ from coop_gym.cli import SEED_LIMIT
 from coop_gym.compiled.checks import check_integer
 from coop_gym.io import write_text
 from coop_gym.model.personas import TEST_PERSONAS, resolve_personas
+from coop_gym.registration import HARD_ENV_ID
 
 __all__ = [
     "ALGORITHMS",
@@ -40,7 +41,7 @@ ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo", "dqn")
 
 DEFAULT_ENV_IDS: dict[str, str] = {
     # The hard level: where reading the mind decides the outcome (coop_gym/model/difficulty.py).
-    "ppo": "CoopGym/SitToStandHard-v2",
+    "ppo": HARD_ENV_ID,
     # Measurements only: the policy must remember the cue responses itself (an LSTM).
     "recurrent_ppo": "CoopGym/SitToStandRaw-v0",
     # DQN needs a flat Discrete action space.

@@ -61,10 +61,11 @@ from agents.evaluate import evaluate
 from agents.play_log import PlayedEpisode, append_played, next_seed, read_played, score_played
 from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.model.personas import resolve_personas
+from coop_gym.registration import HARD_ENV_ID
 
 __all__ = ["DEFAULT_CSV", "DEFAULT_ENV_ID", "KEYS", "Controls", "main", "play", "score_played", "scripted_keys"]
 
-DEFAULT_ENV_ID = "CoopGym/SitToStandHard-v2"
+DEFAULT_ENV_ID = HARD_ENV_ID
 DEFAULT_CSV = "runs/played.csv"
 COMPARED = ("oracle", "prober")
 """Scripted agents replayed on each played seed for the summary."""

@@ -37,6 +37,7 @@ from scipy.special import erfc
 import coop_gym  # noqa: F401  (registers the ids)
 from agents.scripted import make_scripted
 from coop_gym.envs.switching import SwitchingEstimator, SwitchingOptions
+from coop_gym.registration import HARD_ENV_ID
 from estimator.multiple_model import IMMEstimator
 
 __all__ = ["ESTIMATORS", "collect", "main", "summarise"]
@@ -48,7 +49,7 @@ MIN_STEPS_PER_LAG = 100
 """Fewer steps at a lag than this leave the curve's point out (NaN): past a caregiver's probe window
 only the odd episode is still probing, and its few steps would draw a spike."""
 _BINS = 10
-DEFAULT_ENV_ID = "CoopGym/SitToStandHard-v2"
+DEFAULT_ENV_ID = HARD_ENV_ID
 
 
 def _kalman_probabilities(xi_hat: NDArray[np.float64], xi_std: NDArray[np.float64]) -> NDArray[np.float64]:

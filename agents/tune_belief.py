@@ -28,6 +28,7 @@ from agents.evaluate import evaluate
 from agents.tune_baselines import TUNING_SEED
 from coop_gym.envs.contract import observation_features
 from coop_gym.model.personas import TRAIN_PERSONAS, resolve_personas
+from coop_gym.registration import HARD_ENV_ID
 
 __all__ = ["leave_one_out", "main", "settings_grid"]
 
@@ -75,7 +76,7 @@ def leave_one_out(
 def main(argv: Sequence[str] | None = None) -> int:
     """Score :func:`settings_grid` on the TRAINING personas, leaving each out of the filter, and print the best."""
     parser = argparse.ArgumentParser(prog="python -m agents.tune_belief", description=main.__doc__)
-    parser.add_argument("--env", default="CoopGym/SitToStandHard-v2")
+    parser.add_argument("--env", default=HARD_ENV_ID)
     parser.add_argument("--episodes", type=int, default=128, help="episodes per training persona")
     parser.add_argument("--wide", action="store_true", help="each persona with train.py's train_wide spread")
     args = parser.parse_args(argv)

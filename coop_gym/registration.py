@@ -8,7 +8,7 @@ import gymnasium as gym
 
 from coop_gym.model.params import Timing
 
-__all__ = ["ENV_IDS", "LEVEL_ENV_IDS", "register_envs"]
+__all__ = ["ENV_IDS", "HARD_ENV_ID", "LEVEL_ENV_IDS", "register_envs"]
 
 MAX_EPISODE_STEPS = Timing().max_episode_steps
 """30 s at one action per 0.1 s: the episode length of every registered id on its default timing.
@@ -64,6 +64,10 @@ LEVEL_ENV_IDS: dict[str, str] = {
     **{kwargs["difficulty"]: env_id for env_id, kwargs in ENV_IDS.items() if kwargs.keys() == {"difficulty"}},
 }
 """The id of each level (``v0``: the paper's model; then each difficulty by name), from :data:`ENV_IDS`."""
+
+HARD_ENV_ID = LEVEL_ENV_IDS["hard-v2"]
+"""The hard level's newest id: what ``train.py``, ``agents.play``, ``agents.reading`` and
+``agents.tune_belief`` play by default."""
 
 
 def register_envs() -> None:
