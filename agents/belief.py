@@ -49,7 +49,7 @@ from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE,
 from agents.scripted_base import EPS_S, PhaseState, ScriptedAgent
 from coop_gym.compiled.checks import check_number
 
-__all__ = ["BeliefCaregiver", "BeliefSettings"]
+__all__ = ["TUNED_BELIEF", "BeliefCaregiver", "BeliefSettings"]
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,23 @@ class BeliefSettings:
             check_number("BeliefSettings.recruit_until_m", self.recruit_until_m, 0.0, 1.0)
         for name in ("burst_s", "settle_s", "window_s"):
             check_number(f"BeliefSettings.{name}", getattr(self, name), 0.0, 60.0)
+
+
+# Winners of `python -m agents.tune_belief --env ID` (its settings_grid, 128 episodes of each training persona
+# from seed 1,000,000, each met by a filter drawn around the other four; success in the comments).
+# Rerun after a model change.
+TUNED_BELIEF: dict[str, BeliefSettings] = {
+    # Chosen on the hard level, where the caregiver was designed; the other levels play it as it is.
+    "v0": BeliefSettings(),
+    "easy": BeliefSettings(),
+    "medium": BeliefSettings(),
+    # 90.9 % (the grid's others 69.5-90.8 %).
+    "hard": BeliefSettings(),
+    # 92.5 % (the -v1 settings: 88.4 %, 5th of 12): -v2's guided push recruits slower, so a burst runs longer
+    # and ends at a lower P(xi = +1).
+    "hard-v2": BeliefSettings(burst_s=3.0, recruited_p=0.4),
+}
+"""The belief caregiver's settings chosen on each hard level's training personas (``v0``: the ``-v0`` ids)."""
 
 
 class BeliefCaregiver(ScriptedAgent):

@@ -34,7 +34,7 @@ from agents.base import (
     WAIT,
     require_features,
 )
-from agents.belief import BeliefCaregiver
+from agents.belief import TUNED_BELIEF, BeliefCaregiver
 from agents.blind import TUNED_BLIND, BlindAgent, BlindSettings, CuePhase
 from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
@@ -402,10 +402,11 @@ def make_scripted(
 ) -> ScriptedAgent:
     """Build a scripted agent by name (see :data:`SCRIPTED_AGENTS`).
 
-    ``level`` (a difficulty or its name, or None for the ``-v0`` ids) picks the blind and
-    probing caregivers' settings chosen for that level (:data:`TUNED_BLIND`,
-    :data:`TUNED_PROBER`); the other agents do not depend on it. A level of your own has no
-    chosen settings: build ``BlindAgent(settings=...)`` or ``ProbingCaregiver(settings=...)``.
+    ``level`` (a difficulty or its name, or None for the ``-v0`` ids) picks the blind, probing
+    and belief caregivers' settings chosen for that level (:data:`TUNED_BLIND`,
+    :data:`TUNED_PROBER`, :data:`agents.belief.TUNED_BELIEF`); the other agents do not depend
+    on it. A level of your own has no chosen settings: build ``BlindAgent(settings=...)``,
+    ``ProbingCaregiver(settings=...)`` or ``BeliefCaregiver(settings=...)``.
     """
     if name not in SCRIPTED_AGENTS:
         raise ValueError(f"unknown scripted agent {name!r}; known: {', '.join(SCRIPTED_AGENTS)}")
@@ -413,6 +414,8 @@ def make_scripted(
         return BlindAgent(features, action_type, seed, settings=_chosen(TUNED_BLIND, "BlindAgent", level))
     if name == ProbingCaregiver.name:
         return ProbingCaregiver(features, action_type, seed, settings=_chosen(TUNED_PROBER, "ProbingCaregiver", level))
+    if name == BeliefCaregiver.name:
+        return BeliefCaregiver(features, action_type, seed, settings=_chosen(TUNED_BELIEF, "BeliefCaregiver", level))
     return SCRIPTED_AGENTS[name](features, action_type, seed)
 
 

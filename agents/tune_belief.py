@@ -10,8 +10,9 @@ OTHER training personas (``SwitchingOptions.personas``): leave one persona out. 
 personas are people the caregiver has not met, and a filter scored only on the people its
 hypotheses were drawn around would choose settings that lean on knowing them. ``--wide``
 plays each persona with the wider spread ``train.py`` trains on (``train_wide``): people
-further from the five, whose bodies the filter's hypotheses cover less well. The winner is
-:class:`agents.belief.BeliefSettings`' default; it is scored on the held-out personas by
+further from the five, whose bodies the filter's hypotheses cover less well. The winner on each
+hard level is its entry of :data:`agents.belief.TUNED_BELIEF` (on ``-v1``,
+:class:`agents.belief.BeliefSettings`' default); it is scored on the held-out personas by
 ``python -m agents.evaluate --compare belief,...`` with the filter's default hypotheses (all the
 training personas).
 """
@@ -37,12 +38,15 @@ def settings_grid() -> list[BeliefSettings]:
     """The settings ``python -m agents.tune_belief`` tries: end-of-burst gate x longest burst.
 
     ``recruited_p=1.0`` never ends a burst early. A wider search by the same leave-one-out
-    score (the gate at 0.4-0.6, bursts of 1-3 s, the lift gate, settle, probe window and
-    lifting in any phase) found nothing better than the default; the grid keeps the choice
-    it makes visible.
+    score (bursts of 0.5-1.5 s, the lift gate, settle, probe window, the lean a lift needs and
+    lifting in any phase) found nothing better than these on either hard level; the grid
+    keeps the choice it makes visible: the longest burst is what the two hard levels differ
+    on (``-v2``'s guided push recruits slower).
     """
     return [
-        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p) for recruited_p in (0.5, 1.0) for burst_s in (1.0, 2.0)
+        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p)
+        for recruited_p in (0.3, 0.4, 0.5, 1.0)
+        for burst_s in (2.0, 3.0, 4.0)
     ]
 
 

@@ -271,9 +271,10 @@ def run(
 def main(argv: list[str] | None = None) -> int:
     """Parse the flags, measure, write the JSON and the PNG."""
     from coop_gym.io import write_json
+    from coop_gym.registration import HARD_ENV_ID
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--env", default="CoopGym/SitToStandHard-v1", help="env id (default: the hard level)")
+    parser.add_argument("--env", default=HARD_ENV_ID, help=f"env id (default: the hard level, {HARD_ENV_ID})")
     parser.add_argument("--budget-s", type=_positive_float, default=900.0, help="training seconds per contender")
     parser.add_argument("--eval-every-s", type=_positive_float, default=30.0, help="training seconds between scores")
     parser.add_argument("--episodes", type=positive_int, default=500, help="held-out episodes per score")

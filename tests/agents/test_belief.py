@@ -85,3 +85,15 @@ def test_needs_the_filter_and_checks_its_settings():
         BeliefSettings(window_s=-1.0)
     with pytest.raises(ValueError, match="recruit_until_m"):
         BeliefSettings(recruit_until_m=-0.1)
+
+
+def test_the_chosen_settings_are_the_search_grids_and_differ_only_where_chosen():
+    # TUNED_BELIEF holds winners of agents.tune_belief's grid; the levels it was not run on keep -v1's.
+    from agents.belief import TUNED_BELIEF
+    from agents.tune_belief import settings_grid
+
+    grid = settings_grid()
+    assert TUNED_BELIEF["hard"] in grid and TUNED_BELIEF["hard-v2"] in grid
+    assert TUNED_BELIEF["hard"] == BeliefSettings()
+    assert {TUNED_BELIEF[level] for level in ("v0", "easy", "medium")} == {BeliefSettings()}
+    assert TUNED_BELIEF["hard-v2"].burst_s > TUNED_BELIEF["hard"].burst_s

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from agents.belief import TUNED_BELIEF
 from agents.evaluate import OUTCOMES, EpisodeRecord, EvaluationResult, evaluate, headroom
 from agents.scripted import TUNED_BLIND, TUNED_PROBER, BlindAgent, BlindSettings, ProbingCaregiver, make_scripted
 from coop_gym.envs.sit_to_stand import observation_features
@@ -169,8 +170,8 @@ def test_headroom_arithmetic() -> None:
     assert headroom([result("ppo:run", 8)]) is None
 
 
-def test_tuned_blind_and_prober_cover_every_level() -> None:
-    assert set(TUNED_BLIND) == set(TUNED_PROBER) == {"v0", *DIFFICULTIES}
+def test_the_tuned_settings_cover_every_level() -> None:
+    assert set(TUNED_BLIND) == set(TUNED_PROBER) == set(TUNED_BELIEF) == {"v0", *DIFFICULTIES}
 
 
 def test_the_blind_search_scores_candidates_as_the_evaluation_does() -> None:

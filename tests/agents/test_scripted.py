@@ -10,6 +10,7 @@ import pytest
 
 import coop_gym  # noqa: F401
 from agents.base import encode_actions
+from agents.belief import TUNED_BELIEF
 from agents.evaluate import evaluate
 from agents.scripted import (
     SCRIPTED_AGENTS,
@@ -452,8 +453,10 @@ def test_a_level_of_ones_own_has_no_chosen_settings_and_says_so():
     # A shipped level given as its Difficulty is its name; a changed one has no chosen settings.
     assert make_scripted("blind", level=DIFFICULTIES["hard"]).settings == TUNED_BLIND["hard"]
     assert make_scripted("prober", level="medium").settings == TUNED_PROBER["medium"]
+    switching = observation_features("belief", "switching")
+    assert make_scripted("belief", switching, level="hard-v2").settings == TUNED_BELIEF["hard-v2"]
     mine = dataclasses.replace(DIFFICULTIES["hard"], lapse_rate_per_s=0.05)
-    for name, agent in (("blind", "BlindAgent"), ("prober", "ProbingCaregiver")):
+    for name, agent in (("blind", "BlindAgent"), ("prober", "ProbingCaregiver"), ("belief", "BeliefCaregiver")):
         with pytest.raises(ValueError, match=rf"no {agent} settings were chosen for the level 'hard' \(not a shipped"):
             make_scripted(name, level=mine)
     with pytest.raises(ValueError, match=r"no BlindAgent settings .* level 'brutal'; chosen for: v0, easy"):
