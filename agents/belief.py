@@ -24,7 +24,8 @@ that has the body slightly wrong reads that motion as the answer.
 
 The settings were chosen on the TRAINING personas, each played with a filter whose hypotheses
 were drawn around the OTHER training personas (``python -m agents.tune_belief``: meeting a kind
-of person the caregiver has not seen is what the held-out personas test), and are scored on
+of person the caregiver has not seen is what the held-out personas test), one entry of
+:data:`TUNED_BELIEF` per hard level (``agents.evaluate`` plays each level's), and are scored on
 the held-out ones by :mod:`agents.evaluate`.
 
 Example:
@@ -99,7 +100,7 @@ TUNED_BELIEF: dict[str, BeliefSettings] = {
     "medium": BeliefSettings(),
     # 90.9 % (the grid's others 69.5-90.8 %).
     "hard": BeliefSettings(),
-    # 92.5 % (the -v1 settings: 88.4 %, 5th of 12): -v2's guided push recruits slower, so a burst runs longer
+    # 92.5 % (the -v1 settings: 88.4 %, 9th of 12): -v2's guided push recruits slower, so a burst runs longer
     # and ends at a lower P(xi = +1).
     "hard-v2": BeliefSettings(burst_s=3.0, recruited_p=0.4),
 }
