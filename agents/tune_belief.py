@@ -38,10 +38,11 @@ def settings_grid() -> list[BeliefSettings]:
     """The settings ``python -m agents.tune_belief`` tries: end-of-burst gate x longest burst.
 
     ``recruited_p=1.0`` never ends a burst early. A wider search by the same leave-one-out
-    score (bursts of 0.5-1.5 s, the lift gate, settle, probe window, the lean a lift needs and
-    lifting in any phase) found nothing better than these on either hard level; the grid
-    keeps the choice it makes visible: the longest burst is what the two hard levels differ
-    on (``-v2``'s guided push recruits slower).
+    score found nothing better than these: on ``-v1`` bursts of 0.5-1.5 s, the lift gate,
+    settle, probe window and lifting in any phase; on ``-v2`` the lift gate, probe window,
+    re-probe gate and the lean a lift needs (docs/HARD_LEVEL.md). The grid keeps the choice
+    it makes visible: the longest burst and its gate are what the two hard levels differ on
+    (``-v2``'s guided push recruits slower).
     """
     return [
         BeliefSettings(burst_s=burst_s, recruited_p=recruited_p)
