@@ -32,7 +32,9 @@ Example:
     >>> import gymnasium as gym
     >>> import coop_gym
     >>> env = gym.make("CoopGym/SitToStandHard-v2", estimator="switching")
-    >>> agent = BeliefCaregiver.for_env(env)
+    >>> agent = BeliefCaregiver.for_env(env)  # the settings chosen for the env's level
+    >>> agent.settings == TUNED_BELIEF["hard-v2"]
+    True
     >>> obs, _ = env.reset(seed=0)
     >>> action, _ = agent.predict(obs)
     >>> action.tolist()  # first step: recruit (soft push, "lean forward")
@@ -113,6 +115,7 @@ class BeliefCaregiver(ScriptedAgent):
     name = "belief"
     needs = ("elapsed_s", "x_hat_m", "p_cooperative")
     settings_class = BeliefSettings
+    tuned = TUNED_BELIEF
     RECRUIT, SETTLE, PROBE = 0, 1, 2
 
     def _decide(

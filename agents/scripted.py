@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,13 +33,13 @@ from agents.base import (
     WAIT,
     require_features,
 )
-from agents.belief import TUNED_BELIEF, BeliefCaregiver
+from agents.belief import BeliefCaregiver
 from agents.blind import TUNED_BLIND, BlindAgent, BlindSettings, CuePhase
 from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.compiled.checks import check_number
 from coop_gym.envs.config import LiftCriteria
-from coop_gym.model.difficulty import DIFFICULTIES, Difficulty
+from coop_gym.model.difficulty import Difficulty
 from estimator.judgment import ThresholdJudgment
 
 __all__ = [
@@ -352,6 +351,7 @@ class ProbingCaregiver(ScriptedAgent):
     name = "prober"
     needs = ("elapsed_s", "x_hat_m")
     settings_class = ProbingSettings
+    tuned = TUNED_PROBER
     RECRUIT, SETTLE, PROBE = 0, 1, 2
 
     def _decide(
@@ -410,23 +410,6 @@ def make_scripted(
     """
     if name not in SCRIPTED_AGENTS:
         raise ValueError(f"unknown scripted agent {name!r}; known: {', '.join(SCRIPTED_AGENTS)}")
-    if name == BlindAgent.name:
-        return BlindAgent(features, action_type, seed, settings=_chosen(TUNED_BLIND, "BlindAgent", level))
-    if name == ProbingCaregiver.name:
-        return ProbingCaregiver(features, action_type, seed, settings=_chosen(TUNED_PROBER, "ProbingCaregiver", level))
-    if name == BeliefCaregiver.name:
-        return BeliefCaregiver(features, action_type, seed, settings=_chosen(TUNED_BELIEF, "BeliefCaregiver", level))
-    return SCRIPTED_AGENTS[name](features, action_type, seed)
-
-
-def _chosen(table: dict[str, Any], agent: str, level: str | Difficulty | None) -> Any:
-    """The settings ``table`` holds for ``level``; ValueError naming a level it has none for."""
-    key = "v0" if level is None else level if isinstance(level, str) else level.name
-    if isinstance(level, Difficulty) and DIFFICULTIES.get(level.name) != level:
-        raise ValueError(
-            f"no {agent} settings were chosen for the level {level.name!r} (not a shipped level); "
-            f"build {agent}(settings=...) for it"
-        )
-    if key not in table:
-        raise ValueError(f"no {agent} settings were chosen for the level {key!r}; chosen for: {', '.join(table)}")
-    return table[key]
+    cls = SCRIPTED_AGENTS[name]
+    settings = None if cls.tuned is None else cls.chosen_settings(level)
+    return cls(features, action_type, seed, settings=settings)

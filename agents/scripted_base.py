@@ -15,7 +15,7 @@ and for every observation whose ``elapsed_s`` is 0 (the first of an episode).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from agents.base import action_type_of, encode_actions, features_of, require_features
 from coop_gym.envs.config import ACTION_TYPES
 from coop_gym.envs.contract import observation_features
+from coop_gym.model.difficulty import DIFFICULTIES, Difficulty
 
 __all__ = ["EPS_S", "PhaseState", "ScriptedAgent"]
 
@@ -107,6 +108,8 @@ class ScriptedAgent:
     settings_class: ClassVar[type | None] = None
     default_observation: ClassVar[str] = "belief"
     """The observation mode whose features the agent reads when none are given."""
+    tuned: ClassVar[Mapping[str, Any] | None] = None
+    """The settings chosen for each shipped level (``v0``: the ``-v0`` ids), or None: one set for all."""
 
     def __init__(
         self,
@@ -133,8 +136,36 @@ class ScriptedAgent:
 
     @classmethod
     def for_env(cls, env: Any, **kwargs: Any) -> ScriptedAgent:
-        """Build the agent for a (single or vector) coop_gym env: its features and action type."""
+        """Build the agent for a (single or vector) coop_gym env: its features, action type and level.
+
+        An agent with :attr:`tuned` settings plays those chosen for the env's level unless
+        ``settings`` is given (a level of your own has none: ValueError).
+        """
+        if cls.tuned is not None and kwargs.get("settings") is None:
+            kwargs["settings"] = cls.chosen_settings(getattr(getattr(env, "unwrapped", env), "difficulty", None))
         return cls(features_of(env), action_type_of(env), **kwargs)
+
+    @classmethod
+    def chosen_settings(cls, level: str | Difficulty | None) -> Any:
+        """The settings :attr:`tuned` holds for ``level`` (a name, a shipped :class:`Difficulty`, or None for ``-v0``).
+
+        Raises:
+            ValueError: the agent has no table, or none was chosen for ``level`` (e.g. a level of your own).
+        """
+        agent = cls.__name__
+        if cls.tuned is None:
+            raise ValueError(f"{agent} has no settings chosen per level")
+        key = "v0" if level is None else level if isinstance(level, str) else level.name
+        if isinstance(level, Difficulty) and DIFFICULTIES.get(level.name) != level:
+            raise ValueError(
+                f"no {agent} settings were chosen for the level {level.name!r} (not a shipped level); "
+                f"build {agent}(settings=...) for it"
+            )
+        if key not in cls.tuned:
+            raise ValueError(
+                f"no {agent} settings were chosen for the level {key!r}; chosen for: {', '.join(cls.tuned)}"
+            )
+        return cls.tuned[key]
 
     def reset(self) -> None:
         """Forget the memory kept for ``state=None`` callers."""

@@ -104,6 +104,7 @@ class SitToStandVectorEnv(ConfiguredEnv, VectorEnv):
         arguments = EnvArguments.from_keywords(type(self).__name__, kwargs)
         config = arguments.resolve(self.metadata["render_modes"])
         threads = check_threads(arguments.threads)
+        self.difficulty = arguments.difficulty
         if max_episode_steps is None:
             max_episode_steps = config.timing.max_episode_steps
         if not is_integer(max_episode_steps):

@@ -466,3 +466,23 @@ def test_a_level_of_ones_own_has_no_chosen_settings_and_says_so():
         evaluate("blind", "CoopGym/SitToStandHard-v1", "test", 1, 0, env_kwargs={"difficulty": mine})
     oracle = evaluate("oracle", "CoopGym/SitToStandHard-v1", "test", 4, 0, env_kwargs={"difficulty": mine})
     assert oracle.success_rate == 1.0
+
+
+def test_for_env_plays_the_settings_chosen_for_the_envs_level():
+    from agents.belief import BeliefCaregiver, BeliefSettings
+    from agents.scripted import BlindAgent, ProbingCaregiver
+
+    single = gym.make("CoopGym/SitToStandHard-v2", estimator="switching")
+    vector = gym.make_vec("CoopGym/SitToStandHard-v2", num_envs=2, vectorization_mode="vector_entry_point")
+    assert BeliefCaregiver.for_env(single).settings == TUNED_BELIEF["hard-v2"] != BeliefSettings()
+    for env in (single, vector):  # the level is found through wrappers and on the vector env
+        assert BlindAgent.for_env(env).settings == TUNED_BLIND["hard-v2"]
+        assert ProbingCaregiver.for_env(env).settings == TUNED_PROBER["hard-v2"]
+    assert ProbingCaregiver.for_env(gym.make("CoopGym/SitToStand-v0")).settings == TUNED_PROBER["v0"]
+    mine = BeliefSettings(lift_p=0.9)
+    assert BeliefCaregiver.for_env(single, settings=mine).settings is mine  # given settings win
+    custom = dataclasses.replace(DIFFICULTIES["hard"], lapse_rate_per_s=0.05)
+    with pytest.raises(ValueError, match=r"no ProbingCaregiver settings .* 'hard' \(not a shipped level\)"):
+        ProbingCaregiver.for_env(gym.make("CoopGym/SitToStandHard-v1", difficulty=custom))
+    single.close()
+    vector.close()
