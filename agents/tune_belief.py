@@ -14,7 +14,13 @@ further from the five, whose bodies the filter's hypotheses cover less well. The
 hard level is its entry of :data:`agents.belief.TUNED_BELIEF` (on ``-v1``,
 :class:`agents.belief.BeliefSettings`' default); it is scored on the held-out personas by
 ``python -m agents.evaluate --compare belief,...`` with the filter's default hypotheses (all the
-training personas).
+training personas); ``--held-out N`` plays the winner on ``N`` held-out episodes too.
+
+``--estimator imm`` (or ``multiple_model``) runs the same search with the caregiver reading that
+estimator's ``P(xi = +1)`` instead: which estimator reads the mind best in the caregiver's
+loop. Those filters are built on each persona's own typical gains (the env's nominal model),
+so nothing is left out and they know more of the person than the switching filter is given;
+their probabilities are calibrated differently, so ``--lift-p`` widens the grid by lift gates.
 """
 
 from __future__ import annotations
@@ -31,11 +37,14 @@ from coop_gym.envs.contract import observation_features
 from coop_gym.model.personas import TRAIN_PERSONAS, resolve_personas
 from coop_gym.registration import HARD_ENV_ID
 
-__all__ = ["leave_one_out", "main", "settings_grid"]
+__all__ = ["ESTIMATORS", "leave_one_out", "main", "settings_grid"]
+
+ESTIMATORS = ("switching", "imm", "multiple_model")
+"""The estimators whose ``P(xi = +1)`` the caregiver can read (``estimator=`` of the env)."""
 
 
-def settings_grid() -> list[BeliefSettings]:
-    """The settings ``python -m agents.tune_belief`` tries: end-of-burst gate x longest burst.
+def settings_grid(lift_ps: Sequence[float] = (BeliefSettings.lift_p,)) -> list[BeliefSettings]:
+    """The settings ``python -m agents.tune_belief`` tries: end-of-burst gate x longest burst (x lift gate).
 
     ``recruited_p=1.0`` never ends a burst early. A wider search by the same leave-one-out
     score found nothing better than these: on ``-v1`` bursts of 0.5-1.5 s, the lift gate,
@@ -45,14 +54,21 @@ def settings_grid() -> list[BeliefSettings]:
     (``-v2``'s guided push recruits slower).
     """
     return [
-        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p)
+        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p, lift_p=lift_p)
+        for lift_p in lift_ps
         for recruited_p in (0.3, 0.4, 0.5, 1.0)
         for burst_s in (2.0, 3.0, 4.0)
     ]
 
 
 def leave_one_out(
-    settings: BeliefSettings, env_id: str, episodes: int, seed: int = TUNING_SEED, *, wide: bool = False
+    settings: BeliefSettings,
+    env_id: str,
+    episodes: int,
+    seed: int = TUNING_SEED,
+    *,
+    wide: bool = False,
+    estimator: str = "switching",
 ) -> tuple[float, float]:
     """Mean success and unsafe rates over the training personas, each met by a filter that has not seen it.
 
@@ -64,14 +80,20 @@ def leave_one_out(
         wide: Play the ``train_wide`` set (each persona with
             :data:`coop_gym.model.personas.WIDE_VARIATION_STD`, what ``train.py`` trains on)
             instead of the personas' own spread.
+        estimator: Whose ``P(xi = +1)`` the caregiver reads (:data:`ESTIMATORS`); only the
+            switching filter's hypotheses can leave a persona out (the others are built on each
+            persona's own typical gains).
     """
+    if estimator not in ESTIMATORS:
+        raise ValueError(f"estimator must be one of {list(ESTIMATORS)}, got {estimator!r}")
     rates = []
     for persona in resolve_personas("train_wide" if wide else "train"):
-        others = [name for name in TRAIN_PERSONAS if name != persona.name]
-        options = {"personas": others}
+        env_kwargs: dict[str, object] = {"estimator": estimator}
+        if estimator == "switching":
+            env_kwargs["estimator_options"] = {"personas": [name for name in TRAIN_PERSONAS if name != persona.name]}
         result = evaluate(
-            BeliefCaregiver(observation_features("belief", "switching"), settings=settings),
-            env_id, [persona], episodes, seed, env_kwargs={"estimator": "switching", "estimator_options": options},
+            BeliefCaregiver(observation_features("belief", estimator), settings=settings),
+            env_id, [persona], episodes, seed, env_kwargs=env_kwargs,
         )  # fmt: skip
         rates.append((result.success_rate, result.unsafe_rate))
     success, unsafe = np.mean(rates, axis=0)
@@ -84,16 +106,39 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--env", default=HARD_ENV_ID)
     parser.add_argument("--episodes", type=int, default=128, help="episodes per training persona")
     parser.add_argument("--wide", action="store_true", help="each persona with train.py's train_wide spread")
+    parser.add_argument("--estimator", choices=ESTIMATORS, default="switching", help="whose P(xi = +1) is read")
+    parser.add_argument(
+        "--lift-p", type=float, nargs="+", default=[BeliefSettings.lift_p], help="lift gates the grid tries"
+    )
+    parser.add_argument(
+        "--held-out", type=int, default=0, metavar="N", help="also play the winner on N held-out episodes (seeds 0..)"
+    )
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes must be positive, got {args.episodes}")
+    if args.held_out < 0:
+        parser.error(f"--held-out must be 0 or more, got {args.held_out}")
+    try:
+        grid = settings_grid(args.lift_p)
+    except ValueError as exc:
+        parser.error(f"--lift-p: {exc}")
     rows = []
-    for settings in settings_grid():
-        success, unsafe = leave_one_out(settings, args.env, args.episodes, wide=args.wide)
+    for settings in grid:
+        success, unsafe = leave_one_out(settings, args.env, args.episodes, wide=args.wide, estimator=args.estimator)
         rows.append((success, -unsafe, settings))
         print(f"{success:.3f} success, {unsafe:.3f} unsafe: {settings}", flush=True)
-    best = max(rows, key=lambda row: row[:2])
-    print(f"best on the training personas, each left out of the filter: {best[2]}")
+    best = max(rows, key=lambda row: row[:2])[2]
+    left_out = ", each left out of the filter" if args.estimator == "switching" else ""
+    print(f"best on the training personas{left_out} ({args.estimator}): {best}")
+    if args.held_out:
+        agent = BeliefCaregiver(observation_features("belief", args.estimator), settings=best)
+        result = evaluate(agent, args.env, "test", args.held_out, 0, env_kwargs={"estimator": args.estimator})
+        low, high = result.interval("success")
+        print(
+            f"held out ({args.held_out} episodes, seeds 0..{args.held_out - 1}): success {result.success_rate:.3f} "
+            f"[{low:.3f}, {high:.3f}], unsafe {result.unsafe_rate:.4f}, premature {result.rate('premature'):.3f}, "
+            f"timeout {result.rate('timeout'):.3f}"
+        )
     return 0
 
 

@@ -1,3 +1,5 @@
+import re
+
 import numpy as np
 import pytest
 
@@ -97,3 +99,24 @@ def test_the_chosen_settings_are_the_search_grids_and_differ_only_where_chosen()
     assert TUNED_BELIEF["hard"] == BeliefSettings()
     assert {TUNED_BELIEF[level] for level in ("v0", "easy", "medium")} == {BeliefSettings()}
     assert TUNED_BELIEF["hard-v2"].burst_s > TUNED_BELIEF["hard"].burst_s
+
+
+def test_the_search_can_read_another_estimator_and_score_its_winner_held_out(capsys):
+    # The same grid on the IMM's P(xi = +1), with lift gates, and its winner on held-out episodes.
+    from agents.tune_belief import leave_one_out, main, settings_grid
+
+    grid = settings_grid((0.8, 0.9))
+    assert len(grid) == 24 and {s.lift_p for s in grid} == {0.8, 0.9}
+    success, unsafe = leave_one_out(grid[0], "CoopGym/SitToStandHard-v2", 2, estimator="imm")
+    assert 0.0 <= unsafe <= success + unsafe <= 1.0
+    with pytest.raises(ValueError, match=r"estimator must be one of \['switching', 'imm', 'multiple_model'\]"):
+        leave_one_out(grid[0], "CoopGym/SitToStandHard-v2", 2, estimator="kalman")
+    assert main(["--estimator", "imm", "--episodes", "1", "--held-out", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "best on the training personas (imm): BeliefSettings(" in out
+    assert re.search(r"held out \(3 episodes, seeds 0\.\.2\): success \d\.\d{3} \[", out)
+    bad = ((["--lift-p", "1.5"], "--lift-p: BeliefSettings.lift_p"), (["--held-out", "-1"], "--held-out must be"))
+    for argv, message in bad:
+        with pytest.raises(SystemExit):
+            main(argv)
+        assert message in capsys.readouterr().err
