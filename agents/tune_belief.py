@@ -70,7 +70,7 @@ def leave_one_out(
     wide: bool = False,
     estimator: str = "switching",
 ) -> tuple[float, float]:
-    """Mean success and unsafe rates over the training personas, each met by a filter that has not seen it.
+    """Mean success and unsafe rates over the training personas, each met by a switching filter that has not seen it.
 
     Args:
         settings: The caregiver's settings.
