@@ -47,6 +47,7 @@ __all__ = [
     "encode_actions",
     "feature_mismatch",
     "features_of",
+    "level_of",
     "require_features",
 ]
 
@@ -82,6 +83,11 @@ def action_type_of(env: Any) -> str:
         if isinstance(value, str):
             return value
     raise ValueError(f"{type(env).__name__} has no `action_type` attribute; is it a coop_gym env?")
+
+
+def level_of(env: Any) -> Any:
+    """The difficulty level of a single or vector coop_gym env (``env.unwrapped.difficulty``; None for ``-v0``)."""
+    return getattr(getattr(env, "unwrapped", env), "difficulty", None)
 
 
 def feature_mismatch(trained: Sequence[str] | None, observed: Sequence[str], env_id: str = "the env") -> str | None:

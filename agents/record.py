@@ -39,7 +39,7 @@ import numpy as np
 from gymnasium.wrappers import RecordVideo
 
 import coop_gym
-from agents.base import Agent, action_type_of, feature_mismatch, features_of
+from agents.base import Agent, action_type_of, feature_mismatch, features_of, level_of
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.timeline import Trace, TraceBuilder, plot_timeline
 from coop_gym.cli import SEED_LIMIT, output_path_problem
@@ -309,8 +309,8 @@ def _agent_for(agent: Agent | str, env: gym.Env[Any, Any], env_id: str, seed: in
     if not isinstance(agent, str):
         return agent, getattr(agent, "name", None) or type(agent).__name__
     try:
-        level = getattr(env.unwrapped, "difficulty", None)  # the blind and probing settings chosen for it
-        return make_scripted(agent, features_of(env), action_type_of(env), seed=seed, level=level), agent
+        # The settings chosen for the env's level.
+        return make_scripted(agent, features_of(env), action_type_of(env), seed=seed, level=level_of(env)), agent
     except ValueError as exc:
         raise IncompatibleAgentError(f"{exc} (env {env_id})") from None
 

@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.base import action_type_of, encode_actions, features_of, require_features
+from agents.base import action_type_of, encode_actions, features_of, level_of, require_features
 from coop_gym.envs.config import ACTION_TYPES
 from coop_gym.envs.contract import observation_features
 from coop_gym.model.difficulty import DIFFICULTIES, Difficulty
@@ -142,7 +142,7 @@ class ScriptedAgent:
         ``settings`` is given (a level of your own has none: ValueError).
         """
         if cls.tuned is not None and kwargs.get("settings") is None:
-            kwargs["settings"] = cls.chosen_settings(getattr(getattr(env, "unwrapped", env), "difficulty", None))
+            kwargs["settings"] = cls.chosen_settings(level_of(env))
         return cls(features_of(env), action_type_of(env), **kwargs)
 
     @classmethod
