@@ -268,6 +268,32 @@ def run(
     }
 
 
+def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str) -> tuple[str, ...]:
+    """The contenders of ``--contenders`` for ``--env``; a parser error names whichever flag is wrong."""
+    contenders = tuple(c for c in spec.split(",") if c)
+    if not contenders:
+        parser.error(f"--contenders: empty; known: {', '.join(CONTENDERS)}, default@N")
+    for c in contenders:
+        try:
+            _contender(c)
+        except argparse.ArgumentTypeError as error:
+            parser.error(f"--contenders: {error}")
+
+    import coop_gym
+
+    if env_id not in coop_gym.ENV_IDS:
+        parser.error(f"--env: unknown env id {env_id!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
+    from agents.hyperparams import hyperparams_for
+
+    for c in contenders:
+        if c.startswith("default@"):
+            try:
+                _resized(hyperparams_for("ppo", env_id), int(c.partition("@")[2]))
+            except ValueError as error:
+                parser.error(f"--contenders: {error}")
+    return contenders
+
+
 def main(argv: list[str] | None = None) -> int:
     """Parse the flags, measure, write the JSON and the PNG."""
     from coop_gym.io import write_json
@@ -289,27 +315,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--stop-at-target", action="store_true", help="stop a contender once it reaches the target")
     add_save_argument(parser, "time_to_quality_<env>.json")
     args = parser.parse_args(argv)
-    contenders = tuple(c for c in args.contenders.split(",") if c)
-    if not contenders:
-        parser.error(f"--contenders: empty; known: {', '.join(CONTENDERS)}, default@N")
-    for c in contenders:
-        try:
-            _contender(c)
-        except argparse.ArgumentTypeError as error:
-            parser.error(f"--contenders: {error}")
-
-    import coop_gym
-
-    if args.env not in coop_gym.ENV_IDS:
-        parser.error(f"--env: unknown env id {args.env!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
-    from agents.hyperparams import hyperparams_for
-
-    for c in contenders:
-        if c.startswith("default@"):
-            try:
-                _resized(hyperparams_for("ppo", args.env), int(c.partition("@")[2]))
-            except ValueError as error:
-                parser.error(f"--contenders: {error}")
+    contenders = _checked_contenders(parser, args.env, args.contenders)
     problem = output_path_problem(args.out, folder=True)
     if problem:
         parser.error(f"--out: {problem}")
