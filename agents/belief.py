@@ -14,7 +14,9 @@ which lifts on a forward answer of ``answer_m``); it only chooses which cue to g
 2. **settle**: silence for ``settle_s`` (the push's own motion dies out);
 3. **probe**: "lean forward" with no push -- a cooperative person answers, a passive one does not
    move, a resisting one leans back -- watched for ``window_s``; then probe again while
-   ``P(xi = +1) >= reprobe_p``, else recruit again.
+   ``P(xi = +1) >= reprobe_p``, else recruit again. The words are said as the probe starts, or,
+   with ``hold_words``, through the whole window (a person's intention moves only while a cue is
+   heard, so a held request draws a longer answer; off by default).
 
 It lifts while it watches a probe's answer, once ``P(xi = +1) >= lift_p`` and the shoulder
 estimate is at least ``lean_m`` (what a safe lift needs of the posture: the success criterion
@@ -50,7 +52,7 @@ from numpy.typing import NDArray
 
 from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE, WAIT
 from agents.scripted_base import EPS_S, PhaseState, ScriptedAgent
-from coop_gym.compiled.checks import check_number
+from coop_gym.compiled.checks import check_flag, check_number
 
 __all__ = ["TUNED_BELIEF", "BeliefCaregiver", "BeliefSettings"]
 
@@ -70,6 +72,8 @@ class BeliefSettings:
         recruit_until_m: End a burst once the shoulder estimate reaches this [m]; None: no
             limit. Not chosen: on the training personas it changes nothing beyond the noise
             (docs/HARD_LEVEL.md, "The belief caregiver").
+        hold_words: Say "lean forward" on every step of a probe window, not only as it starts.
+            Not chosen, for the same reason (docs/HARD_LEVEL.md, "The belief caregiver on hard-v2").
     """
 
     lift_p: float = 0.85
@@ -80,6 +84,7 @@ class BeliefSettings:
     window_s: float = 1.0
     reprobe_p: float = 0.5
     recruit_until_m: float | None = None
+    hold_words: bool = False
 
     def __post_init__(self) -> None:
         """Validate ranges."""
@@ -90,6 +95,7 @@ class BeliefSettings:
             check_number("BeliefSettings.recruit_until_m", self.recruit_until_m, 0.0, 1.0)
         for name in ("burst_s", "settle_s", "window_s"):
             check_number(f"BeliefSettings.{name}", getattr(self, name), 0.0, 60.0)
+        check_flag("BeliefSettings.hold_words", self.hold_words)
 
 
 # Winners of `python -m agents.tune_belief --env ID` (its settings_grid, 128 episodes of each training persona
@@ -140,6 +146,8 @@ class BeliefCaregiver(ScriptedAgent):
         asking |= again
 
         recruiting = (memory.phase == self.RECRUIT) & ~lift
+        if s.hold_words:
+            asking |= memory.phase == self.PROBE
         push = np.where(recruiting, PUSH_SOFT, PUSH_NONE)
         verbal = np.where((recruiting | asking) & ~lift, VERBAL_FORWARD, VERBAL_NONE)
         return push, verbal, np.where(lift, LIFT, WAIT)

@@ -39,6 +39,20 @@ def test_recruits_settles_then_probes_with_words_alone():
     assert all(a[2] != LIFT for a in actions)
 
 
+def test_holding_the_words_asks_on_every_step_of_the_probe_window():
+    once = BeliefSettings(burst_s=0.5, settle_s=0.3, window_s=1.0)
+    held = BeliefSettings(burst_s=0.5, settle_s=0.3, window_s=1.0, hold_words=True)
+    verbal = {
+        s.hold_words: [a[1] for a in _play(BeliefCaregiver(FEATURES, settings=s), 0.1, steps=20)] for s in (once, held)
+    }
+    # Probe asked at step 8, watched to step 17; step 18 recruits again (P(+1) low).
+    assert verbal[False][8:18] == [VERBAL_FORWARD] + [VERBAL_NONE] * 9
+    assert verbal[True][8:18] == [VERBAL_FORWARD] * 10
+    assert verbal[True][:8] == verbal[False][:8] and verbal[True][18] == verbal[False][18] == VERBAL_FORWARD
+    lifts = _play(BeliefCaregiver(FEATURES, settings=held), 0.9, 0.2, steps=12)
+    assert lifts[9][2] == LIFT and lifts[9][1] == VERBAL_NONE  # a lift is a lift, held words or not
+
+
 def test_probes_again_without_pushing_while_cooperation_is_likely():
     settings = BeliefSettings(lift_p=0.9, burst_s=0.5, recruited_p=1.0, settle_s=0.3, window_s=1.0, reprobe_p=0.5)
     actions = _play(BeliefCaregiver(FEATURES, settings=settings), p_cooperative=0.7)
@@ -87,6 +101,8 @@ def test_needs_the_filter_and_checks_its_settings():
         BeliefSettings(window_s=-1.0)
     with pytest.raises(ValueError, match="recruit_until_m"):
         BeliefSettings(recruit_until_m=-0.1)
+    with pytest.raises(ValueError, match="hold_words"):
+        BeliefSettings(hold_words="yes")
 
 
 def test_the_chosen_settings_are_the_search_grids_and_differ_only_where_chosen():
