@@ -43,8 +43,13 @@ ESTIMATORS = ("switching", "imm", "multiple_model")
 """The estimators whose ``P(xi = +1)`` the caregiver can read (``estimator=`` of the env)."""
 
 
-def settings_grid(lift_ps: Sequence[float] = (BeliefSettings.lift_p,)) -> list[BeliefSettings]:
+def settings_grid(
+    lift_ps: Sequence[float] = (BeliefSettings.lift_p,), hold_words: bool = False
+) -> list[BeliefSettings]:
     """The settings ``python -m agents.tune_belief`` tries: end-of-burst gate x longest burst (x lift gate).
+
+    ``hold_words`` plays the whole grid with the probe's words held through its window
+    (``--hold-words``).
 
     ``recruited_p=1.0`` never ends a burst early. A wider search by the same leave-one-out
     score found nothing better than these: on ``-v1`` bursts of 0.5-1.5 s, the lift gate,
@@ -54,7 +59,7 @@ def settings_grid(lift_ps: Sequence[float] = (BeliefSettings.lift_p,)) -> list[B
     (``-v2``'s guided push recruits slower).
     """
     return [
-        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p, lift_p=lift_p)
+        BeliefSettings(burst_s=burst_s, recruited_p=recruited_p, lift_p=lift_p, hold_words=hold_words)
         for lift_p in lift_ps
         for recruited_p in (0.3, 0.4, 0.5, 1.0)
         for burst_s in (2.0, 3.0, 4.0)
@@ -110,6 +115,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--lift-p", type=float, nargs="+", default=[BeliefSettings.lift_p], help="lift gates the grid tries"
     )
+    parser.add_argument("--hold-words", action="store_true", help='say "lean forward" through each probe window')
     parser.add_argument(
         "--held-out", type=int, default=0, metavar="N", help="also play the winner on N held-out episodes (seeds 0..)"
     )
@@ -119,7 +125,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.held_out < 0:
         parser.error(f"--held-out must be 0 or more, got {args.held_out}")
     try:
-        grid = settings_grid(args.lift_p)
+        grid = settings_grid(args.lift_p, args.hold_words)
     except ValueError as exc:
         parser.error(f"--lift-p: {exc}")
     rows = []

@@ -1,4 +1,5 @@
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -123,13 +124,15 @@ def test_the_search_can_read_another_estimator_and_score_its_winner_held_out(cap
 
     grid = settings_grid((0.8, 0.9))
     assert len(grid) == 24 and {s.lift_p for s in grid} == {0.8, 0.9}
+    held = settings_grid((0.8, 0.9), hold_words=True)
+    assert [s.hold_words for s in held] == [True] * 24 and [replace(s, hold_words=False) for s in held] == grid
     success, unsafe = leave_one_out(grid[0], "CoopGym/SitToStandHard-v2", 2, estimator="imm")
     assert 0.0 <= unsafe <= success + unsafe <= 1.0
     with pytest.raises(ValueError, match=r"estimator must be one of \['switching', 'imm', 'multiple_model'\]"):
         leave_one_out(grid[0], "CoopGym/SitToStandHard-v2", 2, estimator="kalman")
-    assert main(["--estimator", "imm", "--episodes", "1", "--held-out", "3"]) == 0
+    assert main(["--estimator", "imm", "--episodes", "1", "--held-out", "3", "--hold-words"]) == 0
     out = capsys.readouterr().out
-    assert "best on the training personas (imm): BeliefSettings(" in out
+    assert "best on the training personas (imm): BeliefSettings(" in out and "hold_words=True)" in out
     assert re.search(r"held out \(3 episodes, seeds 0\.\.2\): success \d\.\d{3} \[", out)
     bad = ((["--lift-p", "1.5"], "--lift-p: BeliefSettings.lift_p"), (["--held-out", "-1"], "--held-out must be"))
     for argv, message in bad:
