@@ -379,6 +379,35 @@ def test_native_vector_env_matches_sync_vector_of_single_envs(mode: str) -> None
     )
 
 
+def test_native_vector_env_with_the_particle_filter_matches_single_envs() -> None:
+    """Env ``i`` seeded ``s`` is the single env seeded ``s`` with ``estimator="switching"`` too,
+    whatever the other envs reset beside it (their particle seeds span all 64 bits)."""
+    from gymnasium.vector import AutoresetMode
+
+    kwargs: dict[str, Any] = {
+        "estimator": "switching",
+        "estimator_options": {"n_particles": 64, "hypotheses": 8},
+        "personas": ["frail", "forgetful"],
+    }
+    actions = [np.array([1 if t < 20 else 0, 2 if t % 10 == 0 else 0, 0]) for t in range(30)]
+
+    def single(seed: int) -> list[Any]:
+        env = gym.make("CoopGym/SitToStandHard-v2", **kwargs)
+        return [env.reset(seed=seed)[0]] + [env.step(a)[0] for a in actions]
+
+    vec = gym.make_vec(
+        "CoopGym/SitToStandHard-v2", num_envs=4, vectorization_mode="vector_entry_point",
+        autoreset_mode=AutoresetMode.DISABLED, **kwargs,
+    )  # fmt: skip
+    batch = [vec.reset(seed=[7, 8, 9, 10])[0]] + [vec.step(np.stack([a] * 4))[0] for a in actions]
+    for i, seed in enumerate((7, 8, 9, 10)):
+        np.testing.assert_array_equal(np.array([obs[i] for obs in batch]), np.array(single(seed)), err_msg=f"env {i}")
+    mask = np.array([False, False, True, False])
+    again = [vec.reset(seed=[None, None, 9, None], options={"reset_mask": mask})[0]]
+    again += [vec.step(np.stack([a] * 4))[0] for a in actions]
+    np.testing.assert_array_equal(np.array([obs[2] for obs in again]), np.array(single(9)), err_msg="masked reset")
+
+
 def test_native_vector_env_clone_mid_run_continues_identically() -> None:
     _native_vector()
     original, twin = (gym.make_vec(ENV_ID, num_envs=4) for _ in range(2))

@@ -156,6 +156,14 @@ def test_bad_inputs_raise_and_change_nothing():
         pf.run(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((3, 3)))
     with pytest.raises(ValueError, match="seeds"):
         pf.reset([0], 0.0, seeds=[-1])
+    with pytest.raises(ValueError, match="seeds must be 1 non-negative ints, got an array of float64"):
+        pf.reset([0], 0.0, seeds=np.array([2.0**63]))
+    np.testing.assert_array_equal(pf.particles, before)
+    # Seeds above 2**63 beside small ones stay exact: env 1 draws the same as when reset alone.
+    pf.reset([1], 0.0, seeds=[2**63 + 5])
+    alone = pf.particles[1].copy()
+    pf.reset([0, 1], 0.0, seeds=[3, 2**63 + 5])
+    np.testing.assert_array_equal(pf.particles[1], alone)
     with pytest.raises(ValueError, match="estimator_options for 'switching'"):
         switching_filter(hypothesis_bank(1, HARD, Realism(), TIMING), TIMING, [np.random.default_rng(0)], {"bogus": 1})
 
