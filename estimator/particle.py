@@ -342,12 +342,16 @@ class SwitchingParticleFilter:
                 raise ValueError(f"params must be a finite ({idx.shape[0]}, {k}, {c}) or ({idx.shape[0]}, {c}) array")
             self.params[idx] = np.repeat(rows, k // rows.shape[1], axis=1)
         if seeds is not None:
-            if isinstance(seeds, np.ndarray) and seeds.dtype.kind not in "iu":
-                raise ValueError(f"seeds must be {idx.shape[0]} non-negative ints, got an array of {seeds.dtype}")
             # Element by element: np.asarray of Python ints above 2**63 beside smaller ones makes
             # float64 and rounds them, so an env's particles would depend on the other envs' seeds.
-            values = seeds.reshape(-1).tolist() if isinstance(seeds, np.ndarray) else seeds
-            seed_list = [int(v) for v in (values if isinstance(values, (list, tuple)) else [values])]
+            values: list[Any]
+            if isinstance(seeds, np.ndarray):
+                if seeds.dtype.kind not in "iu":
+                    raise ValueError(f"seeds must be {idx.shape[0]} non-negative ints, got an array of {seeds.dtype}")
+                values = seeds.reshape(-1).tolist()
+            else:
+                values = list(seeds) if isinstance(seeds, (list, tuple)) else [seeds]
+            seed_list = [int(v) for v in values]
             if len(seed_list) != idx.shape[0] or min(seed_list, default=0) < 0:
                 raise ValueError(f"seeds must be {idx.shape[0]} non-negative ints")
             for e, seed in zip(idx, seed_list, strict=True):
