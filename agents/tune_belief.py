@@ -11,8 +11,7 @@ personas are people the caregiver has not met, and a filter scored only on the p
 hypotheses were drawn around would choose settings that lean on knowing them. ``--wide``
 plays each persona with the wider spread ``train.py`` trains on (``train_wide``): people
 further from the five, whose bodies the filter's hypotheses cover less well. The winner on each
-hard level is its entry of :data:`agents.belief.TUNED_BELIEF` (on ``-v1``,
-:class:`agents.belief.BeliefSettings`' default); it is scored on the held-out personas by
+hard level is its entry of :data:`agents.belief.TUNED_BELIEF`; it is scored on the held-out personas by
 ``python -m agents.evaluate --compare belief,...`` with the filter's default hypotheses (all the
 training personas); ``--held-out N`` plays the winner on ``N`` held-out episodes too.
 
@@ -55,7 +54,7 @@ def settings_grid(
     score found nothing better than these: on ``-v1`` bursts of 0.5-1.5 s, the lift gate,
     settle, probe window and lifting in any phase; on ``-v2`` the lift gate, probe window,
     re-probe gate and the lean a lift needs (docs/HARD_LEVEL.md). The grid keeps the choice
-    it makes visible: the longest burst and its gate are what the two hard levels differ on
+    it makes visible: both hard levels choose a 3-s burst, and differ on the gate that ends it
     (``-v2``'s guided push recruits slower).
     """
     return [
