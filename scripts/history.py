@@ -6,7 +6,8 @@ parameters it reads the held-out people better (docs/HARD_LEVEL.md). A caregiver
 the same person again could learn their body from the episodes before. Here each held-out
 persona gives ``--residents`` people (each drawn around the persona once, then met in
 ``--episodes`` episodes in a row: the same body, a new mind each episode), played by the
-belief caregiver on the hard level with its filter in one of four modes:
+belief caregiver on the hard level (its settings chosen for the level, with the push limit
+``--recruit-until-m``) with its filter in one of four modes:
 
 * ``nominal``: every episode starts from the default bank (what the env does);
 * ``carried``: after each episode the bank is drawn again from the filter's posterior over its
@@ -46,8 +47,8 @@ import tyro
 from numpy.typing import NDArray
 
 import coop_gym  # noqa: F401  (registers the ids)
-from agents.base import Agent
-from agents.belief import BeliefCaregiver, BeliefSettings
+from agents.base import Agent, level_of
+from agents.belief import BeliefCaregiver
 from agents.evaluate.results import wilson_interval
 from coop_gym.envs.switching import SwitchingOptions, hypothesis_people, pack_at_level, switching_filter
 from coop_gym.model.difficulty import get_difficulty
@@ -233,7 +234,9 @@ def meet(persona: str, resident: int, mode: str, args: Args) -> tuple[list[str],
     person = Persona(persona, "one resident", body, variation_relative_std=0.0)
     options = {"true_person": mode == "true"}
     env = gym.make(ENV_ID, estimator="switching", estimator_options=options, personas=[person])
-    agent = BeliefCaregiver.for_env(env, settings=BeliefSettings(recruit_until_m=args.recruit_until_m))
+    shipped = BeliefCaregiver.chosen_settings(level_of(env))
+    settings = dataclasses.replace(shipped, recruit_until_m=args.recruit_until_m)
+    agent = BeliefCaregiver.for_env(env, settings=settings)
     unwrapped: Any = env.unwrapped
     core = unwrapped.core
     core.mm = recorder = _Recorder(core.mm)
