@@ -58,7 +58,9 @@ class SwitchingOptions:
 
     The defaults were compared on the training personas through the belief caregiver
     (``agents/belief.py``; 250 episodes each): 1024 particles over 128 hypotheses with a
-    compliance range of 8 read them best of the settings tried. The filter costs about
+    compliance range of 8 read them best of the settings tried. The reading std, mode jitter and
+    compliance range sit on a flat top: nearby values move the caregiver's leave-one-out success
+    by less than the noise (docs/HARD_LEVEL.md, "The belief caregiver"). The filter costs about
     ``n_particles`` person steps per env step (``python bench/run.py`` times the env); a
     lighter filter (256 particles, 32 hypotheses) suits training many envs. See
     :class:`estimator.particle.SwitchingParticleFilter` for what each does.
