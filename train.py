@@ -1,7 +1,9 @@
 """Train a robot-caregiver guidance agent, then score it against the scripted baselines.
 
 ``python train.py`` with no arguments trains PPO on ``CoopGym/SitToStandHard-v2`` (the hard
-level, where reading the mind decides the outcome; training personas only), evaluates it and
+level, where reading the mind decides the outcome; training personas only), keeps the policy
+that scores best on the training personas' validation episodes in the last half of training
+(``--select-points``; docs/agents.md, "Which policy is saved"), evaluates it and
 every scripted baseline -- the mental-state-blind policy, the probing caregiver, the belief
 caregiver on the switching filter's estimate, the oracle on the oracle observation of the same
 episodes -- on the held-out test personas over 1000 seeded
@@ -13,6 +15,7 @@ everything in one run folder::
         model.zip                                 the trained agent, self-contained (agents.rl.load_agent)
         vecnormalize.pkl, agent.json              the same normaliser and metadata beside it
         checkpoints/step_N/                       while training: the newest two checkpoints
+        checkpoints/best_step_N.zip               while training: the best-validated policies so far
         training.json                             training summary, once training finished
         tb/                                       TensorBoard: charts/, losses/, eval/
         monitor.csv                               training episodes (return, length, outcome)
@@ -96,6 +99,10 @@ class Args:
     """scripted agents to compare with, joined by ','; with blind and oracle: the mind-reading score"""
     eval_points: int = 8
     """evaluations during training for the learning curve (min(200, eval_episodes) episodes each; 0: none)"""
+    select_points: int = 8
+    """sb3: scores on validation episodes in the last half of training; the best policy is saved (0: the last)"""
+    select_episodes: int = 1000
+    """validation episodes per score (the training personas, never the held-out ones)"""
     checkpoint_every: int | None = None
     """env steps between checkpoints, at the next rollout boundary; None: a tenth of --timesteps; 0: on stop only"""
     threads: int = 1
@@ -186,6 +193,8 @@ def _problem_with_numbers(args: Args) -> str | None:
         return problem
     if args.eval_points < 0 or args.threads < 1:
         return "--eval-points must be >= 0 and --threads >= 1"
+    if args.select_points < 0 or args.select_episodes < 1:
+        return "--select-points must be >= 0 and --select-episodes >= 1"
     if args.checkpoint_every is not None and args.checkpoint_every < 0:
         return f"--checkpoint-every must be >= 0, got {args.checkpoint_every}"
     return None
@@ -428,7 +437,7 @@ def _train(args: Args, stop: StopSignals, plan: _Plan) -> dict[str, Any] | int:
     except ValueError as exc:
         return _usage_error(str(exc))
     model.set_logger(cleanrl_logger(run_dir / "tb"))
-    callbacks, curve, elapsed = _callbacks(args, plan, stop, state, start_steps, int(model.num_timesteps))
+    callbacks, curve, selection, elapsed = _callbacks(args, plan, stop, state, start_steps, int(model.num_timesteps))
     stop.in_training = True
     try:
         model.learn(
@@ -441,9 +450,12 @@ def _train(args: Args, stop: StopSignals, plan: _Plan) -> dict[str, Any] | int:
         return _interrupted(run_dir, stop)
     finally:
         stop.in_training = False
+    training = _training_summary(plan, model, start_steps, elapsed())
+    if selection is not None:  # the best-validated policy is the one saved
+        training["selected"] = selection.finish(model)
+        _print_selection(training["selected"])
     save_agent(model, run_dir, algo=plan.algo, env_id=plan.env_id)
     env.close()
-    training = _training_summary(plan, model, start_steps, elapsed())
     # Training is over: the summary marks it, and the checkpoints have served their purpose.
     finished = {"training": training, "learning_curve": curve.history if curve else [], "start_steps": start_steps}
     write_json(run_dir / TRAINING_FILE, finished)
@@ -470,15 +482,25 @@ def _training_summary(plan: _Plan, model: Any, start_steps: int, train_s: float)
     }
 
 
+def _print_selection(selected: dict[str, Any]) -> None:
+    """One line: which policy is saved and how it and the final policy scored on validation."""
+    final = next(p for p in selected["scores"] if p["timesteps"] == selected["final_timesteps"])
+    print(
+        f"saved the policy at {selected['timesteps']} steps: validation success "
+        f"{selected['validation_success_rate']:.1%} on the {selected['personas']} personas "
+        f"({selected['episodes']} episodes; the final policy {final['success_rate']:.1%})"
+    )
+
+
 def _callbacks(
     args: Args, plan: _Plan, stop: StopSignals, state: dict[str, Any], start_steps: int, model_steps: int
-) -> tuple[list[Any], Any, Any]:
-    """``(callbacks, learning-curve callback or None, training-seconds clock)`` of a training run."""
-    from agents.rl import CheckpointCallback, OutcomeStatsCallback, PeriodicEvalCallback
+) -> tuple[list[Any], Any, Any, Any]:
+    """``(callbacks, learning-curve callback or None, selection callback or None, training-seconds clock)``."""
+    from agents.rl import CheckpointCallback, OutcomeStatsCallback, PeriodicEvalCallback, SelectionCallback
+    from agents.run_folder import CHECKPOINTS_DIR
     from agents.run_report import personas_arg
 
-    # Periodic scores on the evaluation personas (for the learning curve only; the
-    # final model is the last one, never a selected one).
+    # Periodic scores on the evaluation personas: the learning curve only, never a selection.
     callbacks: list[Any] = [OutcomeStatsCallback()]
     curve = None
     if args.eval_points > 0:
@@ -489,6 +511,18 @@ def _callbacks(
         if state:
             curve.history, curve._next = state["curve_history"], state["curve_next"]
         callbacks.append(curve)
+    # Scores on the training personas' validation episodes in the last half: the saved policy.
+    selection = None
+    if args.select_points > 0:
+        half = plan.timesteps // 2
+        every = max(1, (plan.timesteps - half) // args.select_points)
+        folder = plan.run_dir / CHECKPOINTS_DIR
+        start = start_steps + half
+        points, episodes = args.select_points, args.select_episodes
+        selection = SelectionCallback(folder, plan.algo, plan.env_id, episodes, points, start, every)
+        if state.get("selection") is not None:
+            selection.restore(state["selection"])
+        callbacks.append(selection)
     wall_s = float(state.get("wall_time_s", 0.0))  # training seconds before an interruption
     started = time.perf_counter()
 
@@ -500,6 +534,7 @@ def _callbacks(
             "start_steps": start_steps,
             "curve_history": curve.history if curve else [],
             "curve_next": curve._next if curve else None,
+            "selection": selection.state() if selection else None,
             "wall_time_s": elapsed(),
         }
 
@@ -514,7 +549,7 @@ def _callbacks(
             start_steps=model_steps,
         )
     )
-    return callbacks, curve, elapsed
+    return callbacks, curve, selection, elapsed
 
 
 # --- evaluation and report --------------------------------------------------------

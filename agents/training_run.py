@@ -47,6 +47,8 @@ RUN_FIELDS = (
     "eval_personas",
     "baselines",
     "eval_points",
+    "select_points",
+    "select_episodes",
     "checkpoint_every",
 )
 """Settings that define a run: ``--resume`` of an unfinished run takes them from its ``args.json``."""

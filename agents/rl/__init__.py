@@ -8,7 +8,7 @@ One import for everything the trainer and the loaders use; each part has a modul
   ``model.zip`` that loads as an :class:`SB3Agent`, scored by :func:`agents.evaluate.evaluate`
   like any other agent;
 * :mod:`agents.rl.callbacks` -- TensorBoard under CleanRL's names, outcome rates, periodic
-  evaluations;
+  evaluations, the selection of the saved policy on validation episodes;
 * :mod:`agents.rl.checkpoints` -- checkpoints that continue training exactly.
 
 Example:
@@ -38,7 +38,13 @@ from agents.rl.bundle import (
     save_model_bundle,
     saved_model_problem,
 )
-from agents.rl.callbacks import CleanRLTensorBoard, OutcomeStatsCallback, PeriodicEvalCallback, cleanrl_logger
+from agents.rl.callbacks import (
+    CleanRLTensorBoard,
+    OutcomeStatsCallback,
+    PeriodicEvalCallback,
+    SelectionCallback,
+    cleanrl_logger,
+)
 from agents.rl.checkpoints import (
     CheckpointCallback,
     TrainingInterrupted,
@@ -70,6 +76,7 @@ __all__ = [
     "OutcomeStatsCallback",
     "PeriodicEvalCallback",
     "SB3Agent",
+    "SelectionCallback",
     "TrainingInterrupted",
     "algorithm_class",
     "cleanrl_logger",

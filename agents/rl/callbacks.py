@@ -5,10 +5,13 @@
 * :class:`OutcomeStatsCallback` -- outcome rates of recent training episodes.
 * :class:`PeriodicEvalCallback` -- the current policy scored through the one evaluation
   path every so many env steps (the learning curve; it never selects a model).
+* :class:`SelectionCallback` -- the policy scored on the training personas' validation
+  episodes in the last half of training; the best-scoring policy becomes the saved model.
 """
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
@@ -16,11 +19,24 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import KVWriter, Logger, TensorBoardOutputFormat
 
 from agents.normalize import ObsNormalizer
-from agents.rl.bundle import SB3Agent
+from agents.rl.bundle import SB3Agent, read_bundle, save_model_bundle
 from agents.rl.training import find_vec_normalize
 from coop_gym.envs.config import Outcome
 
-__all__ = ["CleanRLTensorBoard", "OutcomeStatsCallback", "PeriodicEvalCallback", "cleanrl_logger"]
+__all__ = [
+    "VALIDATION_PERSONAS",
+    "VALIDATION_SEED",
+    "CleanRLTensorBoard",
+    "OutcomeStatsCallback",
+    "PeriodicEvalCallback",
+    "SelectionCallback",
+    "cleanrl_logger",
+]
+
+VALIDATION_PERSONAS = "train"
+"""The people a policy is selected on: the training personas (never the held-out ones)."""
+VALIDATION_SEED = 2_000_000
+"""Seed of validation episode 0: episodes apart from the evaluation's (``--eval-seed`` 0 ..)."""
 
 
 # SB3 logs under rollout/, train/, time/; the house style (CleanRL) puts scalars under
@@ -145,3 +161,102 @@ class PeriodicEvalCallback(BaseCallback):
         if point["mean_time_to_lift_s"] is not None:
             self.logger.record("eval/mean_time_to_lift_s", point["mean_time_to_lift_s"])
         return point
+
+
+class SelectionCallback(BaseCallback):
+    """Keeps the policy that scores best on the training personas' validation episodes.
+
+    From half-way through training, at ``points`` rollout starts ``every`` env steps apart
+    (and once more on the final policy, :meth:`finish`), the policy plays the same
+    ``episodes`` validation episodes: the :data:`VALIDATION_PERSONAS`, seeds
+    :data:`VALIDATION_SEED` onwards -- never the held-out personas. Each policy that scores at
+    least as well as the best so far is saved to ``folder/best_step_N.zip`` (with its
+    observation statistics). PPO's held-out success moves by several points between
+    policies a few hundred thousand steps apart while its training return does not
+    (docs/agents.md, "Which policy is saved"); the best validated one is the saved model.
+
+    Scoring does not touch training: the episodes run in their own envs and the policy acts
+    deterministically, so the weights trained are those of a run without selection.
+
+    Args:
+        folder: Where the best policies are saved (the run's checkpoints folder).
+        algo: Algorithm name (stored in the saved zips).
+        env_id: Env id trained on and validated on.
+        episodes: Validation episodes per score.
+        points: Scores before the final policy's.
+        start: Env step of the first score.
+        every: Env steps between scores.
+    """
+
+    def __init__(self, folder: str | Path, algo: str, env_id: str, episodes: int, points: int, start: int, every: int):
+        """Store the settings; scores happen during ``learn`` and in :meth:`finish`."""
+        super().__init__()
+        self.folder, self.algo, self.env_id = Path(folder), algo, env_id
+        self.episodes, self.points, self.every = episodes, points, max(1, every)
+        self.history: list[dict[str, Any]] = []
+        self._next = start
+
+    def state(self) -> dict[str, Any]:
+        """What a checkpoint keeps to continue the selection (:meth:`restore`)."""
+        return {"history": copy.deepcopy(self.history), "next": self._next}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue the selection a checkpoint's :meth:`state` describes."""
+        self.history, self._next = copy.deepcopy(state["history"]), state["next"]
+
+    def _on_rollout_start(self) -> None:
+        if len(self.history) < self.points and self.num_timesteps >= self._next:
+            self._next = self.num_timesteps + self.every
+            self._score(save=True)
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _score(self, save: bool) -> dict[str, Any]:
+        """Play the validation episodes with the current policy; save it if it is the best so far."""
+        from agents.evaluate import evaluate
+
+        vec_normalize = find_vec_normalize(self.model.get_env())
+        agent = SB3Agent(self.model, self.algo, self.env_id, ObsNormalizer.from_vec_normalize(vec_normalize))
+        result = evaluate(agent, self.env_id, VALIDATION_PERSONAS, self.episodes, VALIDATION_SEED)
+        steps, success = int(self.num_timesteps), result.success_rate
+        point: dict[str, Any] = {"timesteps": steps, "success_rate": success, "saved": None}
+        if save and all(point["success_rate"] >= p["success_rate"] for p in self.history):
+            path = self.folder / f"best_step_{point['timesteps']:012d}.zip"
+            save_model_bundle(self.model, path, algo=self.algo, env_id=self.env_id, vec_normalize=vec_normalize)
+            point["saved"] = str(path.name)
+        self.history.append(point)
+        self.logger.record("eval/validation_success_rate", point["success_rate"])
+        return point
+
+    def finish(self, model: Any) -> dict[str, Any]:
+        """Score the final policy; if an earlier one scored higher, load it into ``model``.
+
+        Returns the selection's record: the policy kept (its step), every score, and where
+        the validation episodes come from. Ties go to the later policy.
+        """
+        self.model = model
+        self.num_timesteps = int(model.num_timesteps)
+        final = self._score(save=False)
+        best = max(reversed(self.history), key=lambda p: p["success_rate"])
+        if best is not final:
+            _load_policy(model, self.folder / best["saved"])
+        return {
+            "timesteps": best["timesteps"],
+            "validation_success_rate": best["success_rate"],
+            "final_timesteps": final["timesteps"],
+            "personas": VALIDATION_PERSONAS,
+            "episodes": self.episodes,
+            "seed": VALIDATION_SEED,
+            "scores": [{k: p[k] for k in ("timesteps", "success_rate")} for p in self.history],
+        }
+
+
+def _load_policy(model: Any, path: Path) -> None:
+    """Load the policy (weights, observation statistics, step count) saved at ``path`` into ``model``."""
+    info, stats = read_bundle(path)
+    model.set_parameters(str(path), exact_match=True, device="cpu")
+    vec_normalize = find_vec_normalize(model.get_env())
+    if vec_normalize is not None and stats is not None:
+        vec_normalize.obs_rms = stats.obs_rms
+    model.num_timesteps = int(info["num_timesteps"])

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 # PPO with one env: 512-step rollouts, so a checkpoint boundary every 512 steps.
 TINY = [
     "--timesteps", "1536", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
-    "--eval-points", "0", "--baselines", "", "--no-progress", "--threads", "1",
+    "--eval-points", "0", "--select-episodes", "64", "--baselines", "", "--no-progress", "--threads", "1",
 ]  # fmt: skip
 
 
@@ -111,6 +111,9 @@ def test_sigterm_at_a_boundary_then_resume_reaches_the_weights_of_an_unbroken_ru
     (unbroken,) = straight.iterdir()
     a, b = _policy_weights(run), _policy_weights(unbroken)
     assert all(torch.equal(a[k], b[k]) for k in a)
+    # The validation scores continue across the interruption: the same policy is selected.
+    selected = [json.loads((r / "training.json").read_text())["training"]["selected"] for r in (run, unbroken)]
+    assert selected[0] == selected[1] and len(selected[0]["scores"]) == 2  # at 1024 steps, then the final policy
 
 
 @pytest.mark.parametrize(

@@ -25,6 +25,7 @@ from agents.rl import (
     MODEL_FILE,
     VECNORMALIZE_FILE,
     SB3Agent,
+    algorithm_class,
     load_agent,
     make_model,
     make_train_env,
@@ -162,3 +163,39 @@ def test_algorithm_is_read_from_a_bare_zip(tmp_path):
         agent = load_agent(tmp_path / f"{algo}.zip")
         assert agent.algo == algo and type(agent.model) is type(model) and agent.env_id is None
         env.close()
+
+
+def test_selection_saves_the_best_validated_policy(tmp_path, monkeypatch):
+    """The policy that scored best on validation is loaded back (weights, statistics, steps); ties go later."""
+    import agents.evaluate as evaluate_module
+    from agents.rl import SelectionCallback, read_bundle
+    from agents.rl.callbacks import VALIDATION_PERSONAS, VALIDATION_SEED
+
+    scores = iter([0.5, 0.9, 0.9, 0.4, 0.6])  # four points during training, then the final policy
+    calls = []
+
+    class Result:
+        def __init__(self, personas, seed):
+            calls.append((personas, seed))
+            self.success_rate = next(scores)
+
+    monkeypatch.setattr(
+        evaluate_module, "evaluate", lambda agent, env_id, personas, n, seed, **kw: Result(personas, seed)
+    )
+    config, env, model = tiny_model("ppo")
+    selection = SelectionCallback(tmp_path, "ppo", config.env_id, episodes=8, points=4, start=64, every=64)
+    model.learn(64 * 6, callback=selection)
+    assert [p["success_rate"] for p in selection.history] == [0.5, 0.9, 0.9, 0.4]
+    kept = selection.history[2]  # 0.9 twice: the later one
+    saved_weights = {k: v.clone() for k, v in model.policy.state_dict().items()}
+    selected = selection.finish(model)
+    assert calls == [(VALIDATION_PERSONAS, VALIDATION_SEED)] * 5  # the training personas, never "test"
+    assert selected["timesteps"] == kept["timesteps"] < selected["final_timesteps"]
+    assert model.num_timesteps == kept["timesteps"]
+    _, stats = read_bundle(tmp_path / kept["saved"])
+    assert np.array_equal(env.obs_rms.mean, stats.obs_rms.mean)
+    loaded = model.policy.state_dict()
+    assert any(not torch.equal(loaded[k], saved_weights[k]) for k in loaded)  # the final weights were replaced
+    best = algorithm_class("ppo").load(tmp_path / kept["saved"], device="cpu").policy.state_dict()
+    assert all(torch.equal(loaded[k], best[k]) for k in loaded)
+    env.close()

@@ -11,7 +11,10 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = ["--timesteps", "256", "--n-envs", "2", "--eval-episodes", "8", "--eval-points", "1", "--no-progress"]
+TINY = [
+    "--timesteps", "256", "--n-envs", "2", "--eval-episodes", "8", "--eval-points", "1", "--select-episodes", "64",
+    "--no-progress",
+]  # fmt: skip
 
 
 def run_train(*argv: str, cwd: Path, timeout_s: float = 1200) -> subprocess.CompletedProcess[str]:
