@@ -98,6 +98,9 @@ def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, An
         "wall_time_s": round(float(training["wall_time_s"]), 1),
         "hyperparams": f"agents/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']",
     }
+    if "selected" in training:  # train.py kept the best-validated policy, not the final one
+        selected = training["selected"]
+        section["selected"] = {k: selected[k] for k in ("timesteps", "validation_success_rate", "personas", "episodes")}
     if "defaults" in training:
         section["defaults"] = training["defaults"]
     return section
