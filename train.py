@@ -564,6 +564,7 @@ def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> i
         finish_run,
         verdict_against_handbook,
         versions,
+        warn_if_blind,
     )
 
     run_dir, env_id = plan.run_dir, plan.env_id
@@ -597,6 +598,7 @@ def _evaluate_and_report(args: Args, plan: _Plan, finished: dict[str, Any]) -> i
         "verdict": verdict_against_handbook(label, results),
         **versions(),
     }
+    summary["reads_no_better_than_blind"] = warn_if_blind(label, comparison.room)
     # Written last: a run folder with results.json and COMPLETE finished; one without did not.
     finish_run(run_dir, summary)
     return 0

@@ -10,6 +10,7 @@ written last, so a run folder without them did not finish.
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,7 @@ __all__ = [
     "personas_arg",
     "verdict_against_handbook",
     "versions",
+    "warn_if_blind",
 ]
 
 
@@ -130,6 +132,24 @@ def _across_runs(run_dir: Path, summary: dict[str, Any]) -> dict[str, Any] | Non
         return None
     print(f"mind-reading score of {own[1]} across training runs in {run_dir.parent}: {aggregate.text()}")
     return aggregate.as_json()
+
+
+def warn_if_blind(label: str, room: Headroom | None) -> bool | None:
+    """Print a warning if the learned agent does no better than the best blind policy; whether so (None: unknown).
+
+    A training seed is a draw: on the hard level some seeds never learn to read the person
+    (docs/agents.md, "Across training seeds"), and the table alone is easy to misread.
+    """
+    score = room.score_of(label) if room is not None else None
+    if score is None or math.isnan(score.score):
+        return None
+    if score.score > 0:
+        return False
+    print(
+        f"warning: {label} does no better than the best blind policy (mind-reading score {score.score:.2f}): "
+        "this training seed did not learn to read the person; a seed is a draw, train another --seed"
+    )
+    return True
 
 
 def verdict_against_handbook(label: str, results: list[Any]) -> dict[str, Any] | None:

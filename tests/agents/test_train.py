@@ -72,6 +72,14 @@ def test_run_folder_is_complete_and_the_model_loads(first_run):
     assert all(r["episodes"] == 8 and r["personas"] == ["frail", "forgetful"] for r in results["evaluation"]["results"])
     assert set(results["verdict"]) >= {"higher_success_than_handbook", "no_more_unsafe_than_handbook"}
     assert results["training"]["timesteps"] >= 256
+    # 256 steps learn nothing: where the score is defined, the report says the seed reads no mind.
+    learned_score = room["mind_reading_score"]["ppo (learned)"]["score"]
+    expected = None if learned_score is None else learned_score <= 0
+    assert results["reads_no_better_than_blind"] is expected
+    # The saved policy is the best-validated one, on the training personas (here only the final one is scored).
+    selected = results["training"]["selected"]
+    assert selected["personas"] == "train" and selected["episodes"] == 64
+    assert selected["timesteps"] == selected["final_timesteps"] == results["training"]["total_timesteps"]
 
     from agents.rl import load_agent
 
@@ -173,3 +181,19 @@ def test_default_run_beats_the_handbook_on_held_out_personas(tmp_path):
     verdict = results["verdict"]
     assert verdict["higher_success_than_handbook"], verdict
     assert verdict["no_more_unsafe_than_handbook"], verdict
+
+
+def test_the_report_warns_when_the_learned_agent_reads_no_mind(capsys):
+    from types import SimpleNamespace
+
+    from agents.run_report import warn_if_blind
+
+    def room(score):
+        return SimpleNamespace(score_of=lambda agent: SimpleNamespace(agent=agent, score=score))
+
+    assert warn_if_blind("ppo (learned)", room(-0.02)) is True
+    assert "does no better than the best blind policy" in capsys.readouterr().out
+    assert warn_if_blind("ppo (learned)", room(0.62)) is False
+    assert warn_if_blind("ppo (learned)", room(float("nan"))) is None
+    assert warn_if_blind("ppo (learned)", None) is None
+    assert capsys.readouterr().out == ""
