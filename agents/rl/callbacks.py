@@ -171,9 +171,9 @@ class SelectionCallback(BaseCallback):
     ``episodes`` validation episodes: the :data:`VALIDATION_PERSONAS`, seeds
     :data:`VALIDATION_SEED` onwards -- never the held-out personas. Each policy that scores at
     least as well as the best so far is saved to ``folder/best_step_N.zip`` (with its
-    observation statistics). PPO's held-out success moves by several points between
-    policies a few hundred thousand steps apart while its training return does not
-    (docs/agents.md, "Which policy is saved"); the best validated one is the saved model.
+    observation statistics). PPO's held-out success moves by up to 16 points between policies
+    of one run a few hundred thousand steps apart, its success on the training personas by
+    less (docs/agents.md, "Which policy is saved"); the best validated one is the saved model.
 
     Scoring does not touch training: the episodes run in their own envs and the policy acts
     deterministically, so the weights trained are those of a run without selection.
