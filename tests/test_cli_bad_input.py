@@ -111,6 +111,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.evaluate", "episodes 0", ["--agent", "random", "--episodes", "0"], r"--episodes must be >= 1, got 0"),
     ("agents.evaluate", "episodes not a number", ["--agent", "random", "--episodes", "x"], r"invalid int value: 'x'"),
     ("agents.evaluate", "n-envs 0", ["--agent", "random", "--n-envs", "0"], r"--n-envs must be >= 1, got 0"),
+    ("agents.evaluate", "threads 0", ["--agent", "random", "--threads", "0"], r"--threads must be >= 1, got 0"),
     ("agents.evaluate", "negative seed", ["--agent", "random", "--seed", "-3"], r"--seed must be >= 0, got -3"),
     ("agents.evaluate", "unknown persona", ["--agent", "random", "--personas", "nobody"], r"--personas: unknown"),
     ("agents.evaluate", "unknown env", ["--agent", "random", "--env", "Nope-v0"], r"--env: unknown env id 'Nope-v0'"),

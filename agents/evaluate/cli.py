@@ -85,6 +85,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="seed of episode 0 (default 0)")
     parser.add_argument("--n-envs", type=int, default=64, help="episodes played side by side (default 64)")
     parser.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch CPU threads of a --model's policy (default 1, as train.py: these small networks gain nothing "
+        "from more, and two evaluations at once on 2 cores ran 8x slower on torch's default)",
+    )
+    parser.add_argument(
         "--backend", choices=("auto", "vector", "single"), default="auto", help="batched vector env or single envs"
     )
     parser.add_argument("--stochastic", action="store_true", help="sample actions instead of deterministic ones")
@@ -179,6 +186,8 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
     if args.n_envs < 1:
         parser.error(f"--n-envs must be >= 1, got {args.n_envs}")
+    if args.threads < 1:
+        parser.error(f"--threads must be >= 1, got {args.threads}")
     problem = seed_range_problem("--seed", args.seed, args.episodes)  # episode k uses seed + k
     if problem:
         parser.error(problem)
@@ -214,6 +223,9 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
     """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env."""
     if entry in SCRIPTED_AGENTS:
         return entry, args.env or DEFAULT_ENV_ID, entry
+    import torch
+
+    torch.set_num_threads(args.threads)  # the policy's forward passes (SB3's and RLlib's)
     folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
     if not is_pretrained(entry) and is_rllib_run(entry):
         from agents.rllib import load_rllib_agent

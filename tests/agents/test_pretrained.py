@@ -68,3 +68,18 @@ def test_train_py_scores_a_pretrained_model_by_name(tmp_path):
     (run_dir,) = tmp_path.iterdir()
     results = json.loads((run_dir / "results.json").read_text())
     assert [r["agent"] for r in results["evaluation"]["results"]][:2] == ["ppo (learned)", "handbook"]
+
+
+def test_the_evaluate_command_sets_the_policys_torch_threads(capsys):
+    """One thread by default (as train.py): two evaluations at once on 2 cores ran 8x slower on torch's default."""
+    import torch
+
+    before = torch.get_num_threads()
+    try:
+        assert main(["--model", "pretrained:hard-v2-ppo", "--episodes", "4", "--threads", "2", "--json"]) == 0
+        assert torch.get_num_threads() == 2
+        assert main(["--model", "pretrained:hard-v2-ppo", "--episodes", "4", "--json"]) == 0
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
+    capsys.readouterr()
