@@ -484,7 +484,7 @@ def _training_summary(plan: _Plan, model: Any, start_steps: int, train_s: float)
 
 def _print_selection(selected: dict[str, Any]) -> None:
     """One line: which policy is saved and how it and the final policy scored on validation."""
-    final = next(p for p in selected["scores"] if p["timesteps"] == selected["final_timesteps"])
+    final = selected["scores"][-1]  # the final policy is scored last
     print(
         f"saved the policy at {selected['timesteps']} steps: validation success "
         f"{selected['validation_success_rate']:.1%} on the {selected['personas']} personas "

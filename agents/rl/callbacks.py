@@ -151,8 +151,7 @@ class PeriodicEvalCallback(BaseCallback):
         """Run one evaluation and log it."""
         from agents.evaluate import evaluate
 
-        normalizer = ObsNormalizer.from_vec_normalize(find_vec_normalize(self.model.get_env()))
-        agent = SB3Agent(self.model, self.algo, self.env_id, normalizer)
+        agent = _current_policy(self.model, self.algo, self.env_id)
         result = evaluate(agent, self.env_id, self.personas, self.episodes, self.seed, n_envs=min(64, self.episodes))
         point = {"timesteps": int(self.num_timesteps), **result.summary()}
         self.history.append(point)
@@ -216,15 +215,13 @@ class SelectionCallback(BaseCallback):
         """Play the validation episodes with the current policy; save it if it is the best so far."""
         from agents.evaluate import evaluate
 
-        vec_normalize = find_vec_normalize(self.model.get_env())
-        agent = SB3Agent(self.model, self.algo, self.env_id, ObsNormalizer.from_vec_normalize(vec_normalize))
+        agent = _current_policy(self.model, self.algo, self.env_id)
         result = evaluate(agent, self.env_id, VALIDATION_PERSONAS, self.episodes, VALIDATION_SEED)
-        steps, success = int(self.num_timesteps), result.success_rate
-        point: dict[str, Any] = {"timesteps": steps, "success_rate": success, "saved": None}
+        point: dict[str, Any] = {"timesteps": int(self.num_timesteps), "success_rate": result.success_rate}
         if save and all(point["success_rate"] >= p["success_rate"] for p in self.history):
-            path = self.folder / f"best_step_{point['timesteps']:012d}.zip"
+            vec_normalize = find_vec_normalize(self.model.get_env())
+            path = self.saved_path(point["timesteps"])
             save_model_bundle(self.model, path, algo=self.algo, env_id=self.env_id, vec_normalize=vec_normalize)
-            point["saved"] = str(path.name)
         self.history.append(point)
         self.logger.record("eval/validation_success_rate", point["success_rate"])
         return point
@@ -240,7 +237,7 @@ class SelectionCallback(BaseCallback):
         final = self._score(save=False)
         best = max(reversed(self.history), key=lambda p: p["success_rate"])
         if best is not final:
-            _load_policy(model, self.folder / best["saved"])
+            _load_policy(model, self.saved_path(best["timesteps"]))  # the best so far when scored: saved
         return {
             "timesteps": best["timesteps"],
             "validation_success_rate": best["success_rate"],
@@ -248,8 +245,17 @@ class SelectionCallback(BaseCallback):
             "personas": VALIDATION_PERSONAS,
             "episodes": self.episodes,
             "seed": VALIDATION_SEED,
-            "scores": [{k: p[k] for k in ("timesteps", "success_rate")} for p in self.history],
+            "scores": [dict(p) for p in self.history],
         }
+
+    def saved_path(self, timesteps: int) -> Path:
+        """Where the policy scored at ``timesteps`` was saved (if it was the best so far)."""
+        return self.folder / f"best_step_{timesteps:012d}.zip"
+
+
+def _current_policy(model: Any, algo: str, env_id: str) -> SB3Agent:
+    """The model's policy as it is now, with the training env's current observation statistics."""
+    return SB3Agent(model, algo, env_id, ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env())))
 
 
 def _load_policy(model: Any, path: Path) -> None:

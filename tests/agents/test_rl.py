@@ -192,10 +192,10 @@ def test_selection_saves_the_best_validated_policy(tmp_path, monkeypatch):
     assert calls == [(VALIDATION_PERSONAS, VALIDATION_SEED)] * 5  # the training personas, never "test"
     assert selected["timesteps"] == kept["timesteps"] < selected["final_timesteps"]
     assert model.num_timesteps == kept["timesteps"]
-    _, stats = read_bundle(tmp_path / kept["saved"])
+    _, stats = read_bundle(selection.saved_path(kept["timesteps"]))
     assert np.array_equal(env.obs_rms.mean, stats.obs_rms.mean)
     loaded = model.policy.state_dict()
     assert any(not torch.equal(loaded[k], saved_weights[k]) for k in loaded)  # the final weights were replaced
-    best = algorithm_class("ppo").load(tmp_path / kept["saved"], device="cpu").policy.state_dict()
+    best = algorithm_class("ppo").load(selection.saved_path(kept["timesteps"]), device="cpu").policy.state_dict()
     assert all(torch.equal(loaded[k], best[k]) for k in loaded)
     env.close()
