@@ -32,7 +32,10 @@ from coop_gym.compiled.checks import check_integer
 from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
 
-__all__ = ["SB3VecEnvAdapter", "make_sb3_vec_env"]
+__all__ = ["STEP_INFOS", "SB3VecEnvAdapter", "make_sb3_vec_env"]
+
+STEP_INFOS: tuple[str, ...] = ("all", "finished")
+"""What :class:`SB3VecEnvAdapter` puts in ``infos`` each step (its ``step_infos`` argument)."""
 
 
 class SB3VecEnvAdapter(VecEnv):
@@ -48,6 +51,11 @@ class SB3VecEnvAdapter(VecEnv):
         venv: The vector env; ``venv.metadata["autoreset_mode"]`` must be
             ``AutoresetMode.SAME_STEP`` (e.g. ``gymnasium.make_vec(id, n,
             autoreset_mode=AutoresetMode.SAME_STEP)``).
+        step_infos: ``"all"``: every env's info dict on every step, as ``DummyVecEnv`` gives
+            them; ``"finished"``: only the envs whose episode ended this step get theirs (with
+            ``"terminal_observation"`` and ``"episode"``), the others an empty dict, and
+            ``reset_infos`` are not refreshed at an autoreset -- all that SB3's PPO and
+            ``VecMonitor`` read, without building hundreds of dicts per step.
 
     Example:
         >>> import coop_gym
@@ -59,8 +67,10 @@ class SB3VecEnvAdapter(VecEnv):
         ([True, False], 'unsafe', 1)
     """
 
-    def __init__(self, venv: VectorEnv) -> None:
+    def __init__(self, venv: VectorEnv, step_infos: str = "all") -> None:
         """Wrap ``venv`` (see the class docstring)."""
+        if step_infos not in STEP_INFOS:
+            raise ValueError(f"step_infos must be one of {list(STEP_INFOS)}, got {step_infos!r}")
         if not isinstance(venv, VectorEnv):
             raise TypeError(f"venv must be a gymnasium.vector.VectorEnv, got {type(venv).__name__}")
         mode = venv.metadata.get("autoreset_mode")
@@ -70,6 +80,7 @@ class SB3VecEnvAdapter(VecEnv):
                 "build it with gymnasium.make_vec(id, num_envs, autoreset_mode=AutoresetMode.SAME_STEP)"
             )
         self.venv = venv
+        self.step_infos = step_infos
         super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
         n = venv.num_envs
         # The natively batched coop_gym env (not hidden behind a VectorWrapper, which could change
@@ -127,23 +138,27 @@ class SB3VecEnvAdapter(VecEnv):
         if self._rows_env is not None:
             # coop_gym's batched env: per-env info dicts straight from its report rows.
             obs, rewards, terminated, truncated, final = self._rows_env.step_rows(self._actions)
-            per_env = self._row_infos(self._rows_env.core.report)
+            if self.step_infos == "all":
+                per_env = self._row_infos(self._rows_env.core.report)
+            else:
+                per_env = [{} for _ in range(self.num_envs)]
             if final is not None:
                 final_obs = final[1]
                 rows = final[2]
                 finals = {i: self._info.single(rows[i].tolist()) for i in np.flatnonzero(final[0]).tolist()}
         else:
             obs, rewards, terminated, truncated, infos = self.venv.step(self._actions)
-            per_env = _unbatch(infos, self.num_envs)
+            per_env = _unbatch(infos, self.num_envs) if self.step_infos == "all" else [{} for _ in range(self.num_envs)]
             if "final_info" in infos:
                 final_obs = infos["final_obs"]
                 finals = dict(enumerate(_unbatch(infos["final_info"], self.num_envs)))
         dones = np.logical_or(terminated, truncated)
         self._episode_return += rewards
         self._episode_length += 1
-        for i, info in enumerate(per_env):
-            if not dones[i]:
-                info["TimeLimit.truncated"] = False
+        if self.step_infos == "all":
+            for i, info in enumerate(per_env):
+                if not dones[i]:
+                    info["TimeLimit.truncated"] = False
         if dones.any():
             now = time.time()
             for i in np.flatnonzero(dones).tolist():
@@ -156,7 +171,8 @@ class SB3VecEnvAdapter(VecEnv):
                     "l": int(self._episode_length[i]),
                     "t": round(now - self._t_start, 6),
                 }
-                self.reset_infos[i] = per_env[i]
+                if self.step_infos == "all":
+                    self.reset_infos[i] = per_env[i]
                 per_env[i] = info
             self._episode_return[dones] = 0.0
             self._episode_length[dones] = 0
@@ -251,7 +267,12 @@ def _unbatch(infos: dict[str, Any], n: int) -> list[dict[str, Any]]:
 
 
 def make_sb3_vec_env(
-    env_id: str, n_envs: int, seed: int | None = None, env_kwargs: dict[str, Any] | None = None
+    env_id: str,
+    n_envs: int,
+    seed: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    *,
+    step_infos: str = "all",
 ) -> SB3VecEnvAdapter:
     """``n_envs`` envs of ``env_id`` as one natively batched SB3 ``VecEnv``.
 
@@ -260,6 +281,7 @@ def make_sb3_vec_env(
         n_envs: Number of envs.
         seed: Env ``i`` is seeded ``seed + i`` at the first reset (None: fresh entropy).
         env_kwargs: Keyword arguments of the env (e.g. ``personas``, ``reward``).
+        step_infos: ``"all"`` or ``"finished"`` (:class:`SB3VecEnvAdapter`).
 
     Returns:
         The :class:`SB3VecEnvAdapter` (not yet reset; SB3's ``learn`` resets it).
@@ -277,6 +299,6 @@ def make_sb3_vec_env(
         autoreset_mode=AutoresetMode.SAME_STEP,
         **kwargs,
     )
-    adapter = SB3VecEnvAdapter(venv)
+    adapter = SB3VecEnvAdapter(venv, step_infos=step_infos)
     adapter.seed(seed)
     return adapter

@@ -86,7 +86,8 @@ def make_train_env(
         venv = DummyVecEnv([_env_factory(env_id, kwargs) for _ in range(n_envs)])
         venv.seed(seed)
     else:
-        venv = make_sb3_vec_env(env_id, n_envs, seed, kwargs)
+        # Training reads only finished episodes' infos (outcome, terminal observation, truncation).
+        venv = make_sb3_vec_env(env_id, n_envs, seed, kwargs, step_infos="finished")
     filename = None
     if monitor_file is not None:
         Path(monitor_file).parent.mkdir(parents=True, exist_ok=True)

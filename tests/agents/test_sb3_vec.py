@@ -194,3 +194,44 @@ def test_generic_vector_envs_go_through_the_dict_of_arrays_path_with_the_same_re
                 done_count += 1
             _assert_same_info(got, expected)
     assert done_count >= 3
+
+
+@pytest.mark.parametrize("generic", [False, True])
+def test_finished_step_infos_keep_every_finished_episodes_info_and_nothing_else(generic: bool) -> None:
+    """``step_infos="finished"``: the same steps; a finished env's info as ``"all"`` gives it, others empty."""
+    n, seed = 4, 21
+
+    def adapter(step_infos: str) -> SB3VecEnvAdapter:
+        if not generic:
+            return make_sb3_vec_env("CoopGym/SitToStand-v0", n, seed, env_kwargs=SHORT, step_infos=step_infos)
+        sync = gym.make_vec(
+            "CoopGym/SitToStand-v0",
+            num_envs=n,
+            vectorization_mode="sync",
+            vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP},
+            **SHORT,
+        )
+        made = SB3VecEnvAdapter(sync, step_infos=step_infos)
+        made.seed(seed)
+        return made
+
+    full, lean = adapter("all"), adapter("finished")
+    assert np.array_equal(full.reset(), lean.reset())
+    rng = np.random.default_rng(2)
+    finished = 0
+    for _ in range(60):
+        actions = np.column_stack([rng.integers(0, 3, n), rng.integers(0, 3, n), rng.random(n) < 0.1])
+        obs_a, rew_a, done_a, infos_a = full.step(actions)
+        obs_l, rew_l, done_l, infos_l = lean.step(actions)
+        assert np.array_equal(obs_a, obs_l) and np.array_equal(rew_a, rew_l) and np.array_equal(done_a, done_l)
+        for done, got, expected in zip(done_l, infos_l, infos_a, strict=True):
+            if not done:
+                assert got == {}
+                continue
+            finished += 1
+            assert np.array_equal(got.pop("terminal_observation"), expected.pop("terminal_observation"))
+            assert got.pop("episode")["l"] == expected.pop("episode")["l"]
+            _assert_same_info(got, expected)
+    assert finished >= 4
+    with pytest.raises(ValueError, match="step_infos"):
+        make_sb3_vec_env("CoopGym/SitToStand-v0", 2, step_infos="some")
