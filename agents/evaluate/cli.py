@@ -35,7 +35,7 @@ from agents.evaluate import (
     write_csv,
     write_json,
 )
-from agents.evaluate.runs import aggregate_runs, read_run_score, runs_in
+from agents.evaluate.runs import RunScore, aggregate_runs, finished_run_score, is_run_folder, run_folders_in
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
 from agents.run_folder import is_rllib_run
 from agents.scripted import SCRIPTED_AGENTS
@@ -73,7 +73,8 @@ def _parser() -> argparse.ArgumentParser:
         nargs="+",
         metavar="RUN",
         help="train.py run folders (or folders of them): the IQM of the learned agents' mind-reading scores "
-        "across the runs (training seeds), stratified bootstrap 95%% CI, per algorithm; nothing is played",
+        "across the runs (training seeds), stratified bootstrap 95%% CI, per algorithm; nothing is played. "
+        "A run that did not finish with a score, or one given twice, is an error naming it",
     )
     parser.add_argument(
         "--env", default=None, help=f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
@@ -289,21 +290,24 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
 
 
 def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: bool) -> int:
-    """``--runs``: the IQM of the mind-reading score per algorithm across the runs' ``results.json``."""
-    runs = []
-    for folder in folders:
-        if not Path(folder).is_dir():
-            parser.error(f"--runs: {folder} is not a folder")
-        own = read_run_score(folder)
-        runs.extend([own] if own is not None else runs_in(folder))
-    if not runs:
-        parser.error(
-            "--runs: no finished run with a mind-reading score (results.json of train.py with blind and oracle)"
-        )
+    """``--runs``: the IQM of the mind-reading score per algorithm across the runs' ``results.json``.
+
+    Every run given, or found in a folder given, is counted or refused with a usage error
+    naming it: an IQM over fewer runs than asked would pass for the one asked for.
+    """
+    runs = _run_scores(parser, folders)
     report = {}
-    for algo in sorted({r[1] for r in runs}):
-        like = next(r for r in runs if r[1] == algo)
-        aggregate = aggregate_runs(runs, like=like)
+    for algo in sorted({r[1] for r in runs.values()}):
+        of_algo = {folder: r for folder, r in runs.items() if r[1] == algo}
+        episodes = {r[3] for r in of_algo.values()}
+        if len(episodes) > 1:
+            scored = "; ".join(
+                f"personas {key[0]}, {key[1]} episodes from seed {key[2]}: "
+                + ", ".join(str(f) for f, r in of_algo.items() if r[3] == key)
+                for key in sorted(episodes, key=str)
+            )
+            parser.error(f"--runs: the {algo} runs were scored on different episodes ({scored}); give like runs")
+        aggregate = aggregate_runs(of_algo.values())
         assert aggregate is not None
         report[algo] = aggregate.as_json()
         if not as_json:
@@ -312,6 +316,27 @@ def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: b
     if as_json:
         print(json.dumps(report))
     return 0
+
+
+def _run_scores(parser: argparse.ArgumentParser, folders: list[str]) -> dict[Path, RunScore]:
+    """The score of every run folder given or inside a folder given; a usage error for any run without one."""
+    runs: dict[Path, RunScore] = {}
+    given: set[Path] = set()
+    for folder in folders:
+        if not Path(folder).is_dir():
+            parser.error(f"--runs: {folder} is not a folder")
+        inside = [Path(folder)] if is_run_folder(folder) else run_folders_in(folder)
+        if not inside:
+            parser.error(f"--runs: {folder} is neither a train.py run folder nor a folder of them")
+        for run in inside:
+            if run.resolve() in given:  # counted twice, one seed would weigh double
+                parser.error(f"--runs: {run} is given twice")
+            given.add(run.resolve())
+            try:
+                runs[run] = finished_run_score(run)
+            except ValueError as exc:
+                parser.error(f"--runs: {run}: {exc}; finish it or leave it out")
+    return runs
 
 
 def _split_named(result: EvaluationResult) -> list[EvaluationResult]:
