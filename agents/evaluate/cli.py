@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -60,7 +61,8 @@ def _parser() -> argparse.ArgumentParser:
     who.add_argument(
         "--compare",
         help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
-        "(--agent/--model, if given, are added first)",
+        "(--agent/--model, if given, are added first; each agent once). A model's row is named algo:FOLDER, "
+        "or algo:PATH where two models' folders share a name",
     )
     who.add_argument(
         "--human",
@@ -115,8 +117,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.runs:
         return _report_runs(parser, args.runs, args.json)
     entries = _checked_entries(parser, args)
+    names = _model_names(entries)
     # Every model is loaded and matched to its env before any episode is played.
-    planned = [_planned(parser, args, entry) for entry in entries]
+    planned = [_planned(parser, args, entry, names.get(entry, entry)) for entry in entries]
     if args.env is None:
         planned = _scripted_on_the_models_env(parser, planned)
     results: list[EvaluationResult] = []
@@ -208,7 +211,14 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
         parser.error(
             f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
         )
+    given: dict[str, str] = {}
     for entry in entries:
+        same = entry if entry in SCRIPTED_AGENTS or is_pretrained(entry) else str(Path(entry).resolve())
+        if same in given:  # two rows of one agent, and one score would overwrite the other
+            first = given[same]
+            twice = f"{entry!r} is given twice" if first == entry else f"{first!r} and {entry!r} are one model"
+            parser.error(f"{twice} (--agent, --model and --compare together): list each agent once")
+        given[same] = entry
         if is_pretrained(entry) and entry.removeprefix(PREFIX) not in pretrained_names():
             parser.error(
                 f"unknown pretrained model {entry!r}; known: {', '.join(PREFIX + n for n in pretrained_names())}"
@@ -220,14 +230,32 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
     return entries
 
 
-def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: str) -> tuple[Agent | str, str, str]:
-    """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env."""
+def _model_names(entries: list[str]) -> dict[str, str]:
+    """The name of each saved model path in the table: its folder's, or the path as given where folders share a name.
+
+    A run folder's name says env, algorithm, seed and time, so it names the run's model;
+    two models of one folder (``dir/full.zip``, ``dir/other.zip``) or of folders with one
+    name would share it, and one result would overwrite the other wherever results are
+    keyed by name (the mind-reading scores).
+    """
+    paths = [e for e in entries if e not in SCRIPTED_AGENTS and not is_pretrained(e)]
+    folder_names = {e: (Path(e) if Path(e).is_dir() else Path(e).parent).name or Path(e).stem for e in paths}
+    shared = Counter(folder_names.values())
+    return {e: name if shared[name] == 1 else e for e, name in folder_names.items()}
+
+
+def _planned(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, entry: str, name: str
+) -> tuple[Agent | str, str, str]:
+    """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env.
+
+    ``name`` is a saved model's name in the label (:func:`_model_names`).
+    """
     if entry in SCRIPTED_AGENTS:
         return entry, args.env or DEFAULT_ENV_ID, entry
     import torch
 
     torch.set_num_threads(args.threads)  # the policy's forward passes (SB3's and RLlib's)
-    folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
     if not is_pretrained(entry) and is_rllib_run(entry):
         from agents.rllib import load_rllib_agent
 
@@ -236,7 +264,7 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
         except (OSError, ValueError) as exc:
             parser.error(f"--model {entry}: {exc}")
         env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
-        return rllib_agent, env_id, f"rllib_ppo:{folder.name or Path(entry).stem}"
+        return rllib_agent, env_id, f"rllib_ppo:{name}"
     from agents.rl import load_agent, observation_features
 
     try:
@@ -247,7 +275,7 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
     problem = feature_mismatch(loaded.features, observation_features(env_id, env_kwargs=loaded.env_kwargs), env_id)
     if problem:
         parser.error(f"--model {entry}: {problem}")
-    label = loaded.name if is_pretrained(entry) else f"{loaded.algo}:{folder.name or Path(entry).stem}"
+    label = loaded.name if is_pretrained(entry) else f"{loaded.algo}:{name}"
     return loaded, env_id, label
 
 

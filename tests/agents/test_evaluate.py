@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -400,3 +401,20 @@ def test_cli_runs_refuses_a_run_counted_twice_or_runs_scored_on_other_episodes(t
     no_runs = tmp_path / "empty"
     no_runs.mkdir()
     assert "is neither a train.py run folder nor a folder of them" in _usage_error(["--runs", str(no_runs)], capsys)
+
+
+def test_cli_compare_names_two_models_of_one_folder_apart(tmp_path, capsys):
+    from agents.pretrained import pretrained_model_path
+
+    full, other = tmp_path / "dir" / "full.zip", tmp_path / "dir" / "other.zip"
+    full.parent.mkdir()
+    for path in (full, other):
+        shutil.copyfile(pretrained_model_path("hard-v2-ppo"), path)
+    assert main(["--compare", f"{full},{other},blind,oracle", "--episodes", "2", "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    labels = [f"ppo:{full}", f"ppo:{other}", "blind", "oracle"]  # not "ppo:dir" twice
+    assert [r["agent"] for r in payload["results"]] == labels
+    assert list(payload["headroom"]["mind_reading_score"]) == labels  # no score overwrote another
+    line = _usage_error(["--model", str(full), "--compare", f"blind,{tmp_path}/dir/../dir/full.zip"], capsys)
+    assert f"'{full}' and '{tmp_path}/dir/../dir/full.zip' are one model" in line and "list each agent once" in line
+    assert "'blind' is given twice" in _usage_error(["--compare", "blind,oracle,blind"], capsys)
