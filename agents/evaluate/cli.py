@@ -68,7 +68,8 @@ def _parser() -> argparse.ArgumentParser:
         "--human",
         metavar="CSV",
         help="add the episodes played with python -m agents.play as the 'human' row (replayed on their own seeds; "
-        "scored against blind and oracle on those seeds, never the best non-oracle)",
+        "scored against blind and oracle on those seeds, never the best non-oracle). A CSV of several env ids "
+        "needs --env: its episodes of that env are scored",
     )
     who.add_argument(
         "--runs",
@@ -122,6 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     planned = [_planned(parser, args, entry, names.get(entry, entry)) for entry in entries]
     if args.env is None:
         planned = _scripted_on_the_models_env(parser, planned)
+    human_env = _human_env(parser, args, planned) if args.human else DEFAULT_ENV_ID
     results: list[EvaluationResult] = []
     for agent, env_id, label in planned:
         try:
@@ -145,7 +147,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from agents.play_log import score_played
 
         try:
-            results.append(score_played(args.human, _human_env(parser, args, planned)))
+            results.append(score_played(args.human, human_env))
         except ValueError as exc:
             print(f"error: --human {args.human}: {exc}", file=sys.stderr)
             return 2
@@ -155,22 +157,28 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _human_env(
     parser: argparse.ArgumentParser, args: argparse.Namespace, planned: list[tuple[Agent | str, str, str]]
 ) -> str:
-    """The env whose played episodes ``--human`` scores: the agents' env, else ``--env``, else the CSV's only one.
+    """The env whose played episodes ``--human`` scores: ``--env``, else the agents' env, else the CSV's only one.
 
-    Raises:
-        ValueError: the CSV cannot be read (only when its env id is needed).
+    Without ``--env``, a CSV holding episodes of several env ids is a usage error (as is an
+    unreadable CSV): scoring the episodes of one env id would leave the others out unsaid.
     """
     envs = sorted({env_id for _, env_id, _ in planned})
     if len(envs) > 1:
         parser.error(f"--human: the agents play on different envs ({', '.join(envs)}): give --env")
-    if envs:
-        return envs[0]
     if args.env is not None:
         return str(args.env)
     from agents.play_log import read_played
 
-    played = sorted({e.env_id for e in read_played(args.human)})
-    return played[0] if len(played) == 1 else DEFAULT_ENV_ID
+    try:
+        played = sorted({e.env_id for e in read_played(args.human)})
+    except (OSError, ValueError) as exc:
+        parser.error(f"--human {args.human}: {exc}")
+    if len(played) > 1:
+        parser.error(
+            f"--human: {args.human} holds episodes of {len(played)} env ids ({', '.join(played)}): "
+            "give --env ID to score those of one"
+        )
+    return envs[0] if envs else played[0] if played else DEFAULT_ENV_ID
 
 
 def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:

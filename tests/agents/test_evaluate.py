@@ -418,3 +418,16 @@ def test_cli_compare_names_two_models_of_one_folder_apart(tmp_path, capsys):
     line = _usage_error(["--model", str(full), "--compare", f"blind,{tmp_path}/dir/../dir/full.zip"], capsys)
     assert f"'{full}' and '{tmp_path}/dir/../dir/full.zip' are one model" in line and "list each agent once" in line
     assert "'blind' is given twice" in _usage_error(["--compare", "blind,oracle,blind"], capsys)
+
+
+def test_cli_human_csv_of_several_envs_needs_env(tmp_path, capsys, monkeypatch):
+    from agents.play_log import PlayedEpisode, append_played
+
+    csv_path = tmp_path / "played.csv"
+    for env_id in ("CoopGym/SitToStandHard-v2", "CoopGym/SitToStand-v0"):
+        append_played(csv_path, PlayedEpisode(env_id, 1, "test", "frail", "unsafe", 0.1, -10.0, ((2, 0, 1),)))
+    monkeypatch.setattr("agents.evaluate.cli.evaluate", None)  # the error comes before any episode is played
+    for agents in ([], ["--compare", "blind,oracle"]):
+        line = _usage_error([*agents, "--human", str(csv_path)], capsys)  # not the default env's row alone
+        expected = "holds episodes of 2 env ids (CoopGym/SitToStand-v0, CoopGym/SitToStandHard-v2): give --env ID"
+        assert f"--human: {csv_path} {expected}" in line, line
