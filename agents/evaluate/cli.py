@@ -12,7 +12,10 @@ Kept here, the imports run one way (``cli -> rl -> evaluate``). Examples::
     python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
         --csv out.csv --plot out.png
 
-Importing this module does not import torch; ``--model`` loads SB3 lazily.
+Every row and score has its own name, and nothing given is left out unsaid: a ``--runs``
+run without a score, an agent given twice and a ``--human`` CSV of several env ids without
+``--env`` are usage errors naming them (exit 2); two models whose folders share a name are
+named by their paths. Importing this module does not import torch; ``--model`` loads SB3 lazily.
 """
 
 from __future__ import annotations
