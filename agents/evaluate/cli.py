@@ -12,7 +12,10 @@ Kept here, the imports run one way (``cli -> rl -> evaluate``). Examples::
     python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle \\
         --csv out.csv --plot out.png
 
-Importing this module does not import torch; ``--model`` loads SB3 lazily.
+Every row and score has its own name, and nothing given is left out unsaid: a ``--runs``
+run without a score, an agent given twice and a ``--human`` CSV of several env ids without
+``--env`` are usage errors naming them (exit 2); two models whose folders share a name are
+named by their paths. Importing this module does not import torch; ``--model`` loads SB3 lazily.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -35,7 +39,7 @@ from agents.evaluate import (
     write_csv,
     write_json,
 )
-from agents.evaluate.runs import aggregate_runs, read_run_score, runs_in
+from agents.evaluate.runs import RunScore, aggregate_runs, finished_run_score, is_run_folder, run_folders_in
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
 from agents.run_folder import is_rllib_run
 from agents.scripted import SCRIPTED_AGENTS
@@ -60,20 +64,23 @@ def _parser() -> argparse.ArgumentParser:
     who.add_argument(
         "--compare",
         help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
-        "(--agent/--model, if given, are added first)",
+        "(--agent/--model, if given, are added first; each agent once). A model's row is named algo:FOLDER, "
+        "or algo:PATH where two models' folders share a name",
     )
     who.add_argument(
         "--human",
         metavar="CSV",
         help="add the episodes played with python -m agents.play as the 'human' row (replayed on their own seeds; "
-        "scored against blind and oracle on those seeds, never the best non-oracle)",
+        "scored against blind and oracle on those seeds, never the best non-oracle). A CSV of several env ids "
+        "needs --env: its episodes of that env are scored",
     )
     who.add_argument(
         "--runs",
         nargs="+",
         metavar="RUN",
         help="train.py run folders (or folders of them): the IQM of the learned agents' mind-reading scores "
-        "across the runs (training seeds), stratified bootstrap 95%% CI, per algorithm; nothing is played",
+        "across the runs (training seeds), stratified bootstrap 95%% CI, per algorithm; nothing is played. "
+        "A run that did not finish with a score, or one given twice, is an error naming it",
     )
     parser.add_argument(
         "--env", default=None, help=f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
@@ -114,10 +121,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.runs:
         return _report_runs(parser, args.runs, args.json)
     entries = _checked_entries(parser, args)
+    names = _model_names(entries)
     # Every model is loaded and matched to its env before any episode is played.
-    planned = [_planned(parser, args, entry) for entry in entries]
+    planned = [_planned(parser, args, entry, names.get(entry, entry)) for entry in entries]
     if args.env is None:
         planned = _scripted_on_the_models_env(parser, planned)
+    human_env = _human_env(parser, args, planned) if args.human else DEFAULT_ENV_ID
     results: list[EvaluationResult] = []
     for agent, env_id, label in planned:
         try:
@@ -141,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from agents.play_log import score_played
 
         try:
-            results.append(score_played(args.human, _human_env(parser, args, planned)))
+            results.append(score_played(args.human, human_env))
         except ValueError as exc:
             print(f"error: --human {args.human}: {exc}", file=sys.stderr)
             return 2
@@ -151,22 +160,28 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _human_env(
     parser: argparse.ArgumentParser, args: argparse.Namespace, planned: list[tuple[Agent | str, str, str]]
 ) -> str:
-    """The env whose played episodes ``--human`` scores: the agents' env, else ``--env``, else the CSV's only one.
+    """The env whose played episodes ``--human`` scores: ``--env``, else the agents' env, else the CSV's only one.
 
-    Raises:
-        ValueError: the CSV cannot be read (only when its env id is needed).
+    Without ``--env``, a CSV holding episodes of several env ids is a usage error (as is an
+    unreadable CSV): scoring the episodes of one env id would leave the others out unsaid.
     """
     envs = sorted({env_id for _, env_id, _ in planned})
     if len(envs) > 1:
         parser.error(f"--human: the agents play on different envs ({', '.join(envs)}): give --env")
-    if envs:
-        return envs[0]
     if args.env is not None:
         return str(args.env)
     from agents.play_log import read_played
 
-    played = sorted({e.env_id for e in read_played(args.human)})
-    return played[0] if len(played) == 1 else DEFAULT_ENV_ID
+    try:
+        played = sorted({e.env_id for e in read_played(args.human)})
+    except (OSError, ValueError) as exc:
+        parser.error(f"--human {args.human}: {exc}")
+    if len(played) > 1:
+        parser.error(
+            f"--human: {args.human} holds episodes of {len(played)} env ids ({', '.join(played)}): "
+            "give --env ID to score those of one"
+        )
+    return envs[0] if envs else played[0] if played else DEFAULT_ENV_ID
 
 
 def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
@@ -207,7 +222,14 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
         parser.error(
             f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
         )
+    given: dict[str, str] = {}
     for entry in entries:
+        same = entry if entry in SCRIPTED_AGENTS or is_pretrained(entry) else str(Path(entry).resolve())
+        if same in given:  # two rows of one agent, and one score would overwrite the other
+            first = given[same]
+            twice = f"{entry!r} is given twice" if first == entry else f"{first!r} and {entry!r} are one model"
+            parser.error(f"{twice} (--agent, --model and --compare together): list each agent once")
+        given[same] = entry
         if is_pretrained(entry) and entry.removeprefix(PREFIX) not in pretrained_names():
             parser.error(
                 f"unknown pretrained model {entry!r}; known: {', '.join(PREFIX + n for n in pretrained_names())}"
@@ -219,14 +241,32 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
     return entries
 
 
-def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: str) -> tuple[Agent | str, str, str]:
-    """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env."""
+def _model_names(entries: list[str]) -> dict[str, str]:
+    """The name of each saved model path in the table: its folder's, or the path as given where folders share a name.
+
+    A run folder's name says env, algorithm, seed and time, so it names the run's model;
+    two models of one folder (``dir/full.zip``, ``dir/other.zip``) or of folders with one
+    name would share it, and one result would overwrite the other wherever results are
+    keyed by name (the mind-reading scores).
+    """
+    paths = [e for e in entries if e not in SCRIPTED_AGENTS and not is_pretrained(e)]
+    folder_names = {e: (Path(e) if Path(e).is_dir() else Path(e).parent).name or Path(e).stem for e in paths}
+    shared = Counter(folder_names.values())
+    return {e: name if shared[name] == 1 else e for e, name in folder_names.items()}
+
+
+def _planned(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, entry: str, name: str
+) -> tuple[Agent | str, str, str]:
+    """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env.
+
+    ``name`` is a saved model's name in the label (:func:`_model_names`).
+    """
     if entry in SCRIPTED_AGENTS:
         return entry, args.env or DEFAULT_ENV_ID, entry
     import torch
 
     torch.set_num_threads(args.threads)  # the policy's forward passes (SB3's and RLlib's)
-    folder = Path(entry) if Path(entry).is_dir() else Path(entry).parent
     if not is_pretrained(entry) and is_rllib_run(entry):
         from agents.rllib import load_rllib_agent
 
@@ -235,7 +275,7 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
         except (OSError, ValueError) as exc:
             parser.error(f"--model {entry}: {exc}")
         env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
-        return rllib_agent, env_id, f"rllib_ppo:{folder.name or Path(entry).stem}"
+        return rllib_agent, env_id, f"rllib_ppo:{name}"
     from agents.rl import load_agent, observation_features
 
     try:
@@ -246,7 +286,7 @@ def _planned(parser: argparse.ArgumentParser, args: argparse.Namespace, entry: s
     problem = feature_mismatch(loaded.features, observation_features(env_id, env_kwargs=loaded.env_kwargs), env_id)
     if problem:
         parser.error(f"--model {entry}: {problem}")
-    label = loaded.name if is_pretrained(entry) else f"{loaded.algo}:{folder.name or Path(entry).stem}"
+    label = loaded.name if is_pretrained(entry) else f"{loaded.algo}:{name}"
     return loaded, env_id, label
 
 
@@ -289,21 +329,24 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
 
 
 def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: bool) -> int:
-    """``--runs``: the IQM of the mind-reading score per algorithm across the runs' ``results.json``."""
-    runs = []
-    for folder in folders:
-        if not Path(folder).is_dir():
-            parser.error(f"--runs: {folder} is not a folder")
-        own = read_run_score(folder)
-        runs.extend([own] if own is not None else runs_in(folder))
-    if not runs:
-        parser.error(
-            "--runs: no finished run with a mind-reading score (results.json of train.py with blind and oracle)"
-        )
+    """``--runs``: the IQM of the mind-reading score per algorithm across the runs' ``results.json``.
+
+    Every run given, or found in a folder given, is counted or refused with a usage error
+    naming it: an IQM over fewer runs than asked would pass for the one asked for.
+    """
+    runs = _run_scores(parser, folders)
     report = {}
-    for algo in sorted({r[1] for r in runs}):
-        like = next(r for r in runs if r[1] == algo)
-        aggregate = aggregate_runs(runs, like=like)
+    for algo in sorted({r[1] for r in runs.values()}):
+        of_algo = {folder: r for folder, r in runs.items() if r[1] == algo}
+        episodes = {r[3] for r in of_algo.values()}
+        if len(episodes) > 1:
+            scored = "; ".join(
+                f"personas {key[0]}, {key[1]} episodes from seed {key[2]}: "
+                + ", ".join(str(f) for f, r in of_algo.items() if r[3] == key)
+                for key in sorted(episodes, key=str)
+            )
+            parser.error(f"--runs: the {algo} runs were scored on different episodes ({scored}); give like runs")
+        aggregate = aggregate_runs(of_algo.values())
         assert aggregate is not None
         report[algo] = aggregate.as_json()
         if not as_json:
@@ -312,6 +355,27 @@ def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: b
     if as_json:
         print(json.dumps(report))
     return 0
+
+
+def _run_scores(parser: argparse.ArgumentParser, folders: list[str]) -> dict[Path, RunScore]:
+    """The score of every run folder given or inside a folder given; a usage error for any run without one."""
+    runs: dict[Path, RunScore] = {}
+    given: set[Path] = set()
+    for folder in folders:
+        if not Path(folder).is_dir():
+            parser.error(f"--runs: {folder} is not a folder")
+        inside = [Path(folder)] if is_run_folder(folder) else run_folders_in(folder)
+        if not inside:
+            parser.error(f"--runs: {folder} is neither a train.py run folder nor a folder of them")
+        for run in inside:
+            if run.resolve() in given:  # counted twice, one seed would weigh double
+                parser.error(f"--runs: {run} is given twice")
+            given.add(run.resolve())
+            try:
+                runs[run] = finished_run_score(run)
+            except ValueError as exc:
+                parser.error(f"--runs: {run}: {exc}; finish it or leave it out")
+    return runs
 
 
 def _split_named(result: EvaluationResult) -> list[EvaluationResult]:

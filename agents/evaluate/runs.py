@@ -11,19 +11,35 @@ with a stratified bootstrap interval.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from agents.evaluate.headroom import AggregateScore, iqm_across_runs
+from agents.run_folder import ARGS_FILE, COMPLETE_FILE, INTERRUPTED_FILE, TRAINING_FILE
 
-__all__ = ["RESULTS_FILE", "RunScore", "aggregate_runs", "read_run_score", "run_score_of", "runs_in", "scores_by_level"]
+__all__ = [
+    "RESULTS_FILE",
+    "RunScore",
+    "aggregate_runs",
+    "finished_run_score",
+    "is_run_folder",
+    "read_run_score",
+    "run_folders_in",
+    "run_score_of",
+    "runs_in",
+    "scores_by_level",
+]
 
 RESULTS_FILE = "results.json"
 """Written last by every finished run (``train.py``, ``--framework rllib``)."""
 
 RunScore = tuple[str, str, float, tuple[Any, ...]]
 """``(env id, algorithm, score, evaluation key)`` of one run (the key: personas, episodes, seed)."""
+
+_RUN_FILES = (ARGS_FILE, TRAINING_FILE, RESULTS_FILE, COMPLETE_FILE, INTERRUPTED_FILE)
+"""A folder holding any of these is a run folder, finished or not (``args.json`` is written first)."""
 
 
 def run_score_of(results: dict[str, Any]) -> RunScore | None:
@@ -33,20 +49,70 @@ def run_score_of(results: dict[str, Any]) -> RunScore | None:
         score = evaluation["results"][0].get("mind_reading_score")
     except (KeyError, IndexError, TypeError, AttributeError):
         return None
-    if score is None:
+    try:
+        score = float(score)
+    except (TypeError, ValueError):  # null: no blind and oracle beside it, or the score is undefined
+        return None
+    if not math.isfinite(score):
         return None
     algo = f"{results.get('framework', 'sb3')}:{results.get('algo')}"
     key = (str(evaluation.get("personas")), evaluation.get("episodes"), evaluation.get("seed"))
-    return str(results.get("env_id")), algo, float(score), key
+    return str(results.get("env_id")), algo, score, key
+
+
+def is_run_folder(folder: str | Path) -> bool:
+    """Whether ``folder`` is a ``train.py`` run folder, finished or not (it holds a file every run writes)."""
+    folder = Path(folder)
+    return folder.is_dir() and any((folder / name).exists() for name in _RUN_FILES)
+
+
+def run_folders_in(folder: str | Path) -> list[Path]:
+    """The run folders directly inside ``folder`` (``train.py``'s ``--out``), sorted; other folders are not runs."""
+    folder = Path(folder)
+    return [f for f in sorted(folder.iterdir()) if is_run_folder(f)] if folder.is_dir() else []
+
+
+def finished_run_score(folder: str | Path) -> RunScore:
+    """The learned agent's mind-reading score of a finished run folder.
+
+    A folder without the ``COMPLETE`` marker but with ``results.json`` counts as finished:
+    ``results.json`` is only written once a run is scored.
+
+    Raises:
+        ValueError: The run was interrupted or has not finished, or its ``results.json`` is
+            missing, not JSON (a truncated write) or holds no mind-reading score; the
+            message says which.
+    """
+    folder = Path(folder)
+    finished = (folder / COMPLETE_FILE).exists()
+    if (folder / INTERRUPTED_FILE).exists() and not finished:
+        raise ValueError(f"interrupted, not finished (its {INTERRUPTED_FILE} file says how to resume it)")
+    try:
+        data = (folder / RESULTS_FILE).read_bytes()
+    except FileNotFoundError:
+        unfinished = "" if finished else f" and no {COMPLETE_FILE} marker: not finished (still training?)"
+        raise ValueError(f"no {RESULTS_FILE}{unfinished}") from None
+    except OSError as exc:
+        raise ValueError(f"{RESULTS_FILE} is unreadable: {exc.strerror or exc}") from None
+    try:
+        results = json.loads(data)
+    except ValueError as exc:  # UnicodeDecodeError included
+        raise ValueError(f"{RESULTS_FILE} is not valid JSON (a truncated write?): {exc}") from None
+    score = run_score_of(results) if isinstance(results, dict) else None
+    if score is None:
+        raise ValueError(
+            f"{RESULTS_FILE} holds no mind-reading score of the learned agent "
+            "(scored without blind and oracle, or the score is undefined)"
+        )
+    return score
 
 
 def read_run_score(folder: str | Path) -> RunScore | None:
     """The learned agent's mind-reading score of a finished run folder (None: unfinished, or no score)."""
     try:
-        results = json.loads((Path(folder) / RESULTS_FILE).read_text())
-    except (OSError, ValueError):
+        return finished_run_score(folder)
+    except ValueError:
         return None
-    return run_score_of(results) if isinstance(results, dict) else None
 
 
 def scores_by_level(runs: Iterable[RunScore]) -> dict[str, list[float]]:
@@ -68,10 +134,11 @@ def aggregate_runs(runs: Iterable[RunScore], like: RunScore | None = None) -> Ag
 
 
 def runs_in(folder: str | Path, exclude: str | Path | None = None) -> list[RunScore]:
-    """The scores of the finished runs directly inside ``folder`` (e.g. ``train.py``'s ``--out``), but ``exclude``."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        return []
+    """The scores of the finished runs directly inside ``folder`` (e.g. ``train.py``'s ``--out``), but ``exclude``.
+
+    Runs that did not finish or hold no score are left out: other training seeds beside a
+    run may still be training (``python -m agents.evaluate --runs`` refuses them instead).
+    """
     skip = Path(exclude).resolve() if exclude is not None else None
-    folders = [f for f in sorted(folder.iterdir()) if f.is_dir() and f.resolve() != skip]
+    folders = [f for f in run_folders_in(folder) if f.resolve() != skip]
     return [r for r in (read_run_score(f) for f in folders) if r is not None]

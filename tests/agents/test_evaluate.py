@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -312,18 +314,120 @@ def test_iqm_across_seeds_is_rliables_stratified_bootstrap():
         iqm_across_runs({"hard": [float("nan")]})
 
 
+def _write_run(parent: Path, seed: int, score: float | None, episodes: int = 1000) -> Path:
+    """A run folder as train.py leaves it scored (results.json; no COMPLETE marker, as older runs)."""
+    run = parent / f"CoopGym-SitToStandHard-v1__ppo__{seed}__0"
+    run.mkdir(parents=True)
+    results = {
+        "algo": "ppo",
+        "env_id": "CoopGym/SitToStandHard-v1",
+        "evaluation": {
+            "personas": "test",
+            "episodes": episodes,
+            "seed": 0,
+            "results": [{"mind_reading_score": score}],
+        },
+    }
+    (run / "results.json").write_text(json.dumps(results))
+    return run
+
+
 def test_cli_runs_reports_the_iqm_across_training_runs(tmp_path, capsys):
     for seed, score in enumerate([0.7, 0.8, 0.9]):
-        run = tmp_path / f"CoopGym-SitToStandHard-v1__ppo__{seed}__0"
-        run.mkdir()
-        results = {
-            "algo": "ppo",
-            "env_id": "CoopGym/SitToStandHard-v1",
-            "evaluation": {"personas": "test", "episodes": 1000, "seed": 0, "results": [{"mind_reading_score": score}]},
-        }
-        (run / "results.json").write_text(json.dumps(results))
+        _write_run(tmp_path, seed, score)
     assert main(["--runs", str(tmp_path), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)["sb3:ppo"]
     assert report["iqm"] == pytest.approx(0.8) and report["runs"] == {"CoopGym/SitToStandHard-v1": 3}
     with pytest.raises(SystemExit):
         main(["--runs", str(tmp_path / "nothing")])
+
+
+def _usage_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """The one error line of a command line that must exit 2 before printing any result."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    assert exc.value.code == 2 and out == ""
+    lines = [line for line in err.splitlines() if "error" in line]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def _interrupted(run: Path) -> None:
+    (run / "results.json").unlink()
+    (run / "args.json").write_text("{}")
+    (run / "INTERRUPTED").write_text("stopped by SIGTERM; resume with python train.py --resume RUN")
+
+
+def _truncated(run: Path) -> None:
+    (run / "results.json").write_text((run / "results.json").read_text()[:40])
+    (run / "COMPLETE").write_text("")
+
+
+def _missing(run: Path) -> None:
+    (run / "results.json").unlink()
+    (run / "args.json").write_text("{}")
+
+
+def _scoreless(run: Path) -> None:
+    (run / "results.json").write_text((run / "results.json").read_text().replace("0.5", "null"))
+
+
+@pytest.mark.parametrize(
+    ("damage", "why"),
+    [
+        (_interrupted, "interrupted, not finished"),
+        (_truncated, "results.json is not valid JSON"),
+        (_missing, "no results.json and no COMPLETE marker: not finished"),
+        (_scoreless, "results.json holds no mind-reading score"),
+    ],
+)
+def test_cli_runs_refuses_a_run_without_a_score_naming_it(tmp_path, capsys, damage, why):
+    good = _write_run(tmp_path / "out", 0, 0.8)
+    bad = _write_run(tmp_path / "out", 1, 0.5)
+    damage(bad)
+    for argv in (["--runs", str(good), str(bad)], ["--runs", str(tmp_path / "out")]):
+        line = _usage_error(argv, capsys)  # never an IQM "over 1 run"
+        assert f"--runs: {bad}: {why}" in line, line
+
+
+def test_cli_runs_refuses_a_run_counted_twice_or_runs_scored_on_other_episodes(tmp_path, capsys):
+    good = _write_run(tmp_path / "out", 0, 0.8)
+    _write_run(tmp_path / "out", 1, 0.7)
+    assert f"--runs: {good} is given twice" in _usage_error(["--runs", str(tmp_path / "out"), str(good)], capsys)
+    other = _write_run(tmp_path / "elsewhere", 2, 0.9, episodes=200)
+    line = _usage_error(["--runs", str(good), str(other)], capsys)
+    assert "the sb3:ppo runs were scored on different episodes" in line and str(other) in line, line
+    no_runs = tmp_path / "empty"
+    no_runs.mkdir()
+    assert "is neither a train.py run folder nor a folder of them" in _usage_error(["--runs", str(no_runs)], capsys)
+
+
+def test_cli_compare_names_two_models_of_one_folder_apart(tmp_path, capsys):
+    from agents.pretrained import pretrained_model_path
+
+    full, other = tmp_path / "dir" / "full.zip", tmp_path / "dir" / "other.zip"
+    full.parent.mkdir()
+    for path in (full, other):
+        shutil.copyfile(pretrained_model_path("hard-v2-ppo"), path)
+    assert main(["--compare", f"{full},{other},blind,oracle", "--episodes", "2", "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    labels = [f"ppo:{full}", f"ppo:{other}", "blind", "oracle"]  # not "ppo:dir" twice
+    assert [r["agent"] for r in payload["results"]] == labels
+    assert list(payload["headroom"]["mind_reading_score"]) == labels  # no score overwrote another
+    line = _usage_error(["--model", str(full), "--compare", f"blind,{tmp_path}/dir/../dir/full.zip"], capsys)
+    assert f"'{full}' and '{tmp_path}/dir/../dir/full.zip' are one model" in line and "list each agent once" in line
+    assert "'blind' is given twice" in _usage_error(["--compare", "blind,oracle,blind"], capsys)
+
+
+def test_cli_human_csv_of_several_envs_needs_env(tmp_path, capsys, monkeypatch):
+    from agents.play_log import PlayedEpisode, append_played
+
+    csv_path = tmp_path / "played.csv"
+    for env_id in ("CoopGym/SitToStandHard-v2", "CoopGym/SitToStand-v0"):
+        append_played(csv_path, PlayedEpisode(env_id, 1, "test", "frail", "unsafe", 0.1, -10.0, ((2, 0, 1),)))
+    monkeypatch.setattr("agents.evaluate.cli.evaluate", None)  # the error comes before any episode is played
+    for agents in ([], ["--compare", "blind,oracle"]):
+        line = _usage_error([*agents, "--human", str(csv_path)], capsys)  # not the default env's row alone
+        expected = "holds episodes of 2 env ids (CoopGym/SitToStand-v0, CoopGym/SitToStandHard-v2): give --env ID"
+        assert f"--human: {csv_path} {expected}" in line, line
