@@ -99,17 +99,15 @@ class BeliefSettings:
 
 
 # Winners of `python -m agents.tune_belief --env ID` (its settings_grid, 128 episodes of each training persona
-# from seed 1,000,000, each met by a filter drawn around the other four; success in the comments).
-# Rerun after a model change.
+# from seed 1,000,000, each met by a filter drawn around the other four); the command prints every setting's
+# success, and docs/HARD_LEVEL.md ("The belief caregiver") keeps the final table. Rerun after a model change.
 TUNED_BELIEF: dict[str, BeliefSettings] = {
     # The grid was run on the hard levels only; the others play the defaults.
     "v0": BeliefSettings(),
     "easy": BeliefSettings(),
     "medium": BeliefSettings(),
-    # 90.9 % (the default, a 2-s burst: 90.5 %; the grid's others 70.8-90.5 %).
     "hard": BeliefSettings(burst_s=3.0),
-    # 92.3 % (a 3-s burst ended at 0.4: 92.2 %, one episode fewer; the defaults: 89.7 %, 8th of 12): -v2's
-    # guided push recruits slower, so a burst ends at a lower P(xi = +1).
+    # -v2's guided push recruits slower, so a burst ends at a lower P(xi = +1).
     "hard-v2": BeliefSettings(burst_s=3.0, recruited_p=0.3),
 }
 """The belief caregiver's settings chosen on each hard level's training personas (``v0``: the ``-v0`` ids)."""

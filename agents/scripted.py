@@ -329,17 +329,14 @@ class ProbingSettings:
 
 
 # Winners of `python -m agents.tune_baselines prober --level LEVEL` (its 36 settings, 300 episodes each of the
-# training personas from seed 1,000,000; success in the comments). Rerun after a model change.
+# training personas from seed 1,000,000); the command prints every setting's success, and docs/HARD_LEVEL.md
+# ("The prober") keeps the final table. Rerun after a model change.
 TUNED_PROBER: dict[str, ProbingSettings] = {
-    # Ties at 99.0 %: the first in grid order.
+    # A tie on these levels: the first in grid order.
     "v0": ProbingSettings(push_below_m=0.25, answer_m=0.012),
     "easy": ProbingSettings(push_below_m=0.25, answer_m=0.012),
-    # 90.7 %.
     "medium": ProbingSettings(push_below_m=0.25),
-    # 85.7 % (the settings shipped before they were chosen this way, a 0.5-s burst, 0.3-s settle and 0.02-m
-    # answer: 73.0 %, 22nd of 36).
     "hard": ProbingSettings(),
-    # 78.3 %.
     "hard-v2": ProbingSettings(),
 }
 """The probing caregiver's settings chosen on each level's training personas (``v0``: the ``-v0`` ids)."""

@@ -3,7 +3,7 @@
 Two implementations of the same maths:
 
 * :class:`PaperKalmanFilter` -- built on ``filterpy.kalman.KalmanFilter``; the
-  reference, readable and slow (~40 us a step).
+  reference, readable and slow (one Python object and several small matrix products a step).
 * :class:`FastKalmanFilter` -- a batched, compiled (numba) version of the identical
   predict/update used in the environments' hot path. Tests hold both to the
   extended-precision answer within 1e-9 on long random cue sequences, wherever double

@@ -155,7 +155,8 @@ def simulate_nominal_trials(
     (``NominalModel`` prior). ``initial_state="prior"`` draws the start from exactly that
     (so the person drifts toward a random intention at first); ``"rest"`` starts seated at
     rest (``x = xdot = eta = 0``), which a broad filter prior misdescribes -- with the default
-    prior that biases the fitted ``lambda1`` and ``k2`` upward by about 10%.
+    prior that biases the fitted ``lambda1`` and ``k2`` upward (fit ``"rest"`` trials of a known
+    model with :func:`estimator.identify.identify` to see by how much).
 
     Args:
         model: Nominal model to simulate (A, B, Q, R as the filter assumes).

@@ -1,11 +1,12 @@
 """Bad command-line flags: exit status 2 and a message naming the problem on stderr.
 
 Covers the command lines that exist: ``python train.py``, ``python -m agents.evaluate``,
-``python -m estimator.experiment.protocol`` and ``python bench/run.py`` (each skipped, naming the
-missing module, until it is written). Cases call ``main(argv)`` in-process (argparse exits
-through ``SystemExit``) under an alarm, so a bad flag that is wrongly accepted fails the test
-in seconds instead of starting a training run; one real subprocess per command line checks
-the exit status and stderr end to end.
+``python -m agents.record``, ``python -m estimator.experiment.protocol`` and the ``bench/`` scripts
+(``run.py``, ``cold_start.py``, ``render.py``, ``cleanrl_defaults.py``, ``time_to_quality.py``).
+A command line that no longer imports, or has lost its ``main(argv)``, fails. Cases call
+``main(argv)`` in-process (argparse exits through ``SystemExit``) under an alarm, so a bad flag
+that is wrongly accepted fails the test in seconds instead of starting a training run; one real
+subprocess per command line checks the exit status and stderr end to end.
 """
 
 from __future__ import annotations
@@ -31,11 +32,10 @@ ALARM_S = 120  # a cold numba compile on a loaded machine takes tens of s; an ac
 
 
 def _load(name: str) -> Any:
-    """The module of a command line, or skip naming it."""
+    """The module of a command line: a script path under the checkout, or a module name."""
     if name.endswith(".py"):
         path = ROOT / name
-        if not path.exists():
-            pytest.skip(f"{name} does not exist yet")
+        assert path.exists(), f"{name} is listed as a command line but does not exist"
         name = f"_cli_{path.stem}"
         if name in sys.modules:
             return sys.modules[name]
@@ -45,10 +45,7 @@ def _load(name: str) -> Any:
         sys.modules[name] = module  # dataclasses look their module up while the file runs
         spec.loader.exec_module(module)
         return module
-    try:
-        return importlib.import_module(name)
-    except ModuleNotFoundError as exc:
-        pytest.skip(f"{name} does not exist yet ({exc})")
+    return importlib.import_module(name)
 
 
 @contextlib.contextmanager
@@ -425,8 +422,7 @@ _MAIN_MODULE = {"agents.evaluate": "agents.evaluate.cli"}
 def _main_of(cli: str) -> Callable[[list[str]], Any]:
     module = _load(_MAIN_MODULE.get(cli, cli))
     main = getattr(module, "main", None)
-    if main is None:
-        pytest.skip(f"{cli} has no main(argv) yet")
+    assert callable(main), f"{cli} has no main(argv)"
     return main  # type: ignore[no-any-return]
 
 
@@ -462,10 +458,6 @@ END_TO_END = {
 @pytest.mark.parametrize("cli", END_TO_END)
 def test_bad_flag_end_to_end(cli: str) -> None:
     """A real process: exit status 2, usage and the message on stderr, nothing on stdout."""
-    if cli.endswith(".py") and not (ROOT / cli).exists():
-        pytest.skip(f"{cli} does not exist yet")
-    if not cli.endswith(".py") and importlib.util.find_spec(cli) is None:
-        pytest.skip(f"{cli} does not exist yet")
     argv, match = END_TO_END[cli]
     done = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=ROOT, check=False)
     assert done.returncode == 2, done.stderr

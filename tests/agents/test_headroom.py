@@ -51,30 +51,18 @@ def _needs_the_mind_and_lets_the_estimator_read_it(
 
 def test_hard_level_needs_the_mind_and_lets_it_be_read(hard: dict[str, EvaluationResult]) -> None:
     # Every caregiver with its settings chosen on the training personas (TUNED_BLIND, TUNED_PROBER,
-    # the belief caregiver's leave-one-out choice); 2000 held-out episodes measured value of reading
-    # the mind +24.0 points, the belief caregiver +12.0 over blind, the prober +8.0 (docs/HARD_LEVEL.md).
+    # the belief caregiver's leave-one-out choice). The thresholds sit below the 2000-episode figures
+    # that `python bench/levels.py --save` writes to bench/results/levels.json ("hard"), by about the
+    # sampling error of these 400 episodes.
     _needs_the_mind_and_lets_the_estimator_read_it(hard, value=0.18, insight=0.08, prober_lead=0.03, unsafe_slack=0.02)
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="SPEC 'Headroom' / issue #23: oracle - best blind >= 30 points on hard, and a reader >= 15 over it. "
-    "Against the widened blind family (a 1-s guided push, 2 s of words alone, repeated; lift on a 0.16-m lean) "
-    "the -v1 hard level gives +24.0 and +12.0 (the belief caregiver; 2000 held-out episodes); its -v2 meets both "
-    "(test_hard_v2_keeps_its_headroom_against_the_widest_blind_search).",
-)
-def test_hard_level_keeps_its_headroom_against_the_widest_blind_search(hard: dict[str, EvaluationResult]) -> None:
-    room = headroom(list(hard.values()))
-    assert room is not None
-    assert room.value_of_reading_the_mind >= 0.30
-    assert room.achieved_insight >= 0.15
 
 
 def test_hard_v2_keeps_its_headroom_against_the_widest_blind_search(hard_v2: dict[str, EvaluationResult]) -> None:
     # The hard level's -v2 (recruiting slower, willingness steadier once won): the blind and probing
     # settings chosen again on its training personas are the -v1 ones (TUNED_BLIND, TUNED_PROBER).
-    # 2000 held-out episodes (docs/HARD_LEVEL.md): value of reading the mind +32.8 points, the belief
-    # caregiver +16.8 over blind, the prober +13.6; on these 400: +33.3, +17.0, +15.0.
+    # The thresholds are the SPEC's headroom claim (oracle - best blind >= 30 points, a reader >= 15
+    # over it); the 2000-episode figures are in bench/results/levels.json ("hard-v2",
+    # `python bench/levels.py --save`).
     _needs_the_mind_and_lets_the_estimator_read_it(
         hard_v2, value=0.30, insight=0.15, prober_lead=0.10, unsafe_slack=0.01
     )

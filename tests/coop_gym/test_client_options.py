@@ -13,6 +13,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from gymnasium.vector import AutoresetMode
 
 import coop_gym
+from agents.scripted import HandbookCaregiver
 from coop_gym.envs.contract import (
     FEATURE_SCALES,
     FEATURES,
@@ -136,9 +137,8 @@ def test_unit_features_are_renamed_so_physical_readers_refuse_them() -> None:
         "judgment",
         "elapsed_s/30",
     )
-    scripted = pytest.importorskip("agents.scripted")
     with pytest.raises(ValueError, match="x_hat_m"):
-        scripted.HandbookCaregiver.for_env(env)
+        HandbookCaregiver.for_env(env)
 
 
 def _is_number(value: Any) -> bool:

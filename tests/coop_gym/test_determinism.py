@@ -136,10 +136,6 @@ def test_same_seed_same_trajectory(env_id: str) -> None:
 
 @pytest.mark.parametrize("env_id", MM_IDS)
 def test_same_seed_same_trajectory_multiple_model(env_id: str) -> None:
-    try:
-        gym.make(env_id).reset(seed=0)
-    except Exception as exc:  # the multiple-model estimators are being integrated
-        pytest.skip(f"{env_id} does not run yet: {exc!r}")
     assert trajectory_digest(env_id, 5, 400) == trajectory_digest(env_id, 5, 400)
 
 
@@ -357,18 +353,9 @@ def _restrict(got: dict[str, Any], want: dict[str, Any], where: str) -> dict[str
     return {k: _restrict(got[k], want[k], where) if isinstance(want[k], dict) else got[k] for k in want}
 
 
-def _native_vector() -> Any:
-    try:
-        import coop_gym.envs.vector as vector
-    except ImportError as exc:
-        pytest.skip(f"coop_gym.envs.vector (the natively batched env) is not written yet: {exc}")
-    return vector
-
-
 @pytest.mark.parametrize("mode", ["NEXT_STEP", "SAME_STEP"])
 def test_native_vector_env_matches_sync_vector_of_single_envs(mode: str) -> None:
     """The batched env and a SyncVectorEnv of single envs, same seed and autoreset mode: identical."""
-    _native_vector()
     from gymnasium.vector import AutoresetMode
 
     autoreset = AutoresetMode[mode]
@@ -409,7 +396,6 @@ def test_native_vector_env_with_the_particle_filter_matches_single_envs() -> Non
 
 
 def test_native_vector_env_clone_mid_run_continues_identically() -> None:
-    _native_vector()
     original, twin = (gym.make_vec(ENV_ID, num_envs=4) for _ in range(2))
     actions = vec_actions(4, 2, 400)
     for env in (original, twin):
@@ -424,7 +410,6 @@ def test_native_vector_env_clone_mid_run_continues_identically() -> None:
 
 @pytest.mark.slow
 def test_native_vector_env_matches_async_vector_of_single_envs() -> None:
-    _native_vector()
     native = gym.make_vec(ENV_ID, num_envs=2)
     mode = native.metadata.get("autoreset_mode")
     native.close()
@@ -437,7 +422,6 @@ def test_native_vector_env_matches_async_vector_of_single_envs() -> None:
 
 @pytest.mark.slow
 def test_native_vector_env_same_seed_same_trajectory_in_a_fresh_process() -> None:
-    _native_vector()
     code = (
         "import hashlib; "
         "r = ns['gym_vec_trajectory']('vector_entry_point', 4, 3, 400); "

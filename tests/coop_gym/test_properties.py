@@ -123,10 +123,10 @@ VARIED: dict[type, tuple[str, ...]] = {
     Intention: ("push_gain_m_per_s_n", "verbal_gain_m_per_s"),
     Cooperativeness: ("persuadability", "startle_sensitivity"),
 }
-# sample_person raises when variation pushes a varied field out of its validated range (bug,
-# reported; see the xfail below); the env core scales the packed row and does not. For
-# sample_person, varied fields are drawn exp(VARIATION_SIGMAS * sigma) inside their bounds
-# (a draw beyond that has p ~ 3e-7); the env is exercised over the whole range.
+# Variation may carry a varied field past its validated range (test_sample_person_near_a_bound_does_not_raise);
+# re-validating such a person, as test_sampled_person_is_valid_and_finite does, would then raise. So for
+# that test varied fields are drawn exp(VARIATION_SIGMAS * sigma) inside their bounds (a draw beyond
+# that has p ~ 3e-7); the env is exercised over the whole range.
 VARIATION_SIGMAS = 5.0
 
 

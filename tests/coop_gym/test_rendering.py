@@ -218,11 +218,23 @@ def test_two_renderers_coexist():
 
 
 def test_human_mode_with_dummy_display():
+    """The window shows the same picture as ``render_rgb``, and a new state redraws it."""
+    import pygame
+
     r = SitToStandRenderer()
-    r.render_human(BASE, fps=1000)
-    r.render_human(dataclasses.replace(BASE, shoulder_position_m=0.2, push_force_n=10.0), fps=0)
+    leaning = dataclasses.replace(BASE, shoulder_position_m=0.2, push_force_n=10.0)
+    shown = []
+    for state, fps in ((BASE, 1000), (leaning, 0)):
+        r.render_human(state, fps=fps)
+        window = pygame.display.get_surface()
+        assert window is not None and window.get_size() == (600, 400)
+        shown.append(pygame.surfarray.array3d(window).transpose(1, 0, 2))
+        np.testing.assert_array_equal(shown[-1], r.render_rgb(state))
+    assert shown[0].std() > 10  # a picture, not a blank window
+    assert changed_pixels(shown[0].astype(np.int16), shown[1].astype(np.int16)) > 500
     r.close()
     r.close()
+    assert not pygame.display.get_init()  # closing twice leaves the display shut, without error
 
 
 def test_render_state_rejects_bad_discrete_fields():

@@ -21,7 +21,6 @@ from tests.coop_gym.twins import ENV_ID, assert_same_vector_future, message, pri
 
 
 def _vector_env(n: int = 3, **kwargs: Any) -> Any:
-    pytest.importorskip("coop_gym.envs.vector", reason="coop_gym.envs.vector not written yet")
     return gym.make_vec(ENV_ID, num_envs=n, **kwargs)
 
 

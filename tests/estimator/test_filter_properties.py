@@ -24,6 +24,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from estimator import multiple_model as mm
 from estimator.kalman import FastKalmanFilter, PaperKalmanFilter, kalman_step, nominal_row
 from estimator.nominal import NominalModel
 
@@ -474,8 +475,6 @@ def test_fast_filter_stays_finite_and_psd_on_any_model_long(model: NominalModel,
 
 
 # --------------------------------------------------------------------------- multiple model
-
-mm = pytest.importorskip("estimator.multiple_model", reason="estimator.multiple_model not written yet")
 
 
 @st.composite
