@@ -244,6 +244,10 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/time_to_quality.py", "unknown contender", ["--contenders", "x"], r"--contenders: unknown contender 'x'"),
     ("bench/time_to_quality.py", "contender size 5", ["--contenders", "default@5"], r"N must divide the 4096-step"),
     ("bench/time_to_quality.py", "unknown env", ["--env", "CartPole-v1"], r"--env: unknown env id 'CartPole-v1'"),
+    ("bench/learners.py", "unknown row", ["--rows", "ppo-x"], r"--rows: unknown row\(s\) \['ppo-x'\]"),
+    ("bench/learners.py", "seed twice", ["--seeds", "1,1"], r"--seeds: seeds must be distinct and >= 0"),
+    ("bench/learners.py", "seed not a number", ["--seeds", "a"], r"--seeds: seeds are whole numbers"),
+    ("bench/learners.py", "timesteps 0", ["--timesteps", "0"], r"--timesteps: expected a positive integer, got 0"),
     (
         "bench/run.py",
         "repeats not a number",

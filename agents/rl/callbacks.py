@@ -185,11 +185,24 @@ class SelectionCallback(BaseCallback):
         points: Scores before the final policy's.
         start: Env step of the first score.
         every: Env steps between scores.
+        env_kwargs: Env kwargs the policy is trained with beyond the id's own (e.g.
+            ``estimator="switching"``): the validation episodes are played with them.
     """
 
-    def __init__(self, folder: str | Path, algo: str, env_id: str, episodes: int, points: int, start: int, every: int):
+    def __init__(
+        self,
+        folder: str | Path,
+        algo: str,
+        env_id: str,
+        episodes: int,
+        points: int,
+        start: int,
+        every: int,
+        env_kwargs: dict[str, Any] | None = None,
+    ):
         """Store the settings; scores happen during ``learn`` and in :meth:`finish`."""
         super().__init__()
+        self.env_kwargs = dict(env_kwargs or {})
         self.folder, self.algo, self.env_id = Path(folder), algo, env_id
         self.episodes, self.points, self.every = episodes, points, max(1, every)
         self.history: list[dict[str, Any]] = []
@@ -216,7 +229,9 @@ class SelectionCallback(BaseCallback):
         from agents.evaluate import evaluate
 
         agent = _current_policy(self.model, self.algo, self.env_id)
-        result = evaluate(agent, self.env_id, VALIDATION_PERSONAS, self.episodes, VALIDATION_SEED)
+        result = evaluate(
+            agent, self.env_id, VALIDATION_PERSONAS, self.episodes, VALIDATION_SEED, env_kwargs=self.env_kwargs
+        )
         point: dict[str, Any] = {"timesteps": int(self.num_timesteps), "success_rate": result.success_rate}
         if save and all(point["success_rate"] >= p["success_rate"] for p in self.history):
             vec_normalize = find_vec_normalize(self.model.get_env())

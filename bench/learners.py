@@ -1,0 +1,210 @@
+"""Learner x observation on the hard level: one budget, the same held-out episodes, several seeds.
+
+    python bench/learners.py [--rows ppo-kalman,ppo-raw,...] [--seeds 0,1,2,3,4] [--timesteps 1000000]
+                             [--episodes 2000] [--runs DIR] [--save [PATH]]
+
+Does the paper's estimator help a learner, and can memory replace it? Each row is a learner
+and the observation it gets (:data:`ROWS`):
+
+- ``ppo-kalman``: PPO (MLP) on the default observation, the paper's Kalman estimate of
+  ``xi`` beside the measurements -- what ``python train.py`` trains;
+- ``ppo-switching``: the same PPO with the switching particle filter's ``P(xi)`` added
+  (``estimator="switching"``);
+- ``ppo-raw``: the same PPO on the measurements alone (no estimate, no memory);
+- ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
+  on the measurements alone / on the default observation.
+
+Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's
+settings from :mod:`agents.hyperparams` with the budget ``--timesteps`` and the wider
+training personas, the best-validated policy of the last half kept
+(:class:`agents.rl.SelectionCallback`, training personas only), then ``--episodes``
+held-out episodes (test personas, seeds ``0..N-1``: the episodes of ``bench/levels.py``).
+The scripted oracle, best blind, prober and belief caregiver play the same episodes. Each row
+reports, over its training seeds, the interquartile mean of the held-out success rate and of
+the mind-reading score ``(success - blind) / (oracle - blind)`` with a stratified bootstrap
+95 % interval (rliable's method, :func:`agents.evaluate.headroom.iqm_across_runs`) and
+the training wall time.
+
+Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with the kept
+model beside it) as soon as it is done; a rerun with the same ``--runs`` skips what is
+there, so an interrupted sweep loses only the run in progress. ``--save`` writes the report
+to ``bench/results/learners.json`` (``bench/result_files.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+from result_files import add_save_argument, save
+
+from coop_gym.cli import positive_int
+
+ENV_ID = "CoopGym/SitToStandHard-v2"
+SCRIPTED = ("oracle", "blind", "prober", "belief")
+"""The reference caregivers played on the same episodes (``blind`` is the widened blind family's best)."""
+
+
+@dataclass(frozen=True)
+class Row:
+    """A learner and the observation it trains on."""
+
+    algo: str
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    what: str = ""
+
+
+ROWS: dict[str, Row] = {
+    "ppo-kalman": Row("ppo", {}, "PPO (MLP), Kalman estimate + measurements (train.py's default)"),
+    "ppo-switching": Row("ppo", {"estimator": "switching"}, "PPO (MLP), + switching filter's P(xi)"),
+    "ppo-raw": Row("ppo", {"observation_mode": "raw"}, "PPO (MLP), measurements only"),
+    "recurrent-raw": Row("recurrent_ppo", {"observation_mode": "raw"}, "RecurrentPPO (LSTM), measurements only"),
+    "recurrent-kalman": Row("recurrent_ppo", {}, "RecurrentPPO (LSTM), Kalman estimate + measurements"),
+}
+
+
+def _rows(text: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in ROWS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {', '.join(ROWS)}")
+    return names
+
+
+def _seeds(text: str) -> list[int]:
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds are whole numbers joined by ',', got {text!r}") from None
+    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"seeds must be distinct and >= 0, got {text!r}")
+    return seeds
+
+
+def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path) -> dict[str, Any]:
+    """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out."""
+    import torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agents.evaluate import evaluate
+    from agents.hyperparams import hyperparams_for
+    from agents.rl import SelectionCallback, make_model, make_train_env, save_agent
+
+    torch.set_num_threads(1)  # as train.py --threads
+    row = ROWS[name]
+    config = hyperparams_for(row.algo, ENV_ID).replace(total_timesteps=timesteps, personas="train_wide")
+    env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
+    if config.normalize:
+        env = VecNormalize(env, norm_obs=True, norm_reward=False)
+    model = make_model(config, env, seed)
+    half = timesteps // 2
+    every = max(1, (timesteps - half) // 8)
+    checkpoints = folder / f"{name}__{seed}__{timesteps}_checkpoints"
+    selection = SelectionCallback(checkpoints, row.algo, ENV_ID, 1000, 8, half, every, env_kwargs=row.env_kwargs)
+    started = time.perf_counter()
+    model.learn(timesteps, callback=selection)
+    selected = selection.finish(model)
+    wall_s = time.perf_counter() - started
+    saved = save_agent(model, folder / f"{name}__{seed}__{timesteps}", algo=row.algo, env_id=ENV_ID)
+    from agents.rl import load_agent
+
+    agent = load_agent(saved)
+    result = evaluate(agent, ENV_ID, "test", episodes, 0, env_kwargs=row.env_kwargs, name=f"{name}:{seed}")
+    env.close()
+    return {
+        "row": name,
+        "seed": seed,
+        "timesteps": timesteps,
+        "train_wall_s": wall_s,
+        "kept_step": selected["timesteps"],
+        "validation_success_rate": selected["validation_success_rate"],
+        **result.summary(),
+    }
+
+
+def scripted(episodes: int) -> dict[str, dict[str, Any]]:
+    """The reference caregivers on the held-out episodes."""
+    from agents.evaluate import evaluate
+
+    return {name: evaluate(name, ENV_ID, "test", episodes, 0).summary() for name in SCRIPTED}
+
+
+def aggregate(runs: list[dict[str, Any]], blind: float, oracle: float) -> dict[str, Any]:
+    """IQM of success and of the mind-reading score over a row's runs, with stratified bootstrap intervals."""
+    from agents.evaluate.headroom import iqm_across_runs
+
+    success = [r["success_rate"] for r in runs]
+    scores = [(s - blind) / (oracle - blind) for s in success]
+    out: dict[str, Any] = {"runs": len(runs), "seeds": [r["seed"] for r in runs]}
+    for key, values in (("success", success), ("score", scores)):
+        if len(values) >= 2:
+            found = iqm_across_runs({ENV_ID: values})
+            out[key] = {"iqm": found.iqm, "ci95": list(found.ci95)}
+        else:
+            out[key] = {"iqm": values[0], "ci95": [None, None]}
+    out["min_success"] = min(success)
+    out["unsafe_rate_mean"] = statistics.fmean(r["unsafe_rate"] for r in runs)
+    out["train_wall_s_median"] = statistics.median(r["train_wall_s"] for r in runs)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Train and score every (row, seed) not yet in ``--runs``; print the table (and save it)."""
+    parser = argparse.ArgumentParser(prog="python bench/learners.py", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rows", type=_rows, default=list(ROWS), help=f"comma-separated, of {', '.join(ROWS)}")
+    parser.add_argument("--seeds", type=_seeds, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
+    parser.add_argument("--timesteps", type=positive_int, default=1_000_000, help="training budget per run")
+    parser.add_argument("--episodes", type=positive_int, default=2000, help="held-out episodes per agent")
+    parser.add_argument("--runs", type=Path, default=Path("runs/learners"), help="folder of finished runs")
+    add_save_argument(parser, "learners.json")
+    args = parser.parse_args(argv)
+    from coop_gym.cli import output_path_problem
+    from coop_gym.io import write_json
+
+    problem = output_path_problem(str(args.runs), folder=True)
+    if problem:
+        parser.error(f"--runs: {problem}")
+
+    args.runs.mkdir(parents=True, exist_ok=True)
+    reference_file = args.runs / f"scripted__{args.episodes}.json"
+    if not reference_file.exists():
+        write_json(reference_file, scripted(args.episodes))
+    reference = json.loads(reference_file.read_text())
+    blind, oracle = reference["blind"]["success_rate"], reference["oracle"]["success_rate"]
+    table: dict[str, Any] = {}
+    for name in args.rows:
+        runs = []
+        for seed in args.seeds:
+            path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
+            if not path.exists():
+                write_json(path, train_one(name, seed, args.timesteps, args.episodes, args.runs))
+            run = json.loads(path.read_text())
+            if run["episodes"] != args.episodes:
+                parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
+            runs.append(run)
+            print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
+        table[name] = {"what": ROWS[name].what, **aggregate(runs, blind, oracle), "per_seed": runs}
+    for name, row in table.items():
+        s, c = row["success"], row["score"]
+        print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']:.2f} {c['ci95']}")
+    report = {
+        "env_id": ENV_ID,
+        "timesteps": args.timesteps,
+        "episodes": args.episodes,
+        "rows": table,
+        "scripted": {k: {m: v[m] for m in ("success_rate", "unsafe_rate")} for k, v in reference.items()},
+    }
+    if args.save:
+        save(args.save, "learners", argv, report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
