@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, NoReturn, TypeVar
 
 import tyro
+from tyro.conf import DisallowNone
 
 from agents.run_folder import ARGS_FILE, TRAINING_FILE, is_unfinished_run
 
@@ -212,18 +213,19 @@ def parse_train_args(args_type: type[ArgsT], argv: list[str] | None, description
     """
     argv = sys.argv[1:] if argv is None else list(argv)
 
-    def parse(default: ArgsT | None = None) -> ArgsT:
-        config = (tyro.conf.DisallowNone,)
-        shown = io.StringIO()
+    def parse(default: Any = tyro.MISSING_NONPROP) -> ArgsT:
+        shown = io.StringIO()  # what tyro prints: its errors come out in one line
         try:
             with contextlib.redirect_stderr(shown):
-                if default is None:
-                    return tyro.cli(args_type, args=argv, prog=PROG, description=description, config=config)
-                return tyro.cli(args_type, args=argv, default=default, prog=PROG, description=description, config=config)
+                parsed = tyro.cli(
+                    args_type, args=argv, default=default, prog=PROG, description=description, config=(DisallowNone,)
+                )
         except SystemExit as exc:
             if exc.code:  # tyro's own error (an unknown flag, a value of the wrong type or choice)
                 _fail(_one_line(shown.getvalue()))
             raise
+        sys.stderr.write(shown.getvalue())  # a warning, if any
+        return parsed
 
     try:
         args = parse()
