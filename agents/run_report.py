@@ -4,12 +4,14 @@ Both trainers (``train.py`` with SB3 through :func:`evaluate_and_report`, :func:
 with RLlib) finish the same way: the saved agent and each scripted baseline are scored by
 :func:`agents.evaluate.evaluate` on the same seeded episodes of the held-out personas; the
 comparison table is printed with the value of reading the mind, the achieved insight and each
-agent's mind-reading score; ``eval.json`` / ``eval.csv`` hold it; ``results.json`` and the ``COMPLETE`` marker are
-written last, so a run folder without them did not finish.
+agent's mind-reading score; ``eval.json`` / ``eval.csv`` hold it; ``results.json`` and the
+``COMPLETE`` marker are written last, so a run folder without them did not finish. The learning
+curve beside it is drawn from the training episodes of SB3's ``monitor.csv`` (:func:`monitor_curve`).
 """
 
 from __future__ import annotations
 
+import csv
 import math
 import time
 from collections.abc import Callable
@@ -28,35 +30,24 @@ from agents.evaluate import (
 )
 from agents.evaluate.runs import aggregate_runs, run_score_of, runs_in
 from agents.run_folder import COMPLETE_FILE, INTERRUPTED_FILE, MODEL_FILE
+from agents.train_args import baseline_names, personas_arg
 from coop_gym.io import make_unique_folder, write_text
 from coop_gym.io import write_json as write_json_file
 
 if TYPE_CHECKING:
-    from agents.rl.run import Plan
-    from agents.training_run import StopSignals
+    from agents.training_run import Plan, StopSignals
 
 __all__ = [
     "Comparison",
-    "baseline_names",
     "compare_with_baselines",
     "evaluate_and_report",
     "finish_run",
+    "monitor_curve",
     "new_run_folder",
-    "personas_arg",
     "verdict_against_handbook",
     "versions",
     "warn_if_blind",
 ]
-
-
-def personas_arg(text: str) -> str | list[str]:
-    """A persona set name (``"test"``) as it is, names joined by ``,`` as a list."""
-    return [p.strip() for p in text.split(",") if p.strip()] if "," in text else text
-
-
-def baseline_names(text: str) -> list[str]:
-    """Scripted agent names joined by ``,`` (empty: none)."""
-    return [b.strip() for b in text.split(",") if b.strip()]
 
 
 def new_run_folder(out: str | Path, env_id: str, algo: str, seed: int) -> Path:
@@ -108,8 +99,8 @@ def compare_with_baselines(
     episodes, seed = settings.eval_episodes, settings.eval_seed
     started = time.perf_counter()
     results = []
-    agents: list[tuple[Any, str | None]] = [(agent, label), *((b, None) for b in baseline_names(settings.baselines))]
-    for scored, name in agents:
+    to_score: list[tuple[Any, str | None]] = [(agent, label), *((b, None) for b in baseline_names(settings.baselines))]
+    for scored, name in to_score:
         results.append(evaluate(scored, env_id, personas, episodes, seed, name=name))
         if after_each is not None:
             after_each()
@@ -128,7 +119,6 @@ def evaluate_and_report(args: Any, plan: Plan, finished: dict[str, Any], stop: S
     """
     from agents.plots import plot_learning_curve, plot_outcome_rates
     from agents.rl import load_agent
-    from agents.training_run import monitor_curve
 
     run_dir, env_id = plan.run_dir, plan.env_id
     model_path = args.model if args.eval_only and args.model else run_dir / MODEL_FILE
@@ -165,6 +155,22 @@ def evaluate_and_report(args: Any, plan: Plan, finished: dict[str, Any], stop: S
     # Written last: a run folder with results.json and COMPLETE finished; one without did not.
     stop.check()  # a signal whose exception was swallowed still stops the run here
     finish_run(run_dir, summary)
+
+
+def monitor_curve(path: Path, start_steps: int) -> tuple[list[float], list[float]]:
+    """(env step at episode end, return) of every training episode in SB3's monitor.csv."""
+    import numpy as np
+
+    if not path.exists():
+        return [], []
+    with path.open() as handle:
+        handle.readline()  # the JSON header line
+        rows = list(csv.DictReader(handle))
+    lengths = [float(r["l"]) for r in rows]
+    returns = [float(r["r"]) for r in rows]
+    # Episodes from parallel envs interleave; their cumulative length approximates the step count.
+    steps = (start_steps + np.cumsum(lengths)).tolist()
+    return steps, returns
 
 
 def finish_run(run_dir: Path, summary: dict[str, Any]) -> None:

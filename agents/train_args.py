@@ -41,7 +41,9 @@ __all__ = [
     "BadArgs",
     "RunProblem",
     "args_problem",
+    "baseline_names",
     "parse_train_args",
+    "personas_arg",
     "read_training",
     "recorded_settings",
     "resume_settings",
@@ -157,7 +159,6 @@ def _problem_with_numbers(args: Any) -> str | None:
 def _problem_with_names(args: Any) -> str | None:
     """The first unknown env id, persona or baseline (None if all are known)."""
     import coop_gym
-    from agents.run_report import baseline_names, personas_arg
     from agents.scripted import SCRIPTED_AGENTS
     from coop_gym.model.personas import resolve_personas
 
@@ -200,6 +201,16 @@ def _problem_with_paths(args: Any) -> str | None:
     if args.model is not None and not (shipped or saved):
         return f"--model: nothing saved at {args.model}"
     return None
+
+
+def personas_arg(text: str) -> str | list[str]:
+    """A persona set name (``"test"``) as it is, names joined by ``,`` as a list."""
+    return [p.strip() for p in text.split(",") if p.strip()] if "," in text else text
+
+
+def baseline_names(text: str) -> list[str]:
+    """Scripted agent names joined by ``,`` (empty: none)."""
+    return [b.strip() for b in text.split(",") if b.strip()]
 
 
 # --- the command line -------------------------------------------------------------

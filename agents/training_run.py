@@ -1,12 +1,12 @@
 """The life of a ``train.py`` run folder: resuming it, stopping it cleanly, clearing up after it.
 
+* :class:`Plan` -- what a run does (folder, algorithm, env, budget), settled before any work.
 * :class:`StopSignals` -- SIGINT/SIGTERM stop training at the next rollout boundary, after a
   checkpoint; a second signal stops at once (:class:`Stopped`); after training, at once or at
   the next :meth:`StopSignals.check`.
 * :func:`write_interrupted`, :func:`clean_leftovers`, :func:`remove_checkpoints` -- the
   markers and files around a stop and a resume; :func:`write_failed` -- a file that could not
   be written.
-* :func:`monitor_curve` -- the training episodes of SB3's ``monitor.csv`` for the learning curve.
 
 The settings a ``--resume`` continues with are :func:`agents.train_args.resume_settings`.
 
@@ -15,27 +15,44 @@ No torch at import: ``train.py`` parses its arguments before it loads SB3.
 
 from __future__ import annotations
 
-import csv
 import shutil
 import signal
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from agents.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE
 from agents.train_args import PROG
 from coop_gym.io import TEMP_MARKER, write_text
 
+if TYPE_CHECKING:
+    from agents.hyperparams import TrainingConfig
+
 __all__ = [
+    "Plan",
     "StopSignals",
     "Stopped",
     "clean_leftovers",
-    "monitor_curve",
     "remove_checkpoints",
     "write_failed",
     "write_interrupted",
 ]
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a run does, settled before any work: the folder, the algorithm, the env and the budget."""
+
+    run_dir: Path
+    algo: str
+    env_id: str
+    config: TrainingConfig
+    timesteps: int
+    n_envs: int
+    checkpoint_every: int
+    source_model: str | None
 
 
 class Stopped(Exception):
@@ -126,19 +143,3 @@ def clean_leftovers(run_dir: Path) -> None:
 def remove_checkpoints(run_dir: Path) -> None:
     """Training is over: its checkpoints have served their purpose."""
     shutil.rmtree(run_dir / CHECKPOINTS_DIR, ignore_errors=True)
-
-
-def monitor_curve(path: Path, start_steps: int) -> tuple[list[float], list[float]]:
-    """(env step at episode end, return) of every training episode in SB3's monitor.csv."""
-    import numpy as np
-
-    if not path.exists():
-        return [], []
-    with path.open() as handle:
-        handle.readline()  # the JSON header line
-        rows = list(csv.DictReader(handle))
-    lengths = [float(r["l"]) for r in rows]
-    returns = [float(r["r"]) for r in rows]
-    # Episodes from parallel envs interleave; their cumulative length approximates the step count.
-    steps = (start_steps + np.cumsum(lengths)).tolist()
-    return steps, returns

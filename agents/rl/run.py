@@ -16,14 +16,13 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.hyperparams import TrainingConfig, hyperparams_for
+from agents.hyperparams import hyperparams_for
 from agents.rl import (
     CheckpointCallback,
     OutcomeStatsCallback,
@@ -41,26 +40,12 @@ from agents.rl import (
     saved_model_problem,
 )
 from agents.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
-from agents.run_report import new_run_folder, personas_arg
-from agents.train_args import RunProblem, recorded_settings
-from agents.training_run import StopSignals, clean_leftovers, remove_checkpoints
+from agents.run_report import new_run_folder
+from agents.train_args import RunProblem, personas_arg, recorded_settings
+from agents.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
 from coop_gym.io import write_json
 
-__all__ = ["Plan", "plan_run", "train"]
-
-
-@dataclass(frozen=True)
-class Plan:
-    """What a run does, settled before any work: the folder, the algorithm, the env and the budget."""
-
-    run_dir: Path
-    algo: str
-    env_id: str
-    config: TrainingConfig
-    timesteps: int
-    n_envs: int
-    checkpoint_every: int
-    source_model: str | None
+__all__ = ["plan_run", "train"]
 
 
 def plan_run(args: Any) -> Plan:
