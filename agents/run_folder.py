@@ -1,5 +1,26 @@
 """The files of a saved agent and of a ``train.py`` run folder, and which kind a path holds.
 
+A run folder ``runs/{env}__{algo}__{seed}__{time}/`` holds::
+
+    args.json                                 the run's settings (what --resume continues)
+    model.zip                                 the trained agent, self-contained (agents.rl.load_agent)
+    vecnormalize.pkl, agent.json              the same normaliser and metadata beside it
+    checkpoints/step_N/                       while training: the newest two checkpoints
+    checkpoints/best_step_N.zip               while training: the best-validated policies so far
+    training.json                             training summary, once training finished
+    tb/                                       TensorBoard: charts/, losses/, eval/
+    monitor.csv                               training episodes (return, length, outcome)
+    eval.json, eval.csv                       the comparison (eval.json with every episode)
+    learning_curve.png, outcome_rates.png     figures
+    results.json                              summary, written last
+    COMPLETE                                  marker: the run finished
+    INTERRUPTED                               marker: stopped by Ctrl-C/SIGTERM; says how to resume
+
+Every file is written atomically (:mod:`coop_gym.io`): after a crash or SIGKILL,
+``python train.py --resume RUN`` continues an unfinished run in its own folder from the last
+checkpoint with the run's recorded settings and reaches the same weights as a run that never
+stopped. A run folder without ``COMPLETE`` is a failed or interrupted run.
+
 One place for the names, so the trainer that writes them and the loaders that read them
 agree. Plain paths and JSON: no torch, SB3 or Ray (``python -m agents.evaluate`` asks
 :func:`is_rllib_run` before it decides which of them to import).

@@ -1,19 +1,22 @@
 """How every training run ends: the learned agent and the baselines on the same episodes, then the files.
 
-Both trainers (``train.py`` with SB3, :func:`agents.rllib.run` with RLlib) finish the same
-way: the saved agent and each scripted baseline are scored by :func:`agents.evaluate.evaluate`
-on the same seeded episodes of the held-out personas; the comparison table is printed with
-the value of reading the mind, the achieved insight and each agent's mind-reading score;
-``eval.json`` / ``eval.csv`` hold it; ``results.json`` and the ``COMPLETE`` marker are
-written last, so a run folder without them did not finish.
+Both trainers (``train.py`` with SB3 through :func:`evaluate_and_report`, :func:`agents.rllib.run`
+with RLlib) finish the same way: the saved agent and each scripted baseline are scored by
+:func:`agents.evaluate.evaluate` on the same seeded episodes of the held-out personas; the
+comparison table is printed with the value of reading the mind, the achieved insight and each
+agent's mind-reading score; ``eval.json`` / ``eval.csv`` hold it; ``results.json`` and the
+``COMPLETE`` marker are written last, so a run folder without them did not finish. The learning
+curve beside it is drawn from the training episodes of SB3's ``monitor.csv`` (:func:`monitor_curve`).
 """
 
 from __future__ import annotations
 
+import csv
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from agents.evaluate import (
     EvaluationResult,
@@ -26,31 +29,25 @@ from agents.evaluate import (
     write_json,
 )
 from agents.evaluate.runs import aggregate_runs, run_score_of, runs_in
-from agents.run_folder import COMPLETE_FILE, INTERRUPTED_FILE
+from agents.run_folder import COMPLETE_FILE, INTERRUPTED_FILE, MODEL_FILE
+from agents.train_args import baseline_names, personas_arg
 from coop_gym.io import make_unique_folder, write_text
 from coop_gym.io import write_json as write_json_file
 
+if TYPE_CHECKING:
+    from agents.training_run import Plan, StopSignals
+
 __all__ = [
     "Comparison",
-    "baseline_names",
     "compare_with_baselines",
+    "evaluate_and_report",
     "finish_run",
+    "monitor_curve",
     "new_run_folder",
-    "personas_arg",
     "verdict_against_handbook",
     "versions",
     "warn_if_blind",
 ]
-
-
-def personas_arg(text: str) -> str | list[str]:
-    """A persona set name (``"test"``) as it is, names joined by ``,`` as a list."""
-    return [p.strip() for p in text.split(",") if p.strip()] if "," in text else text
-
-
-def baseline_names(text: str) -> list[str]:
-    """Scripted agent names joined by ``,`` (empty: none)."""
-    return [b.strip() for b in text.split(",") if b.strip()]
 
 
 def new_run_folder(out: str | Path, env_id: str, algo: str, seed: int) -> Path:
@@ -89,23 +86,91 @@ class Comparison:
         }
 
 
-def compare_with_baselines(agent: Any, label: str, env_id: str, settings: Any, run_dir: Path) -> Comparison:
+def compare_with_baselines(
+    agent: Any, label: str, env_id: str, settings: Any, run_dir: Path, after_each: Callable[[], None] | None = None
+) -> Comparison:
     """Score ``agent`` and the baselines on the same episodes; print the table, write ``eval.json`` and ``eval.csv``.
 
     ``settings`` is the run's ``train.Args``: ``eval_personas``, ``eval_episodes``, ``eval_seed``
-    and ``baselines`` say which episodes and which scripted agents.
+    and ``baselines`` say which episodes and which scripted agents. ``after_each`` is called
+    after each agent's evaluation (``train.py``: :meth:`agents.training_run.StopSignals.check`).
     """
     personas = personas_arg(settings.eval_personas)
     episodes, seed = settings.eval_episodes, settings.eval_seed
     started = time.perf_counter()
-    results = [evaluate(agent, env_id, personas, episodes, seed, name=label)]
-    for name in baseline_names(settings.baselines):
-        results.append(evaluate(name, env_id, personas, episodes, seed))
+    results = []
+    to_score: list[tuple[Any, str | None]] = [(agent, label), *((b, None) for b in baseline_names(settings.baselines))]
+    for scored, name in to_score:
+        results.append(evaluate(scored, env_id, personas, episodes, seed, name=name))
+        if after_each is not None:
+            after_each()
     comparison = Comparison(results, settings, time.perf_counter() - started)
     print_table(results, room=comparison.room)
     write_json(results, run_dir / "eval.json", episodes=True)
     write_csv(results, run_dir / "eval.csv", room=comparison.room)
     return comparison
+
+
+def evaluate_and_report(args: Any, plan: Plan, finished: dict[str, Any], stop: StopSignals) -> None:
+    """Score the saved agent and the baselines on the same episodes; write the figures, results.json, COMPLETE.
+
+    ``args`` is ``train.Args``, ``finished`` the training summary (``training.json``). A signal
+    stops the run after the agent being evaluated, at the latest before ``results.json`` is written.
+    """
+    from agents.plots import plot_learning_curve, plot_outcome_rates
+    from agents.rl import load_agent
+
+    run_dir, env_id = plan.run_dir, plan.env_id
+    model_path = args.model if args.eval_only and args.model else run_dir / MODEL_FILE
+    # The saved agent (what a user loads) and the baselines, on the same episodes.
+    label = f"{plan.algo} (learned)"
+    comparison = compare_with_baselines(load_agent(model_path), label, env_id, args, run_dir, after_each=stop.check)
+    results = comparison.results
+    plot_outcome_rates(results, run_dir / "outcome_rates.png")
+    curve_points = finished["learning_curve"]
+    if not args.eval_only:
+        steps, returns = monitor_curve(run_dir / "monitor.csv", finished["start_steps"])
+        plot_learning_curve(
+            steps,
+            returns,
+            run_dir / "learning_curve.png",
+            eval_timesteps=[p["timesteps"] for p in curve_points],
+            eval_success=[p["success_rate"] for p in curve_points],
+            reference={r.agent: r.success_rate for r in results[1:] if r.agent in ("handbook", "oracle")},
+            title=f"{plan.algo} on {env_id}: training return, success on {args.eval_personas} personas",
+        )
+    summary = {
+        "run": run_dir.name,
+        "algo": plan.algo,
+        "env_id": env_id,
+        "seed": args.seed,
+        "model": str(model_path),
+        "training": finished["training"],
+        **comparison.summary(),
+        "learning_curve": curve_points,
+        "verdict": verdict_against_handbook(label, results),
+        **versions(),
+    }
+    summary["reads_no_better_than_blind"] = warn_if_blind(label, comparison.room)
+    # Written last: a run folder with results.json and COMPLETE finished; one without did not.
+    stop.check()  # a signal whose exception was swallowed still stops the run here
+    finish_run(run_dir, summary)
+
+
+def monitor_curve(path: Path, start_steps: int) -> tuple[list[float], list[float]]:
+    """(env step at episode end, return) of every training episode in SB3's monitor.csv."""
+    import numpy as np
+
+    if not path.exists():
+        return [], []
+    with path.open() as handle:
+        handle.readline()  # the JSON header line
+        rows = list(csv.DictReader(handle))
+    lengths = [float(r["l"]) for r in rows]
+    returns = [float(r["r"]) for r in rows]
+    # Episodes from parallel envs interleave; their cumulative length approximates the step count.
+    steps = (start_steps + np.cumsum(lengths)).tolist()
+    return steps, returns
 
 
 def finish_run(run_dir: Path, summary: dict[str, Any]) -> None:

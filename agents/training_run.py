@@ -1,102 +1,58 @@
 """The life of a ``train.py`` run folder: resuming it, stopping it cleanly, clearing up after it.
 
-* :func:`resume_settings` -- the settings a ``--resume`` continues with: an unfinished run's
-  own ``args.json`` (it resumes in place), or a saved model's algorithm and env (a new run).
+* :class:`Plan` -- what a run does (folder, algorithm, env, budget), settled before any work.
 * :class:`StopSignals` -- SIGINT/SIGTERM stop training at the next rollout boundary, after a
-  checkpoint; a second signal stops at once (:class:`Stopped`).
+  checkpoint; a second signal stops at once (:class:`Stopped`); after training, at once or at
+  the next :meth:`StopSignals.check`.
 * :func:`write_interrupted`, :func:`clean_leftovers`, :func:`remove_checkpoints` -- the
-  markers and files around a stop and a resume.
-* :func:`monitor_curve` -- the training episodes of SB3's ``monitor.csv`` for the learning curve.
+  markers and files around a stop and a resume; :func:`write_failed` -- a file that could not
+  be written.
+
+The settings a ``--resume`` continues with are :func:`agents.train_args.resume_settings`.
 
 No torch at import: ``train.py`` parses its arguments before it loads SB3.
 """
 
 from __future__ import annotations
 
-import csv
-import json
 import shutil
 import signal
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from agents.run_folder import ARGS_FILE, CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE, is_unfinished_run
+from agents.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE
+from agents.train_args import PROG
 from coop_gym.io import TEMP_MARKER, write_text
 
+if TYPE_CHECKING:
+    from agents.hyperparams import TrainingConfig
+
 __all__ = [
-    "RUN_FIELDS",
+    "Plan",
     "StopSignals",
     "Stopped",
     "clean_leftovers",
-    "monitor_curve",
     "remove_checkpoints",
-    "resume_settings",
+    "write_failed",
     "write_interrupted",
 ]
 
-RUN_FIELDS = (
-    "algo",
-    "env",
-    "seed",
-    "timesteps",
-    "n_envs",
-    "eval_episodes",
-    "eval_seed",
-    "eval_personas",
-    "baselines",
-    "eval_points",
-    "select_points",
-    "select_episodes",
-    "checkpoint_every",
-)
-"""Settings that define a run: ``--resume`` of an unfinished run takes them from its ``args.json``."""
 
+@dataclass(frozen=True)
+class Plan:
+    """What a run does, settled before any work: the folder, the algorithm, the env and the budget."""
 
-def resume_settings(path: Path) -> dict[str, Any]:
-    """The settings ``--resume path`` continues with (a subset of :data:`RUN_FIELDS`).
-
-    Raises:
-        ValueError: nothing resumable at ``path``; the message starts with ``--resume``.
-    """
-    if not (path.exists() or path.with_suffix(".zip").exists()):
-        raise ValueError(f"--resume: nothing saved at {path}")
-    if not is_unfinished_run(path):  # a finished run or a model: a new run continuing the model
-        from agents.rl import resolve_saved
-
-        try:
-            _, info = resolve_saved(path)
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"--resume: {exc}") from None
-        return {k: v for k, v in (("algo", info.get("algo")), ("env", info.get("env_id"))) if v}
-    try:
-        recorded = json.loads((path / ARGS_FILE).read_text())
-        if not isinstance(recorded, dict):
-            raise ValueError("not a JSON object")
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"--resume: {path / ARGS_FILE} is unreadable ({exc})") from None
-    if recorded.get("eval_only"):
-        raise ValueError(
-            f"--resume: {path} was an --eval-only run; run it again: --eval-only --model {recorded.get('model')}"
-        )
-    recorded = _with_defaults(recorded)
-    return {name: recorded[name] for name in RUN_FIELDS if name in recorded}
-
-
-def _with_defaults(settings: dict[str, Any]) -> dict[str, Any]:
-    """Run settings with the algorithm's defaults filled in (older args.json files hold None)."""
-    from agents.hyperparams import hyperparams_for
-
-    out = dict(settings)
-    algo = out.get("algo", "ppo")
-    config = hyperparams_for(algo, out.get("env") or hyperparams_for(algo).env_id)
-    out["env"] = out.get("env") or config.env_id
-    out["timesteps"] = out.get("timesteps") or config.total_timesteps
-    out["n_envs"] = out.get("n_envs") or config.n_envs
-    if out.get("checkpoint_every") is None:
-        out["checkpoint_every"] = max(1, out["timesteps"] // 10)
-    return out
+    run_dir: Path
+    algo: str
+    env_id: str
+    config: TrainingConfig
+    timesteps: int
+    n_envs: int
+    checkpoint_every: int
+    source_model: str | None
 
 
 class Stopped(Exception):
@@ -106,7 +62,10 @@ class Stopped(Exception):
 class StopSignals:
     """SIGINT and SIGTERM stop training at the next rollout boundary; a second one stops at once.
 
-    Outside training a signal stops at once. The previous handlers are restored on exit.
+    Outside training a signal stops at once: the handler raises :class:`Stopped`. Where that
+    exception is lost -- raised inside a ctypes callback (numba's), Python prints "Exception
+    ignored" and goes on -- the signal is still recorded, and :meth:`check` at the next boundary
+    stops the run. The previous handlers are restored on exit.
     """
 
     def __init__(self) -> None:
@@ -119,6 +78,11 @@ class StopSignals:
         """True once a signal arrived."""
         return self.signum is not None
 
+    def check(self) -> None:
+        """Raise :class:`Stopped` if a signal arrived (its own exception may have been swallowed)."""
+        if self.signum is not None:
+            raise Stopped(signal.Signals(self.signum).name)
+
     def _handle(self, signum: int, _frame: Any) -> None:
         first = self.signum is None
         self.signum = signum
@@ -129,7 +93,7 @@ class StopSignals:
                 file=sys.stderr,
             )
             return
-        raise Stopped(signal.Signals(signum).name)
+        self.check()
 
     def __enter__(self) -> StopSignals:
         """Install the handlers."""
@@ -143,17 +107,27 @@ class StopSignals:
             signal.signal(signum, handler)
 
 
-def write_interrupted(run_dir: Path, stop: StopSignals, checkpoint: Path | None) -> int:
+def write_interrupted(run_dir: Path, stop: StopSignals) -> int:
     """Write the INTERRUPTED marker, say how to resume; the exit status is 128 + the signal number."""
+    from agents.rl import latest_checkpoint  # SB3 is loaded once a run has started
+
+    checkpoint = latest_checkpoint(run_dir)
     name = signal.Signals(stop.signum).name if stop.signum else "interrupt"
     if (run_dir / TRAINING_FILE).exists():
         state = "training had finished; resuming runs the evaluation"
     else:
         state = f"last checkpoint {checkpoint}" if checkpoint else "no checkpoint yet; resuming starts training over"
-    message = f"{name}: stopped, {state}\nresume with: python train.py --resume {run_dir}\n"
+    message = f"{name}: stopped, {state}\nresume with: {PROG} --resume {run_dir}\n"
     write_text(run_dir / INTERRUPTED_FILE, time.strftime("%Y-%m-%dT%H:%M:%S ") + message)
     print(f"\n{message}", end="", file=sys.stderr)
     return 128 + (stop.signum or signal.SIGINT)
+
+
+def write_failed(exc: OSError, run_dir: Path) -> int:
+    """A file could not be written (e.g. a full disk): it is not there, never half-written; exit status 1."""
+    print(f"{PROG}: error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
+    print(f"{run_dir} keeps what was complete: free space, then {PROG} --resume {run_dir}", file=sys.stderr)
+    return 1
 
 
 def clean_leftovers(run_dir: Path) -> None:
@@ -169,19 +143,3 @@ def clean_leftovers(run_dir: Path) -> None:
 def remove_checkpoints(run_dir: Path) -> None:
     """Training is over: its checkpoints have served their purpose."""
     shutil.rmtree(run_dir / CHECKPOINTS_DIR, ignore_errors=True)
-
-
-def monitor_curve(path: Path, start_steps: int) -> tuple[list[float], list[float]]:
-    """(env step at episode end, return) of every training episode in SB3's monitor.csv."""
-    import numpy as np
-
-    if not path.exists():
-        return [], []
-    with path.open() as handle:
-        handle.readline()  # the JSON header line
-        rows = list(csv.DictReader(handle))
-    lengths = [float(r["l"]) for r in rows]
-    returns = [float(r["r"]) for r in rows]
-    # Episodes from parallel envs interleave; their cumulative length approximates the step count.
-    steps = (start_steps + np.cumsum(lengths)).tolist()
-    return steps, returns

@@ -87,7 +87,7 @@ def _params(cases: list[tuple[str, str, list[str], str]]) -> list[Any]:
 # (command line, case id, argv, regex the stderr must match)
 CASES: list[tuple[str, str, list[str], str]] = [
     ("train.py", "unknown flag", ["--bogus"], r"Unrecognized options: --bogus"),
-    ("train.py", "unknown algo", ["--algo", "a2c"], r"--algo must be one of .*'a2c'"),
+    ("train.py", "unknown algo", ["--algo", "a2c"], r"invalid choice 'a2c' for argument '--algo'"),
     ("train.py", "unknown env", ["--env", "Nope-v0"], r"--env: unknown env id 'Nope-v0'"),
     ("train.py", "timesteps 0", ["--timesteps", "0"], r"--timesteps must be >= 1, got 0"),
     ("train.py", "timesteps not a number", ["--timesteps", "many"], r"--timesteps:(?s:.*)int.*'many'"),

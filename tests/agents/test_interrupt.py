@@ -174,3 +174,112 @@ def test_an_interrupted_eval_only_run_is_not_resumed_as_training(tmp_path, capsy
         train.parse_args(["--resume", str(run)])
     assert exc.value.code == 2
     assert "was an --eval-only run; run it again: --eval-only --model runs/x/model.zip" in capsys.readouterr().err
+
+
+# --- a hostile user's run folders: each is named in one line, and the folder is left as it was ---------
+
+
+def _usage_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """The one error line of ``train.main(argv)``, which must exit with status 2 and no traceback."""
+    import train
+
+    with pytest.raises(SystemExit) as exc:
+        train.main(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "Traceback" not in err, err
+    (line,) = [line for line in err.splitlines() if "error" in line]
+    assert line.startswith("python train.py: error: ")
+    return line
+
+
+def _settings(**changes: object) -> str:
+    """A tiny run's args.json, as train.py writes it, with ``changes``."""
+    import dataclasses
+
+    import train
+
+    args = train.Args(timesteps=64, n_envs=1, eval_episodes=2, eval_points=0, baselines="handbook", progress=False)
+    return json.dumps(dataclasses.asdict(args) | changes)
+
+
+def test_resume_of_an_args_json_without_settings_names_what_is_missing(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "args.json").write_text("{}")
+    line = _usage_error(["--resume", str(run)], capsys)
+    assert f"{run / 'args.json'} does not record the run's settings: algo, env, seed, timesteps, n_envs missing" in line
+    assert [p.name for p in run.iterdir()] == ["args.json"]  # no default run started inside it
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ('{"seed": "banana"}', r"args.json: seed must be int, got 'banana'"),
+        (_settings(seed="banana"), r"args.json: seed must be int, got 'banana'"),
+        (_settings(timesteps=True), r"args.json: timesteps must be int or None, got True"),
+        (_settings(algo="sac"), r"args.json: algo must be one of 'ppo', 'recurrent_ppo', 'dqn', got 'sac'"),
+        (_settings(n_envs=0), r"args.json: --n-envs must be >= 1, got 0"),
+        (_settings(eval_personas="nobody"), r"args.json: --eval-personas: unknown persona 'nobody'"),
+    ],
+)
+def test_resume_reads_args_json_back_through_the_typed_args(tmp_path, settings, message, capsys):
+    import re
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "args.json").write_text(settings)
+    assert re.search(message, _usage_error(["--resume", str(run)], capsys))
+
+
+@pytest.fixture
+def stopped_while_evaluating(tmp_path: Path) -> Path:
+    """A run folder stopped during its final evaluation: its settings, the saved agent, training.json."""
+    from agents.hyperparams import hyperparams_for
+    from agents.rl import make_model, make_train_env, save_agent
+
+    torch.set_num_threads(1)
+    run = tmp_path / "runs" / "run"
+    run.mkdir(parents=True)
+    (run / "args.json").write_text(_settings())
+    config = hyperparams_for("ppo")
+    env = make_train_env(config.env_id, 1, 0, normalize=True, backend="dummy")
+    save_agent(make_model(config, env, 0), run, algo="ppo", env_id=config.env_id)
+    env.close()
+    (run / "training.json").write_text(json.dumps({"training": {}, "learning_curve": [], "start_steps": 0}))
+    (run / "INTERRUPTED").write_text(f"SIGINT: stopped\nresume with: python train.py --resume {run}\n")
+    return run
+
+
+def test_a_truncated_training_json_is_named_and_the_marker_kept(stopped_while_evaluating, capsys):
+    run = stopped_while_evaluating
+    (run / "training.json").write_text((run / "training.json").read_text()[:20])
+    line = _usage_error(["--resume", str(run)], capsys)
+    assert f"--resume: {run / 'training.json'} is unreadable" in line and "remove it to train this run again" in line
+    assert (run / "INTERRUPTED").exists() and not (run / "COMPLETE").exists()
+
+
+def test_a_signal_whose_exception_is_swallowed_during_evaluation_still_stops_the_run(
+    stopped_while_evaluating, monkeypatch, capsys
+):
+    """As when the signal lands inside numba's ctypes callback: the handler's exception is lost, the signal is not."""
+    import agents.run_report
+    import train
+    from agents.training_run import Stopped
+
+    evaluate = agents.run_report.evaluate
+
+    def evaluate_and_get_a_signal(*args, **kwargs):
+        try:
+            signal.raise_signal(signal.SIGINT)  # the handler runs here and raises Stopped ...
+        except Stopped:
+            pass  # ... which a ctypes callback would print as "Exception ignored" and drop
+        return evaluate(*args, **kwargs)
+
+    run = stopped_while_evaluating
+    monkeypatch.setattr(agents.run_report, "evaluate", evaluate_and_get_a_signal)
+    assert train.main(["--resume", str(run)]) == 128 + signal.SIGINT
+    assert "training had finished" in (run / "INTERRUPTED").read_text()
+    assert not (run / "COMPLETE").exists() and not (run / "results.json").exists()
+    monkeypatch.setattr(agents.run_report, "evaluate", evaluate)
+    assert train.main(["--resume", str(run)]) == 0
+    assert (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()

@@ -197,3 +197,13 @@ def test_the_report_warns_when_the_learned_agent_reads_no_mind(capsys):
     assert warn_if_blind("ppo (learned)", room(float("nan"))) is None
     assert warn_if_blind("ppo (learned)", None) is None
     assert capsys.readouterr().out == ""
+
+
+def test_the_algo_choices_are_the_algorithms_with_defaults():
+    """``Args.algo``'s Literal is what tyro offers; it must name exactly agents.hyperparams.ALGORITHMS."""
+    import typing
+
+    import train
+    from agents.hyperparams import ALGORITHMS
+
+    assert typing.get_args(typing.get_type_hints(train.Args)["algo"]) == ALGORITHMS

@@ -1,0 +1,271 @@
+"""One ``train.py`` run with Stable-Baselines3: its plan and run folder, then training with checkpoints.
+
+* :func:`plan_run` -- what the run does, settled before any work: the algorithm's settings
+  (:mod:`agents.hyperparams`) overridden by the flags, a saved model checked against the env,
+  and the run folder (the unfinished one being resumed, or a new one holding ``args.json``);
+* :func:`train` -- the training env, the model (restored from the last checkpoint, continued
+  from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
+  checkpoints), ``learn``, then the saved agent and ``training.json``.
+
+What happens after training (the evaluation against the baselines, the report) is
+:func:`agents.run_report.evaluate_and_report`; the arguments are ``train.Args``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import torch
+from stable_baselines3.common.vec_env import VecNormalize
+
+from agents.hyperparams import hyperparams_for
+from agents.rl import (
+    CheckpointCallback,
+    OutcomeStatsCallback,
+    PeriodicEvalCallback,
+    SelectionCallback,
+    TrainingInterrupted,
+    cleanrl_logger,
+    latest_checkpoint,
+    load_agent,
+    load_to_continue,
+    make_model,
+    make_train_env,
+    restore_checkpoint,
+    save_agent,
+    saved_model_problem,
+)
+from agents.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
+from agents.run_report import new_run_folder
+from agents.train_args import RunProblem, personas_arg, recorded_settings
+from agents.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
+from coop_gym.io import write_json
+
+__all__ = ["plan_run", "train"]
+
+
+def plan_run(args: Any) -> Plan:
+    """The run's settings -- the algorithm's defaults overridden by the flags -- and its folder.
+
+    Raises:
+        RunProblem: a damaged saved model, or one that does not fit the env (before any folder is made).
+        OSError: the run folder or its ``args.json`` could not be written.
+    """
+    torch.set_num_threads(args.threads)
+    in_place = args.resume is not None and is_unfinished_run(args.resume)
+    saved_agent = None
+    if args.eval_only:
+        try:
+            saved_agent = load_agent(args.model)
+        except (OSError, ValueError) as exc:
+            raise RunProblem(f"--model: {exc}") from None
+    algo = saved_agent.algo if saved_agent is not None else args.algo
+    env_id = args.env or (saved_agent.env_id if saved_agent else None) or hyperparams_for(algo).env_id
+    config = hyperparams_for(algo, env_id)
+    timesteps = args.timesteps or config.total_timesteps
+    checkpoint_every = args.checkpoint_every if args.checkpoint_every is not None else max(1, timesteps // 10)
+    # A model must meet the observation it was trained on: checked before any folder is made.
+    problem = None
+    if saved_agent is not None and args.model is not None:
+        problem = saved_model_problem("--model", args.model, env_id, saved_agent)
+    elif args.resume is not None and not in_place:
+        problem = saved_model_problem("--resume", args.resume, env_id)
+    if problem:
+        raise RunProblem(problem)
+    plan = Plan(Path(), algo, env_id, config, timesteps, args.n_envs or config.n_envs, checkpoint_every, None)
+    return _open_run_folder(args, plan, in_place)
+
+
+def _open_run_folder(args: Any, plan: Plan, in_place: bool) -> Plan:
+    """The run folder: the unfinished one being resumed, or a new one holding the run's settings."""
+    if in_place:
+        run_dir = Path(args.resume)
+        source_model = recorded_settings(run_dir, type(args)).get("resume")  # the model this run continued
+        clean_leftovers(run_dir)
+        print(f"resuming run folder: {run_dir}")
+        return dataclasses.replace(plan, run_dir=run_dir, source_model=source_model)
+    run_dir = new_run_folder(args.out, plan.env_id, plan.algo, args.seed)
+    settings = dataclasses.asdict(args) | {
+        "algo": plan.algo,
+        "env": plan.env_id,
+        "timesteps": plan.timesteps,
+        "n_envs": plan.n_envs,
+        "checkpoint_every": plan.checkpoint_every,
+    }
+    try:
+        write_json(run_dir / ARGS_FILE, settings)
+    except OSError:
+        run_dir.rmdir()  # still empty: no run to resume, so no folder left behind
+        raise
+    print(f"run folder: {run_dir}")
+    return dataclasses.replace(plan, run_dir=run_dir, source_model=args.resume)
+
+
+def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
+    """Train to the step budget, checkpointing on the way; the training summary (also in ``training.json``).
+
+    Raises:
+        agents.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last rollout.
+        RunProblem: a damaged checkpoint or saved model (the message names it).
+    """
+    run_dir, config = plan.run_dir, plan.config
+    checkpoint = latest_checkpoint(run_dir)
+    # Training env: training personas only; observations normalised if the config says so.
+    env = make_train_env(
+        plan.env_id,
+        plan.n_envs,
+        args.seed,
+        personas=config.personas,
+        monitor_file=run_dir / "monitor.csv",
+        monitor_append=checkpoint is not None,
+    )
+    model, env, state, start_steps = _model_to_train(args, plan, env, checkpoint)
+    model.set_logger(cleanrl_logger(run_dir / "tb"))
+    callbacks, curve, selection, elapsed = _callbacks(args, plan, stop, state, start_steps, int(model.num_timesteps))
+    stop.in_training = True
+    try:
+        model.learn(
+            total_timesteps=start_steps + plan.timesteps - int(model.num_timesteps),
+            reset_num_timesteps=checkpoint is None and plan.source_model is None,
+            progress_bar=args.progress,
+            callback=callbacks,
+        )
+    except TrainingInterrupted:  # stopped on request at a rollout boundary, after a checkpoint
+        stop.check()
+        raise  # not reached: only a signal asks for it
+    finally:
+        stop.in_training = False
+    training = _training_summary(plan, model, start_steps, elapsed())
+    if selection is not None:  # the best-validated policy is the one saved
+        training["selected"] = selection.finish(model)
+        _print_selection(training["selected"])
+    save_agent(model, run_dir, algo=plan.algo, env_id=plan.env_id)
+    env.close()
+    # Training is over: the summary marks it, and the checkpoints have served their purpose.
+    finished = {"training": training, "learning_curve": curve.history if curve else [], "start_steps": start_steps}
+    write_json(run_dir / TRAINING_FILE, finished)
+    remove_checkpoints(run_dir)
+    stop.check()  # the signal came after the last rollout boundary
+    return finished
+
+
+def _model_to_train(args: Any, plan: Plan, env: Any, checkpoint: Path | None) -> tuple[Any, Any, dict[str, Any], int]:
+    """``(model, env, checkpoint state, start steps)``: restored, continued from a saved model, or new.
+
+    Raises:
+        RunProblem: a damaged checkpoint or saved model (the message names it).
+    """
+    if checkpoint is not None:
+        try:
+            model, state = restore_checkpoint(checkpoint, env)
+        except (OSError, ValueError) as exc:
+            raise RunProblem(f"--resume: checkpoint {checkpoint}: {exc}") from exc
+        print(f"continuing from {checkpoint} at {model.num_timesteps} steps")
+        return model, env, state, state["start_steps"]
+    if plan.source_model is not None:
+        # A new run from a saved model: its own statistics come along and keep updating.
+        try:
+            model, env = load_to_continue(plan.source_model, env)
+        except (OSError, ValueError) as exc:
+            raise RunProblem(f"--resume: {exc}") from exc
+        print(f"continuing {plan.algo} from {plan.source_model} at {model.num_timesteps} steps")
+        return model, env, {}, int(model.num_timesteps)
+    if plan.config.normalize:
+        env = VecNormalize(env, norm_obs=True, norm_reward=False)
+    return make_model(plan.config, env, args.seed), env, {}, 0
+
+
+def _training_summary(plan: Plan, model: Any, start_steps: int, train_s: float) -> dict[str, Any]:
+    """The ``training`` entry of ``results.json`` (printed in one line too)."""
+    trained_steps = int(model.num_timesteps) - start_steps
+    steps_per_s = trained_steps / train_s if train_s > 0 else None
+    print(f"trained {trained_steps} steps in {train_s:.0f} s ({steps_per_s or 0:.0f} steps/s)")
+    return {
+        "timesteps": trained_steps,
+        "total_timesteps": int(model.num_timesteps),
+        "resumed_from": plan.source_model,
+        "n_envs": plan.n_envs,
+        "wall_time_s": train_s,
+        "steps_per_s": steps_per_s,
+        "hyperparams": {**plan.config.model_kwargs(), "normalize": plan.config.normalize, "policy": plan.config.policy},
+        "personas": plan.config.personas,
+    }
+
+
+def _print_selection(selected: dict[str, Any]) -> None:
+    """One line: which policy is saved and how it and the final policy scored on validation."""
+    final = selected["scores"][-1]  # the final policy is scored last
+    print(
+        f"saved the policy at {selected['timesteps']} steps: validation success "
+        f"{selected['validation_success_rate']:.1%} on the {selected['personas']} personas "
+        f"({selected['episodes']} episodes; the final policy {final['success_rate']:.1%})"
+    )
+
+
+def _callbacks(
+    args: Any, plan: Plan, stop: StopSignals, state: dict[str, Any], start_steps: int, model_steps: int
+) -> tuple[list[Any], PeriodicEvalCallback | None, SelectionCallback | None, Callable[[], float]]:
+    """``(callbacks, learning-curve callback or None, selection callback or None, training-seconds clock)``."""
+    # Periodic scores on the evaluation personas: the learning curve only, never a selection.
+    callbacks: list[Any] = [OutcomeStatsCallback()]
+    curve = None
+    if args.eval_points > 0:
+        every = max(1, plan.timesteps // args.eval_points)
+        episodes = min(200, args.eval_episodes)
+        personas = personas_arg(args.eval_personas)
+        curve = PeriodicEvalCallback(plan.algo, plan.env_id, personas, episodes, args.eval_seed, every, start_steps)
+        if state:
+            _restore_curve(curve, state)
+        callbacks.append(curve)
+    # Scores on the training personas' validation episodes in the last half: the saved policy.
+    selection = None
+    if args.select_points > 0:
+        half = plan.timesteps // 2
+        every = max(1, (plan.timesteps - half) // args.select_points)
+        folder = plan.run_dir / CHECKPOINTS_DIR
+        start = start_steps + half
+        points, episodes = args.select_points, args.select_episodes
+        selection = SelectionCallback(folder, plan.algo, plan.env_id, episodes, points, start, every)
+        if state.get("selection") is not None:
+            selection.restore(state["selection"])
+        callbacks.append(selection)
+    wall_s = float(state.get("wall_time_s", 0.0))  # training seconds before an interruption
+    started = time.perf_counter()
+
+    def elapsed() -> float:
+        return wall_s + time.perf_counter() - started
+
+    def checkpoint_state() -> dict[str, Any]:
+        return {
+            "start_steps": start_steps,
+            **_curve_state(curve),
+            "selection": selection.state() if selection else None,
+            "wall_time_s": elapsed(),
+        }
+
+    callbacks.append(
+        CheckpointCallback(
+            plan.run_dir,
+            plan.checkpoint_every,
+            algo=plan.algo,
+            env_id=plan.env_id,
+            stop_requested=stop.requested,
+            extra=checkpoint_state,
+            start_steps=model_steps,
+        )
+    )
+    return callbacks, curve, selection, elapsed
+
+
+# The learning curve's part of a checkpoint. PeriodicEvalCallback has no public state()/restore()
+# pair as SelectionCallback has, so its schedule (_next) is read and set here, and only here.
+def _curve_state(curve: PeriodicEvalCallback | None) -> dict[str, Any]:
+    return {"curve_history": curve.history if curve else [], "curve_next": curve._next if curve else None}
+
+
+def _restore_curve(curve: PeriodicEvalCallback, state: dict[str, Any]) -> None:
+    curve.history, curve._next = state["curve_history"], state["curve_next"]

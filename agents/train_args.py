@@ -1,0 +1,368 @@
+"""The checks behind ``train.py``'s typed ``Args``, and its command line parsed with them.
+
+``train.py`` holds the ``Args`` dataclass (its field docstrings are the ``--help``, tyro parses
+it, as CleanRL does); this module is what stands behind it:
+
+* :func:`args_problem` -- the first value no run can use (a wrong type, a count out of range,
+  an unknown name, a framework that cannot run, a path that cannot be written), one message
+  naming the flag. ``Args.__post_init__`` raises it as :class:`BadArgs`, so every ``Args`` --
+  parsed from the command line or read back from a run's ``args.json`` -- passed the same checks.
+* :func:`parse_train_args` -- the command line parsed into ``Args``; with ``--resume`` the
+  saved settings (:func:`resume_settings`) are the defaults, and a flag contradicting them is named.
+
+No torch at import: a usage error comes back in a second.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import importlib.util
+import io
+import json
+import re
+import sys
+import types
+import typing
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, NoReturn, TypeVar
+
+import tyro
+from tyro.conf import DisallowNone
+
+from agents.run_folder import ARGS_FILE, TRAINING_FILE, is_unfinished_run
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+__all__ = [
+    "PROG",
+    "RUN_FIELDS",
+    "BadArgs",
+    "RunProblem",
+    "args_problem",
+    "baseline_names",
+    "parse_train_args",
+    "personas_arg",
+    "read_training",
+    "recorded_settings",
+    "resume_settings",
+    "usage_error",
+]
+
+ArgsT = TypeVar("ArgsT", bound="DataclassInstance")
+
+PROG = "python train.py"
+
+RUN_FIELDS = (
+    "algo",
+    "env",
+    "seed",
+    "timesteps",
+    "n_envs",
+    "eval_episodes",
+    "eval_seed",
+    "eval_personas",
+    "baselines",
+    "eval_points",
+    "select_points",
+    "select_episodes",
+    "checkpoint_every",
+)
+"""Settings that define a run: ``--resume`` of an unfinished run takes them from its ``args.json``."""
+RECORDED_FIELDS = ("algo", "env", "seed", "timesteps", "n_envs")
+"""What every ``args.json`` written by ``train.py`` records (``env``, ``timesteps`` and ``n_envs``
+may be null: the algorithm's own); a file without them is not a run's settings."""
+
+
+class BadArgs(Exception):
+    """An ``Args`` value no run can use; the message names the flag.
+
+    Not a ``ValueError``: tyro turns those into a boxed message of its own, while this one
+    reaches :func:`parse_train_args`, which prints the one-line usage error.
+    """
+
+
+class RunProblem(ValueError):
+    """A saved file that cannot be used (a damaged model, checkpoint or summary): exit status 2, one line."""
+
+
+# --- the checks -------------------------------------------------------------------
+
+
+def args_problem(args: Any) -> str | None:
+    """The first value of ``train.Args`` no run can use (None if all are fine)."""
+    return (
+        _type_problem(args)
+        or _problem_with_numbers(args)
+        or _problem_with_names(args)
+        or _problem_with_framework(args)
+        or _problem_with_paths(args)
+    )
+
+
+def _type_problem(args: Any) -> str | None:
+    """The first field whose value is not of its annotated type (what a hand-edited ``args.json`` can hold)."""
+    hints = typing.get_type_hints(type(args))
+    for field in dataclasses.fields(args):
+        value, hint = getattr(args, field.name), hints[field.name]
+        options = typing.get_args(hint) if typing.get_origin(hint) in (types.UnionType, typing.Union) else (hint,)
+        if not any(_is_a(value, option) for option in options):
+            return f"{field.name} must be {' or '.join(_type_name(o) for o in options)}, got {value!r}"
+    return None
+
+
+def _is_a(value: Any, option: Any) -> bool:
+    """Whether ``value`` is of the type ``option`` (a class, None or a Literal); a bool is no int."""
+    if typing.get_origin(option) is Literal:
+        return any(value == choice and type(value) is type(choice) for choice in typing.get_args(option))
+    if option is type(None):
+        return value is None
+    return isinstance(value, option) and (option is bool or not isinstance(value, bool))
+
+
+def _type_name(option: Any) -> str:
+    """``int``, ``None`` or ``one of 'ppo', 'dqn'``."""
+    if typing.get_origin(option) is Literal:
+        return "one of " + ", ".join(repr(choice) for choice in typing.get_args(option))
+    return "None" if option is type(None) else str(option.__name__)
+
+
+def _problem_with_numbers(args: Any) -> str | None:
+    """The first count or seed out of range (None if all are fine)."""
+    from agents.hyperparams import hyperparams_for
+    from coop_gym.cli import seed_range_problem
+
+    for name in ("timesteps", "n_envs"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            return f"--{name.replace('_', '-')} must be >= 1, got {value}"
+    if args.eval_episodes < 1:
+        return f"--eval-episodes must be >= 1, got {args.eval_episodes}"
+    if args.seed < 0 or args.eval_seed < 0:
+        return "--seed and --eval-seed must be >= 0"
+    # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
+    n_envs = args.n_envs or hyperparams_for(args.algo).n_envs
+    problem = seed_range_problem("--seed", args.seed, n_envs)
+    problem = problem or seed_range_problem("--eval-seed", args.eval_seed, args.eval_episodes)
+    if problem:
+        return problem
+    if args.eval_points < 0 or args.threads < 1:
+        return "--eval-points must be >= 0 and --threads >= 1"
+    if args.select_points < 0 or args.select_episodes < 1:
+        return "--select-points must be >= 0 and --select-episodes >= 1"
+    if args.checkpoint_every is not None and args.checkpoint_every < 0:
+        return f"--checkpoint-every must be >= 0, got {args.checkpoint_every}"
+    return None
+
+
+def _problem_with_names(args: Any) -> str | None:
+    """The first unknown env id, persona or baseline (None if all are known)."""
+    import coop_gym
+    from agents.scripted import SCRIPTED_AGENTS
+    from coop_gym.model.personas import resolve_personas
+
+    if args.env is not None and args.env not in coop_gym.ENV_IDS:
+        return f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+    try:
+        resolve_personas(personas_arg(args.eval_personas))
+    except ValueError as exc:
+        return f"--eval-personas: {exc}"
+    unknown = [b for b in baseline_names(args.baselines) if b not in SCRIPTED_AGENTS]
+    if unknown:
+        return f"--baselines: unknown agent(s) {unknown}; known: {', '.join(SCRIPTED_AGENTS)}"
+    return None
+
+
+def _problem_with_framework(args: Any) -> str | None:
+    """What ``--framework rllib`` (and the flags that go with it) cannot do (None if it can)."""
+    if args.framework == "rllib" and (args.algo != "ppo" or args.eval_only or args.resume or args.num_env_runners < 0):
+        return "--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0"
+    if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
+        return '--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"'
+    return None
+
+
+def _problem_with_paths(args: Any) -> str | None:
+    """--eval-only with --resume, a missing --model, or an --out where no run folder can be made (None if fine)."""
+    from coop_gym.cli import output_path_problem
+
+    if args.eval_only and args.resume is not None:
+        return "--eval-only and --resume exclude each other"
+    if args.eval_only and args.model is None:
+        return "--eval-only needs --model PATH"
+    if args.model is not None and not args.eval_only:
+        return "--model is for --eval-only; use --resume PATH to continue training a model"
+    problem = output_path_problem(args.out, folder=True)
+    if problem:
+        return f"--out: {problem}"
+    shipped = args.model is not None and args.model.startswith("pretrained:")  # by name: agents.rl.load_agent
+    saved = args.model is not None and (Path(args.model).exists() or Path(args.model).with_suffix(".zip").exists())
+    if args.model is not None and not (shipped or saved):
+        return f"--model: nothing saved at {args.model}"
+    return None
+
+
+def personas_arg(text: str) -> str | list[str]:
+    """A persona set name (``"test"``) as it is, names joined by ``,`` as a list."""
+    return [p.strip() for p in text.split(",") if p.strip()] if "," in text else text
+
+
+def baseline_names(text: str) -> list[str]:
+    """Scripted agent names joined by ``,`` (empty: none)."""
+    return [b.strip() for b in text.split(",") if b.strip()]
+
+
+# --- the command line -------------------------------------------------------------
+
+
+def parse_train_args(args_type: type[ArgsT], argv: list[str] | None, description: str) -> ArgsT:
+    """``argv`` (default: ``sys.argv[1:]``) parsed into ``args_type`` and checked; usage errors exit with status 2.
+
+    With ``--resume`` the run's (or model's) saved settings are the defaults of a second parse, so
+    the flags not given take them; a given flag that contradicts the run is an error naming it.
+    """
+    argv = sys.argv[1:] if argv is None else list(argv)
+
+    def parse(default: Any = tyro.MISSING_NONPROP) -> ArgsT:
+        shown = io.StringIO()  # what tyro prints: its errors come out in one line
+        try:
+            with contextlib.redirect_stderr(shown):
+                parsed = tyro.cli(
+                    args_type, args=argv, default=default, prog=PROG, description=description, config=(DisallowNone,)
+                )
+        except SystemExit as exc:
+            if exc.code:  # tyro's own error (an unknown flag, a value of the wrong type or choice)
+                _fail(_one_line(shown.getvalue()))
+            raise
+        sys.stderr.write(shown.getvalue())  # a warning, if any
+        return parsed
+
+    try:
+        args = parse()
+        resume = getattr(args, "resume", None)
+        if resume is None:
+            return args
+        saved = resume_settings(Path(resume), args_type)
+        resumed = parse(dataclasses.replace(args_type(), **saved))
+    except (BadArgs, ValueError) as exc:
+        _fail(str(exc))
+    conflicts = [
+        f"--{name.replace('_', '-')} {getattr(resumed, name)!r} (the run has {value!r})"
+        for name, value in saved.items()
+        if getattr(resumed, name) != value
+    ]
+    if conflicts:
+        _fail(f"--resume {resume}: {'; '.join(conflicts)} contradict the saved run; leave them out")
+    return resumed
+
+
+def _fail(message: str) -> NoReturn:
+    """A usage error found while parsing: the usage line and one error line on stderr, exit status 2."""
+    print(f"usage: {PROG} [-h] [OPTIONS]\n{PROG}: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def _one_line(box: str) -> str:
+    """The message of tyro's error box in one line, as argparse (and the package's other commands) print it."""
+    lines = [re.sub(r"\x1b\[[0-9;]*m", "", line).strip(" │") for line in box.splitlines()[1:]]
+    rule = next((k for k, line in enumerate(lines) if line and set(line) <= set("─╰╯")), len(lines))
+    return " ".join(line for line in lines[:rule] if line) or box.strip()
+
+
+def usage_error(message: str) -> int:
+    """A problem found after parsing (e.g. a damaged model): one line on stderr; exit status 2."""
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return 2
+
+
+# --- what --resume continues ------------------------------------------------------
+
+
+def resume_settings(path: Path, args_type: type[Any]) -> dict[str, Any]:
+    """The settings ``--resume path`` continues with (a subset of :data:`RUN_FIELDS`).
+
+    An unfinished run resumes in place with its own ``args.json`` (read back through
+    ``args_type``: typed and checked like the command line); a finished run or a saved model
+    starts a new run from the model, with its algorithm and env.
+
+    Raises:
+        ValueError: nothing resumable at ``path``; the message starts with ``--resume`` and names the file.
+    """
+    if not (path.exists() or path.with_suffix(".zip").exists()):
+        raise ValueError(f"--resume: nothing saved at {path}")
+    if not is_unfinished_run(path):  # a finished run or a model: a new run continuing the model
+        from agents.rl import resolve_saved
+
+        try:
+            _, info = resolve_saved(path)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"--resume: {exc}") from None
+        return {k: v for k, v in (("algo", info.get("algo")), ("env", info.get("env_id"))) if v}
+    recorded = _with_defaults(recorded_settings(path, args_type))
+    read_training(path)  # a damaged summary is named now, before the resume touches the folder
+    return {name: recorded[name] for name in RUN_FIELDS if name in recorded}
+
+
+def recorded_settings(run_dir: Path, args_type: type[Any]) -> dict[str, Any]:
+    """What an unfinished run recorded in ``args.json``: its :data:`RUN_FIELDS` and the model it continued.
+
+    Read back through ``args_type`` (``train.Args``), so a value of the wrong type or out of
+    range is named as on the command line.
+
+    Raises:
+        ValueError: an unreadable or incomplete file, or a bad value; the message names the file.
+    """
+    file = run_dir / ARGS_FILE
+    try:
+        recorded = json.loads(file.read_text())
+        if not isinstance(recorded, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"--resume: {file} is unreadable ({exc})") from None
+    if recorded.get("eval_only"):
+        raise ValueError(
+            f"--resume: {run_dir} was an --eval-only run; run it again: --eval-only --model {recorded.get('model')}"
+        )
+    settings = {name: recorded[name] for name in (*RUN_FIELDS, "resume") if name in recorded}
+    try:
+        args_type(**settings)
+    except BadArgs as exc:
+        raise ValueError(f"--resume: {file}: {exc}") from None
+    missing = [name for name in RECORDED_FIELDS if name not in recorded]
+    if missing:
+        raise ValueError(f"--resume: {file} does not record the run's settings: {', '.join(missing)} missing")
+    return settings
+
+
+def _with_defaults(settings: dict[str, Any]) -> dict[str, Any]:
+    """Run settings with the algorithm's defaults filled in (older args.json files hold None)."""
+    from agents.hyperparams import hyperparams_for
+
+    out = dict(settings)
+    algo = out.get("algo", "ppo")
+    config = hyperparams_for(algo, out.get("env") or hyperparams_for(algo).env_id)
+    out["env"] = out.get("env") or config.env_id
+    out["timesteps"] = out.get("timesteps") or config.total_timesteps
+    out["n_envs"] = out.get("n_envs") or config.n_envs
+    if out.get("checkpoint_every") is None:
+        out["checkpoint_every"] = max(1, out["timesteps"] // 10)
+    return out
+
+
+def read_training(run_dir: Path) -> dict[str, Any] | None:
+    """The training summary of a run that finished training (``training.json``), or None if it did not.
+
+    Raises:
+        RunProblem: the file is there but damaged; the message names it.
+    """
+    file = run_dir / TRAINING_FILE
+    if not file.exists():
+        return None
+    try:
+        finished = json.loads(file.read_text())
+        if not (isinstance(finished, dict) and {"training", "learning_curve", "start_steps"} <= finished.keys()):
+            raise ValueError("not a training summary")
+    except (OSError, ValueError) as exc:
+        raise RunProblem(f"--resume: {file} is unreadable ({exc}); remove it to train this run again") from None
+    return finished
