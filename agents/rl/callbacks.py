@@ -141,6 +141,14 @@ class PeriodicEvalCallback(BaseCallback):
         self.history: list[dict[str, Any]] = []
         self._next = start_steps + self.every
 
+    def state(self) -> dict[str, Any]:
+        """The scores so far and the step the next evaluation is due (what a checkpoint keeps)."""
+        return {"history": copy.deepcopy(self.history), "next": self._next}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state`."""
+        self.history, self._next = copy.deepcopy(state["history"]), state["next"]
+
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:
             self._next = (self.num_timesteps // self.every + 1) * self.every

@@ -261,11 +261,11 @@ def _callbacks(
     return callbacks, curve, selection, elapsed
 
 
-# The learning curve's part of a checkpoint. PeriodicEvalCallback has no public state()/restore()
-# pair as SelectionCallback has, so its schedule (_next) is read and set here, and only here.
+# The learning curve's part of a checkpoint, under the keys checkpoints have always used.
 def _curve_state(curve: PeriodicEvalCallback | None) -> dict[str, Any]:
-    return {"curve_history": curve.history if curve else [], "curve_next": curve._next if curve else None}
+    state = curve.state() if curve else {"history": [], "next": None}
+    return {"curve_history": state["history"], "curve_next": state["next"]}
 
 
 def _restore_curve(curve: PeriodicEvalCallback, state: dict[str, Any]) -> None:
-    curve.history, curve._next = state["curve_history"], state["curve_next"]
+    curve.restore({"history": state["curve_history"], "next": state["curve_next"]})
