@@ -199,3 +199,40 @@ def test_selection_saves_the_best_validated_policy(tmp_path, monkeypatch):
     best = algorithm_class("ppo").load(selection.saved_path(kept["timesteps"]), device="cpu").policy.state_dict()
     assert all(torch.equal(loaded[k], best[k]) for k in loaded)
     env.close()
+
+
+_SAME_SEED_RUN = """
+import sys, hashlib, torch
+torch.set_num_threads(int(sys.argv[1]))
+from stable_baselines3.common.vec_env import VecNormalize
+from agents.hyperparams import hyperparams_for
+from agents.rl import make_model, make_train_env
+config = hyperparams_for("ppo")
+env = VecNormalize(make_train_env(config.env_id, 8, 3, personas=config.personas), norm_obs=True, norm_reward=False)
+model = make_model(config, env, 3, overrides={"n_steps": 64, "batch_size": 128, "n_epochs": 2})
+model.learn(1024)
+digest = hashlib.sha256()
+for tensor in model.policy.state_dict().values():
+    digest.update(tensor.numpy().tobytes())
+digest.update(env.obs_rms.mean.tobytes())
+print(digest.hexdigest())
+"""
+
+
+def test_a_seed_trains_the_same_weights_in_two_fresh_processes() -> None:
+    """train.py's PPO on the hard level, 1024 steps twice in fresh processes on one torch thread: the same weights.
+
+    One thread is train.py's default (``--threads``): torch's multi-threaded reductions add in
+    another order, so another thread count trains other weights (docs/agents.md, "Reproducibility").
+    """
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    digests = [
+        subprocess.run(
+            [sys.executable, "-c", _SAME_SEED_RUN, "1"], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        for _ in range(2)
+    ]
+    assert len(digests[0]) == 64 and digests[0] == digests[1], digests
