@@ -119,13 +119,13 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path)
     result = evaluate(agent, ENV_ID, "test", episodes, 0, env_kwargs=row.env_kwargs, name=f"{name}:{seed}")
     env.close()
     return {
+        **result.summary(),  # its "seed" is the first held-out episode's
         "row": name,
-        "seed": seed,
+        "training_seed": seed,
         "timesteps": timesteps,
         "train_wall_s": wall_s,
         "kept_step": selected["timesteps"],
         "validation_success_rate": selected["validation_success_rate"],
-        **result.summary(),
     }
 
 
@@ -142,7 +142,7 @@ def aggregate(runs: list[dict[str, Any]], blind: float, oracle: float) -> dict[s
 
     success = [r["success_rate"] for r in runs]
     scores = [(s - blind) / (oracle - blind) for s in success]
-    out: dict[str, Any] = {"runs": len(runs), "seeds": [r["seed"] for r in runs]}
+    out: dict[str, Any] = {"runs": len(runs), "training_seeds": [r["training_seed"] for r in runs]}
     for key, values in (("success", success), ("score", scores)):
         if len(values) >= 2:
             found = iqm_across_runs({ENV_ID: values})
@@ -185,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
             path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
             if not path.exists():
                 write_json(path, train_one(name, seed, args.timesteps, args.episodes, args.runs))
-            run = json.loads(path.read_text())
+            run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
             if run["episodes"] != args.episodes:
                 parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
             runs.append(run)
