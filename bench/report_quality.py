@@ -11,7 +11,19 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/report_format.py, however this runs
-from report_format import TIMES, Results, _count, _from_results, _missing, _pct, _points, _provenance, _rate, _table
+from report_format import (
+    TIMES,
+    Results,
+    _ci,
+    _count,
+    _from_results,
+    _missing,
+    _pct,
+    _points,
+    _provenance,
+    _rate,
+    _table,
+)
 
 
 def test_command(results: Results) -> str:
@@ -334,3 +346,51 @@ unresponsive or cooperative), judged at the paper's {delay_s} s, mean ± std ove
     sections += _estimators_table(estimators, delay_s, cap)
     sections += _levels_lines(report)
     return "\n".join(sections)
+
+
+def learners(results: Results) -> str:
+    """Learner x observation on the hard level (``bench/learners.py``)."""
+    head = "### Learners and observations on the hard level\n"
+    record = results.get("learners")
+    if record is None:
+        return head + "\n" + _missing("python bench/learners.py") + "\n"
+    report = record["results"]
+    rows = []
+    for name, row in report["rows"].items():
+        success, score = row["success"], row["score"]
+        per_seed = ", ".join(f"{100 * run['success_rate']:.1f}" for run in row["per_seed"])
+        score_ci = "" if score["ci95"][0] is None else f" [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]"
+        rows.append(
+            [
+                f"`{name}`: {row['what']}",
+                str(row["runs"]),
+                f"{_pct(success['iqm'])} {_ci(success['ci95']) if success['ci95'][0] is not None else ''}".rstrip(),
+                f"{score['iqm']:.2f}{score_ci}",
+                per_seed,
+                _pct(row["unsafe_rate_mean"]),
+                f"{row['train_wall_s_median']:.0f} s",
+            ]
+        )
+    for name, row in report["scripted"].items():
+        rows.append([f"{name} (scripted)", "", _pct(row["success_rate"]), "", "", _pct(row["unsafe_rate"]), ""])
+    header = [
+        "learner: observation",
+        "seeds",
+        "success, IQM [95 % CI]",
+        "mind-reading score, IQM [95 % CI]",
+        "success per seed (%)",
+        "unsafe (mean)",
+        "training (median)",
+    ]
+    return f"""{head}
+{_provenance(record)}
+
+Each row trains with `train.py`'s protocol on `{report["env_id"]}` ({report["timesteps"]:,} steps, the
+wider training personas, the best-validated policy of the last half kept) once per training seed,
+and plays the same {report["episodes"]} held-out episodes as the scripted caregivers below (seeds
+0..{report["episodes"] - 1}, the test personas). The interquartile mean over seeds and its
+stratified bootstrap interval follow rliable; the mind-reading score is `(success - blind) /
+(oracle - blind)` per seed. Training seconds were measured with other runs on the machine.
+
+{_table(header, rows)}
+"""
