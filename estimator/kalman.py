@@ -28,8 +28,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.schema import index_table
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.schema import index_table
 from estimator.nominal import STATE_DIM, NominalModel, euler_transition
 
 __all__ = [

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
+from estimator.compiled.cache import guard_kernel_cache
 from estimator.kalman import NOMINAL, nominal_transition
 
 __all__ = [

@@ -24,8 +24,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.checks import is_number, python_scalar
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.checks import is_number, python_scalar
 
 __all__ = ["STATE_DIM", "NominalModel", "euler_transition"]
 
@@ -71,7 +71,7 @@ class NominalModel:
     push_gain_m_per_s_n: float = 0.006
     verbal_gain_m_per_s: float = 0.12
     position_noise_std_m: float = 0.004
-    # The paper filter's tuning, calibrated with estimator/experiment/calibrate.py so that the
+    # The paper filter's tuning, calibrated with coop_gym/experiment/calibrate.py so that the
     # thresholded judgment on the paper's protocol lands near the paper's Table I.
     velocity_process_std_m_per_s: float = 0.015
     intention_process_std_m: float = 0.002

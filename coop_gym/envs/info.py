@@ -9,13 +9,13 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.envs.arguments import SitToStandConfig
 from coop_gym.envs.config import (
     Outcome,
 )
 from coop_gym.envs.observation import FEATURES, PROBABILITY_FEATURES, observation_space_for
 from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
+from estimator.compiled.cache import guard_kernel_cache
 
 __all__ = [
     "NUMERIC_INFO_KEYS",

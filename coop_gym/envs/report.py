@@ -8,13 +8,13 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.schema import index_table
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import (
     Outcome,
 )
 from coop_gym.envs.observation import FEATURES
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.schema import index_table
 
 __all__ = [
     "EPISODE_END",

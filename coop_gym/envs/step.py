@@ -12,8 +12,6 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.rng import G_STATE, standard_normal
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import Outcome
 from coop_gym.envs.layout import BLOCKS, CONSTS, CUE_COLUMNS, CUES
@@ -29,6 +27,8 @@ from coop_gym.model.dynamics import (
     person_substep,
 )
 from coop_gym.model.params import EPISODE_CLOCK_TOLERANCE_S
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.rng import G_STATE, standard_normal
 from estimator.judgment import JUDGE, JUDGMENT_COLUMNS, judgment_substep
 from estimator.kalman import NOMINAL_COLUMNS, kalman_step
 from estimator.nominal import STATE_DIM
