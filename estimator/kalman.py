@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from estimator.compiled.cache import guard_kernel_cache
 from estimator.compiled.schema import index_table
-from estimator.nominal import STATE_DIM, NominalModel, euler_transition
+from estimator.nominal import EULER_FIELDS, STATE_DIM, NominalModel, euler_transition
 
 __all__ = [
     "NOMINAL",
@@ -40,18 +40,11 @@ __all__ = [
     "FastKalmanFilter",
     "PaperKalmanFilter",
     "kalman_step",
+    "nominal_parameters",
     "nominal_row",
-    "nominal_transition",
 ]
 
-NOMINAL_FIELDS: tuple[str, ...] = (
-    "dt_s",
-    "damping_rate_per_s",
-    "voluntary_gain_per_s2",
-    "push_compliance_m_per_s2_n",
-    "push_gain_m_per_s_n",
-    "verbal_gain_m_per_s",
-)
+NOMINAL_FIELDS: tuple[str, ...] = EULER_FIELDS
 """The :class:`NominalModel` fields ``A`` and ``B`` are made of, packed as they are."""
 
 NOMINAL_DERIVED_COLUMNS: tuple[str, ...] = (
@@ -79,19 +72,15 @@ def nominal_row(model: NominalModel) -> NDArray[np.float64]:
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def nominal_transition(
-    nominal: NDArray[np.float64], push_force_n: float, verbal_cue: float
-) -> tuple[float, float, float, float, float, float]:
-    """:func:`~estimator.nominal.euler_transition` of a nominal row: ``(a01, a10, a11, a12, a23, b1)``."""
-    return euler_transition(  # type: ignore[no-any-return]
+def nominal_parameters(nominal: NDArray[np.float64]) -> tuple[float, float, float, float, float, float]:
+    """A nominal row's ``params`` of :func:`~estimator.nominal.euler_transition` and ``euler_step``."""
+    return (
         nominal[NOMINAL.dt_s],
         nominal[NOMINAL.damping_rate_per_s],
         nominal[NOMINAL.voluntary_gain_per_s2],
         nominal[NOMINAL.push_compliance_m_per_s2_n],
         nominal[NOMINAL.push_gain_m_per_s_n],
         nominal[NOMINAL.verbal_gain_m_per_s],
-        push_force_n,
-        verbal_cue,
     )
 
 
@@ -273,7 +262,7 @@ def _predict(
     m: NDArray[np.float64], P: NDArray[np.float64], nominal: NDArray[np.float64], push_force_n: float, verbal_cue: float
 ) -> None:
     """The prediction ``m = A m + B u``, ``P = A P A^T + Q``, A from the cues (eqs. 1, 6, 10 Euler-discretised)."""
-    a01, a10, a11, a12, a23, b1 = nominal_transition(nominal, push_force_n, verbal_cue)
+    a01, a10, a11, a12, a23, b1 = euler_transition(nominal_parameters(nominal), push_force_n, verbal_cue)
     m0, m1, m2, m3 = m[0], m[1], m[2], m[3]
     m[0] = m0 + a01 * m1
     m[1] = a10 * m0 + a11 * m1 + a12 * m2 + b1 * push_force_n

@@ -17,7 +17,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.kalman import NOMINAL, nominal_transition
+from estimator.kalman import NOMINAL, nominal_parameters
+from estimator.nominal import euler_step, euler_transition
 
 __all__ = [
     "NON_FINITE_INPUT",
@@ -77,7 +78,7 @@ def mode_covariance_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K
         The innovation variance ``S``.
     """
     # F: the upper-left (3, 3) block of the nominal A, which the cues do not enter.
-    dt, f10, f11, f12, _, _ = nominal_transition(nominal, 0.0, 0.0)
+    dt, f10, f11, f12, _, _ = euler_transition(nominal_parameters(nominal), 0.0, 0.0)
     # P = F P F^T + Q, with F's sparse rows [1, dt, 0], [f10, f11, f12], [0, 0, 1].
     fp00 = P[0, 0] + dt * P[1, 0]
     fp01 = P[0, 1] + dt * P[1, 1]
@@ -140,29 +141,13 @@ def mode_mean_step(
 ) -> float:
     """Predict ``m = F m + B_xi u`` and update with gain ``K``, in place on ``m`` (3,).
 
-    The mean is predicted in the difference form of eqs. 1 and 6 (``xdot + dt (...)``), not by
-    multiplying out :func:`~estimator.nominal.euler_transition`'s entries: the two round
-    differently, and the multiple-model estimators' recorded numbers are this form's.
+    The mean is predicted by :func:`~estimator.nominal.euler_step` (the difference form of
+    eqs. 1 and 6), whose rounding the multiple-model estimators' recorded numbers are.
 
     Returns:
         The innovation ``y - H m`` of the predicted mean.
     """
-    dt = nominal[NOMINAL.dt_s]
-    m0, m1, m2 = m[0], m[1], m[2]
-    # eq. 1 (Euler): x' = x + dt xdot ; xdot' = xdot + dt (-lambda1 xdot + k1 (eta - x) + k2 c_p)
-    p0 = m0 + dt * m1
-    p1 = m1 + dt * (
-        -nominal[NOMINAL.damping_rate_per_s] * m1
-        + nominal[NOMINAL.voluntary_gain_per_s2] * (m2 - m0)
-        + nominal[NOMINAL.push_compliance_m_per_s2_n] * push_force_n
-    )
-    # eq. 6: eta' = eta + xi (k3 c_p + k4 c_v) dt -- the only place the mode enters.
-    p2 = (
-        m2
-        + xi
-        * (nominal[NOMINAL.push_gain_m_per_s_n] * push_force_n + nominal[NOMINAL.verbal_gain_m_per_s] * verbal_cue)
-        * dt
-    )
+    p0, p1, p2 = euler_step(nominal_parameters(nominal), m[0], m[1], m[2], xi, push_force_n, verbal_cue)
     innovation = measured_position_m - p0
     m[0] = p0 + K[0] * innovation
     m[1] = p1 + K[1] * innovation
