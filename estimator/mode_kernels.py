@@ -17,7 +17,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.kalman import NOMINAL, nominal_parameters
+from estimator.kalman import NOMINAL, nominal_parameters, predict_covariance
 from estimator.nominal import euler_step, euler_transition
 
 __all__ = [
@@ -74,35 +74,21 @@ def _logaddexp(a: float, b: float) -> float:
 def mode_covariance_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArray[np.float64]) -> float:
     """Predict and Joseph-update one mode covariance ``P`` (3, 3) in place; write the gain ``K`` (3,).
 
+    The prediction is the paper filter's (:func:`~estimator.kalman.predict_covariance`). The update
+    symmetrises the prediction first and expands the Joseph form for ``H = [1, 0, 0]`` entry by
+    entry, where the paper filter's (:func:`~estimator.kalman.kalman_step`) multiplies it out as
+    filterpy does: the two round differently, and each filter's recorded numbers are its own.
+
     Returns:
         The innovation variance ``S``.
     """
-    # F: the upper-left (3, 3) block of the nominal A, which the cues do not enter.
-    dt, f10, f11, f12, _, _ = euler_transition(nominal_parameters(nominal), 0.0, 0.0)
-    # P = F P F^T + Q, with F's sparse rows [1, dt, 0], [f10, f11, f12], [0, 0, 1].
-    fp00 = P[0, 0] + dt * P[1, 0]
-    fp01 = P[0, 1] + dt * P[1, 1]
-    fp02 = P[0, 2] + dt * P[1, 2]
-    fp10 = f10 * P[0, 0] + f11 * P[1, 0] + f12 * P[2, 0]
-    fp11 = f10 * P[0, 1] + f11 * P[1, 1] + f12 * P[2, 1]
-    fp12 = f10 * P[0, 2] + f11 * P[1, 2] + f12 * P[2, 2]
-    fp20 = P[2, 0]
-    fp21 = P[2, 1]
-    fp22 = P[2, 2]
-    p00 = fp00 + dt * fp01 + nominal[NOMINAL.q_position]
-    p01 = f10 * fp00 + f11 * fp01 + f12 * fp02
-    p02 = fp02
-    p11 = f10 * fp10 + f11 * fp11 + f12 * fp12 + nominal[NOMINAL.q_velocity]
-    p12 = fp12
-    p22 = fp22 + nominal[NOMINAL.q_intention]
-    # Row 1 and 2 of (F P) F^T, column 0: symmetric counterparts computed from the other side.
-    p10 = fp10 + dt * fp11
-    p20 = fp20 + dt * fp21
-    p21 = f10 * fp20 + f11 * fp21 + f12 * fp22
+    # P = F P F^T + Q, F the upper-left (3, 3) block of the nominal A, which the cues do not enter.
+    predict_covariance(P, STATE_WIDTH, euler_transition(nominal_parameters(nominal), 0.0, 0.0), nominal)
+    p00, p11, p22 = P[0, 0], P[1, 1], P[2, 2]
     # Symmetrise the prediction (the two sides agree up to rounding).
-    p01 = 0.5 * (p01 + p10)
-    p02 = 0.5 * (p02 + p20)
-    p12 = 0.5 * (p12 + p21)
+    p01 = 0.5 * (P[0, 1] + P[1, 0])
+    p02 = 0.5 * (P[0, 2] + P[2, 0])
+    p12 = 0.5 * (P[1, 2] + P[2, 1])
     r = nominal[NOMINAL.r_position]
     # Scalar measurement H = [1, 0, 0]: S = H P H^T + R, K = P H^T / S.
     S = p00 + r
