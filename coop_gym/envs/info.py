@@ -13,7 +13,7 @@ from coop_gym.envs.arguments import SitToStandConfig
 from coop_gym.envs.config import (
     Outcome,
 )
-from coop_gym.envs.observation import FEATURES, PROBABILITY_FEATURES, observation_space_for
+from coop_gym.envs.observation import PROBABILITY_FEATURES, observation_space_for
 from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
 from estimator.compiled.cache import guard_kernel_cache
 
@@ -29,21 +29,26 @@ __all__ = [
 _OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)
 _OUTCOME_LABEL_ARRAY = np.array(_OUTCOME_LABELS, dtype=object)
 
-# report_info unpacks report rows by position: fail at import if the layout moved (an explicit
-# check, not an assert: it must hold under python -O too).
-_REPORT_LAYOUT = (
-    *FEATURES,
-    *("reward_success", "reward_unsafe", "reward_premature", "reward_time", "reward_force", "reward", "outcome"),
-    *("push_force_n", "true_x_m", "true_xdot_m_per_s", "true_eta_m", "info_true_xi", "persona_index"),
+_INFO_ENTRIES: tuple[tuple[str, int, str], ...] = (
+    ("true_x_m", REPORT.true_x_m, "float"),
+    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, "float"),
+    ("true_eta_m", REPORT.true_eta_m, "float"),
+    ("true_xi", REPORT.info_true_xi, "int"),
+    ("persona", REPORT.persona_index, "label"),
+    ("outcome", REPORT.outcome, "label"),
+    ("judgment", REPORT.judgment, "int"),
+    ("xi_estimate", REPORT.xi_hat, "float"),
+    ("push_force_n", REPORT.push_force_n, "float"),
+    ("verbal_cue", REPORT.verbal_cue, "int"),
+    ("elapsed_s", REPORT.elapsed_s, "float"),
 )
+"""The one list of the info's keys, in order: (key, report column, kind). A ``"label"`` is a name
+looked up by the column's integer (the persona's, the outcome's); its number is the key of
+:data:`_CODE_KEYS` in the numeric info and beside the label in the vector info. Every info adds
+the reward terms (:data:`~coop_gym.envs.report.REWARD_TERMS`) and, with a multiple-model
+estimator, the mode probabilities."""
 
-
-def _check_report_layout() -> None:
-    if REPORT_COLUMNS != _REPORT_LAYOUT:
-        raise RuntimeError("REPORT_COLUMNS changed: update report_info")
-
-
-_check_report_layout()
+_CODE_KEYS = {"persona": "persona_index", "outcome": "outcome_code"}
 
 
 def report_info(r: list[float], persona_names: Sequence[str], probabilities: bool) -> dict[str, Any]:
@@ -54,7 +59,7 @@ def report_info(r: list[float], persona_names: Sequence[str], probabilities: boo
         persona_names: Names of the env's personas, by index.
         probabilities: Add ``xi_probabilities`` (a multiple-model estimator runs).
     """
-    # Unpacked by position (checked against REPORT_COLUMNS at import): one bytecode
+    # Unpacked by position (checked against _INFO_ENTRIES at import): one bytecode
     # instead of ~25 indexed look-ups on the hot path.
     (_pos, _force, verbal, _since, _x_hat, _xdot_hat, _eta_hat, xi_hat, _xi_std, judgment, elapsed,
      p_uncoop, p_unresp, p_coop, _true_xi_feature,
@@ -85,39 +90,54 @@ def report_info(r: list[float], persona_names: Sequence[str], probabilities: boo
     return info
 
 
-# The vector info's keys in order: (key, report column, as int) or a derived entry (None); report_info
-# gives the same keys (bar persona_index and outcome_code), one row at a time, unpacked by position
-# for speed (tests/coop_gym/test_contract.py holds the two equal).
-_INFO_COLUMNS: tuple[tuple[str, int | None, bool], ...] = (
-    ("true_x_m", REPORT.true_x_m, False),
-    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
-    ("true_eta_m", REPORT.true_eta_m, False),
-    ("true_xi", REPORT.info_true_xi, True),
-    ("persona", None, False),
-    ("persona_index", None, False),
-    ("outcome", None, False),
-    ("outcome_code", None, False),
-    ("judgment", REPORT.judgment, True),
-    ("xi_estimate", REPORT.xi_hat, False),
-    ("push_force_n", REPORT.push_force_n, False),
-    ("verbal_cue", REPORT.verbal_cue, True),
-    ("elapsed_s", REPORT.elapsed_s, False),
+def _check_report_info() -> None:
+    """Raise unless :func:`report_info` reads each key from the column :data:`_INFO_ENTRIES` names.
+
+    report_info unpacks the row by position, for speed; this reads a row whose every value tells
+    its column apart (an explicit check, not an assert: it must hold under python -O too).
+    """
+    row = [float(100 + column) for column in range(len(REPORT_COLUMNS))]
+    row[REPORT.outcome] = float(len(_OUTCOME_LABELS) - 1)
+    names = [f"column {column}" for column in range(200 + len(REPORT_COLUMNS))]
+    labels = {"persona": names, "outcome": _OUTCOME_LABELS}
+    try:
+        expected: dict[str, Any] = {
+            key: labels[key][int(row[column])]
+            if kind == "label"
+            else int(row[column])
+            if kind == "int"
+            else row[column]
+            for key, column, kind in _INFO_ENTRIES
+        }
+        expected["xi_probabilities"] = [row[REPORT.p_uncooperative + k] for k in range(len(PROBABILITY_FEATURES))]
+        expected["reward_terms"] = {name: row[REPORT.reward_success + k] for k, name in enumerate(REWARD_TERMS)}
+        info = report_info(row, names, True)
+        info["xi_probabilities"] = info["xi_probabilities"].tolist()
+        matches = list(info.items()) == list(expected.items())
+    except (IndexError, ValueError):  # a column outside the row, a label read from a column that holds no code
+        matches = False
+    if not matches:
+        raise RuntimeError("report_info reads other columns or keys than _INFO_ENTRIES: update report_info")
+
+
+_check_report_info()
+
+
+# The vector info's keys in order: (key, report column, as int) or a label (column None), each
+# label followed by its code's key; report_info gives the same keys bar the codes
+# (tests/coop_gym/test_contract.py holds the two equal).
+_INFO_COLUMNS: tuple[tuple[str, int | None, bool], ...] = tuple(
+    entry
+    for key, column, kind in _INFO_ENTRIES
+    for entry in (
+        [(key, None, False), (_CODE_KEYS[key], None, False)] if kind == "label" else [(key, column, kind == "int")]
+    )
 )
 
 
 # (key, report column, as int): the numeric info, one entry per key, scalars in the single env.
 _NUMERIC_INFO: tuple[tuple[str, int, bool], ...] = (
-    ("true_x_m", REPORT.true_x_m, False),
-    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
-    ("true_eta_m", REPORT.true_eta_m, False),
-    ("true_xi", REPORT.info_true_xi, True),
-    ("persona_index", REPORT.persona_index, True),
-    ("outcome_code", REPORT.outcome, True),
-    ("judgment", REPORT.judgment, True),
-    ("xi_estimate", REPORT.xi_hat, False),
-    ("push_force_n", REPORT.push_force_n, False),
-    ("verbal_cue", REPORT.verbal_cue, True),
-    ("elapsed_s", REPORT.elapsed_s, False),
+    *((_CODE_KEYS.get(key, key), column, kind != "float") for key, column, kind in _INFO_ENTRIES),
     *((f"reward_{name}", REPORT.reward_success + k, False) for k, name in enumerate(REWARD_TERMS)),
 )
 _NUMERIC_PROBABILITIES: tuple[tuple[str, int, bool], ...] = tuple(
