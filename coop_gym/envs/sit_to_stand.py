@@ -16,7 +16,7 @@ from coop_gym.envs.config import Outcome
 from coop_gym.envs.core import SitToStandCore
 from coop_gym.envs.info import InfoBuilder
 from coop_gym.envs.observation import FEATURES, observation_features
-from coop_gym.envs.report import EPISODE_END, REPORT
+from coop_gym.envs.report import REPORT, episode_end
 from coop_gym.model.params import Cues, Timing
 from coop_gym.model.personas import Persona
 
@@ -334,11 +334,8 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
         self.core.step_commands(self._actions.single(action, self._cmd))
         r = self._report_row.tolist()
         self._outcome = outcome = int(r[REPORT.outcome])
-        # A lift terminates. The episode clock of ``timing`` truncates; its last step is truncated
-        # whatever it did, a lift too, as Gymnasium's TimeLimit (and the vector env) report it.
-        terminated, truncated = EPISODE_END[outcome]
         self._episode_steps += 1
-        truncated = truncated or self._episode_steps >= self._max_episode_steps
+        terminated, truncated = episode_end(outcome, self._episode_steps, self._max_episode_steps)
         self._last_lift = terminated
         self._needs_reset = terminated or truncated
         self._stepped = True
