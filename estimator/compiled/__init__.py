@@ -21,8 +21,9 @@ non-zero number; where a divisor can be zero the kernels test it first
 the particle filter's, whose first-class function argument Numba cannot find in a disk
 cache (``estimator/particle.py``).
 
-Imports nothing of ``coop_gym``, ``estimator`` or ``agents``; both the model/env side and
-the filters may import it.
+Imports nothing else of the project: it sits in :mod:`estimator`, the lowest package, so the
+filters import it without loading the envs, and the model and the envs (``coop_gym``, above)
+import it too.
 """
 
 from estimator.compiled.cache import guard_kernel_cache
