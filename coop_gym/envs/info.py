@@ -13,8 +13,9 @@ from coop_gym.envs.arguments import SitToStandConfig
 from coop_gym.envs.config import (
     Outcome,
 )
-from coop_gym.envs.observation import PROBABILITY_FEATURES, observation_space_for
+from coop_gym.envs.observation import PROBABILITY_FEATURES
 from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
+from coop_gym.envs.step import select_and_clip
 from estimator.compiled.cache import guard_kernel_cache
 
 __all__ = [
@@ -176,6 +177,19 @@ def _gather_info_columns(
             ints[k, i] = int(report[i, column])
 
 
+@njit(cache=True, error_model="numpy")
+def _unscaled_rows(
+    report: NDArray[np.float64],
+    columns: NDArray[np.float64],
+    low: NDArray[np.float64],
+    high: NDArray[np.float64],
+    obs: NDArray[np.float32],
+) -> None:
+    # The physical observation of each report row, selected and clipped as the step selects it.
+    for i in range(report.shape[0]):
+        select_and_clip(report[i], columns, low, high, obs[i])
+
+
 class InfoBuilder:
     """The info of an env of ``config``, single (:meth:`single`) or batched (:meth:`batched`), from report rows.
 
@@ -197,11 +211,9 @@ class InfoBuilder:
         self.numeric = config.info_mode == "numeric"
         self.unscaled = config.observation_scale == "unit"
         self._entries = _NUMERIC_INFO + (_NUMERIC_PROBABILITIES if self.probabilities else ())
-        # The physical observation rebuilt from a report row exactly as the kernel builds it:
-        # the features clipped in float64, then rounded to float32.
-        features = config.physical_features
-        self._obs_columns = np.array([REPORT_COLUMNS.index(f) for f in features], dtype=np.int64)
-        physical = observation_space_for(features, config.timing.episode_s)
+        # The physical observation rebuilt from a report row by the step's own selection.
+        self._obs_columns = np.array([REPORT_COLUMNS.index(f) for f in config.physical_features], dtype=np.float64)
+        physical = config.physical_observation_space()
         self._obs_low = physical.low.astype(np.float64)
         self._obs_high = physical.high.astype(np.float64)
         self._plan_all_envs()
@@ -256,8 +268,10 @@ class InfoBuilder:
 
     def unscaled_observation(self, rows: NDArray[np.float64]) -> NDArray[np.float32]:
         """The physical observation of report rows (one row or a batch)."""
-        values = np.take(rows, self._obs_columns, axis=-1)
-        return np.clip(values, self._obs_low, self._obs_high).astype(np.float32)  # type: ignore[no-any-return]
+        batch = np.atleast_2d(rows)
+        obs = np.empty((batch.shape[0], self._obs_columns.shape[0]), dtype=np.float32)
+        _unscaled_rows(batch, self._obs_columns, self._obs_low, self._obs_high, obs)
+        return obs if rows.ndim == 2 else obs[0]
 
     def single(self, r: list[float]) -> dict[str, Any]:
         """The single env's info from one report row (``core.report[i].tolist()``)."""
