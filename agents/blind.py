@@ -20,8 +20,8 @@ from numpy.typing import NDArray
 from agents.base import LIFT, PUSH_BY_NAME, PUSH_NONE, VERBAL_BY_NAME, VERBAL_NONE, WAIT
 from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
-from coop_gym.compiled.checks import check_flag, check_number
 from coop_gym.envs.config import LiftCriteria
+from estimator.compiled.checks import check_flag, check_number
 
 __all__ = ["TUNED_BLIND", "BlindAgent", "BlindSettings", "CuePhase"]
 

@@ -45,8 +45,8 @@ from agents.timeline import Trace, TraceBuilder, plot_timeline
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
-from coop_gym.compiled.checks import check_integer
 from coop_gym.io import atomic_path
+from estimator.compiled.checks import check_integer
 
 __all__ = [
     "DEFAULT_ENV_ID",

@@ -28,9 +28,9 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from coop_gym.cli import SEED_LIMIT
-from coop_gym.compiled.checks import check_integer
 from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
+from estimator.compiled.checks import check_integer
 
 __all__ = ["STEP_INFOS", "SB3VecEnvAdapter", "make_sb3_vec_env"]
 

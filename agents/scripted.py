@@ -37,9 +37,9 @@ from agents.belief import BeliefCaregiver
 from agents.blind import TUNED_BLIND, BlindAgent, BlindSettings, CuePhase
 from agents.scripted_base import EPS_S as _EPS_S
 from agents.scripted_base import PhaseState, ScriptedAgent
-from coop_gym.compiled.checks import check_number
 from coop_gym.envs.config import LiftCriteria
 from coop_gym.model.difficulty import Difficulty
+from estimator.compiled.checks import check_number
 from estimator.judgment import ThresholdJudgment
 
 __all__ = [

@@ -4,7 +4,7 @@ Each measurement is a fresh Python process that imports coop_gym, makes the env,
 and steps it once, timing each part. *Cold* runs get an empty ``NUMBA_CACHE_DIR`` (what a
 fresh install meets: nothing compiled yet); *warm* runs reuse the cache the cold run
 filled. A cold run's first calls run as Python while a background process compiles the
-kernels (``coop_gym.compiled.background``); it then waits for them, and the time until they
+kernels (``estimator.compiled.background``); it then waits for them, and the time until they
 are compiled is reported too. ``--kernels`` also lists the compilations of one more cold run
 that compiles them in the calling process (numba's compile events, nested: a kernel's time
 includes the functions compiled inside it)::
@@ -64,7 +64,7 @@ with event.install_recorder("numba:compile") as rec:
     t4 = time.perf_counter()
     env.step(env.action_space.sample())
     t5 = time.perf_counter()
-from coop_gym.compiled import background
+from estimator.compiled import background
 background.wait()  # the kernels a background process compiles while their first calls run as Python
 t6 = time.perf_counter()
 compiles, stack = [], []

@@ -2,12 +2,12 @@
 
     python bench/papers_experiment.py [--seeds 20] [--estimators kalman,...] [--save [PATH]]
 
-Runs ``python -m estimator.experiment.protocol --seeds N --json`` (Bell & Asada's protocol:
+Runs ``python -m coop_gym.experiment.protocol --seeds N --json`` (Bell & Asada's protocol:
 4 subjects x 25 trials, judged at the paper's 0.75 s) once per estimator on the ``-v0``
 model's personas, and the paper's thresholded Kalman filter and the switching particle filter
 once per difficulty level of the ``-v1`` envs. Each run's report holds the confusion matrix,
 P(judged | requested), accuracy, balanced accuracy, log loss, Brier score and ECE as mean and
-std over the seeds; the paper's own table on real people (``estimator.experiment.PAPER_RESULTS``) comes with it, the
+std over the seeds; the paper's own table on real people (``coop_gym.experiment.PAPER_RESULTS``) comes with it, the
 reference the simulated figures are read against. The ``oracle`` estimator (the subject's
 true parameters) bounds what any estimator can judge from the same trials.
 
@@ -37,14 +37,14 @@ DIFFICULTIES = ("easy", "medium", "hard", "hard-v2")
 
 
 def protocol(flags: list[str]) -> dict[str, Any]:
-    """The JSON report of ``python -m estimator.experiment.protocol FLAGS --json``, run in this process."""
-    from estimator.experiment.protocol import main
+    """The JSON report of ``python -m coop_gym.experiment.protocol FLAGS --json``, run in this process."""
+    from coop_gym.experiment.protocol import main
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         status = main([*flags, "--json"])
     if status != 0:
-        raise RuntimeError(f"estimator.experiment.protocol {' '.join(flags)} exited with {status}")
+        raise RuntimeError(f"coop_gym.experiment.protocol {' '.join(flags)} exited with {status}")
     return json.loads(out.getvalue().strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 

@@ -335,7 +335,7 @@ def papers_experiment(results: Results) -> str:
     labels = ("uncooperative", "unresponsive", "cooperative")
     sections = [f"{head}\n{_provenance(record)}\n"]
     sections.append(
-        f"""`python -m estimator.experiment.protocol --seeds {report["seeds"]} --estimator NAME --json`, run by
+        f"""`python -m coop_gym.experiment.protocol --seeds {report["seeds"]} --estimator NAME --json`, run by
 `bench/papers_experiment.py` for each estimator ([Estimators](estimators.md#the-papers-experiment)):
 Bell & Asada's protocol (4 simulated subjects {TIMES} 25 trials, each asked to be uncooperative,
 unresponsive or cooperative), judged at the paper's {delay_s} s, mean ± std over seeds

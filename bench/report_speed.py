@@ -133,7 +133,7 @@ def cold_start(report: dict[str, Any], record: dict[str, Any]) -> str:
         verdicts.append(f"{'met' if cold <= goal_s else '**not met**'} by `{label}` ({cold:.2f} s)")
     return f"""The kernels compile on a fresh install and load from numba's cache after that; while a kernel is
 missing from the cache, its calls run as Python and a background process compiles it
-(`coop_gym/compiled/background.py`). `python bench/cold_start.py` times the first
+(`estimator/compiled/background.py`). `python bench/cold_start.py` times the first
 `gym.make`/`make_vec` + reset + step in fresh processes with an empty cache (cold; then how long
 after `make` the background compile finished) and with the cache the cold run filled (warm),
 {report["repeats"]} repeats, and the whole wait (import + make + reset + step) over the same wait for
@@ -181,7 +181,7 @@ jobs (a ratio under 1 means the second thread found no free core).
 The vector env's compiled step runs on several threads
 (`gym.make_vec(id, n, vectorization_mode="vector_entry_point", threads=k)`; the default,
 `threads=None`, uses every core this process may run on): each thread runs one GIL-free kernel
-that claims blocks of envs from an atomic counter (`coop_gym/compiled/atomics.py`) until none is
+that claims blocks of envs from an atomic counter (`estimator/compiled/atomics.py`) until none is
 left, each env drawing only from its own generator, so the results are bit-identical whatever the
 thread count (`tests/coop_gym/test_threads.py`). The calling thread does the step's autoresets
 while the worker wakes, and it waits for the worker's last block by reading the counter in a

@@ -28,7 +28,7 @@ from result_files import add_save_argument, save, summary
 
 import coop_gym  # noqa: F401  (registers the ids)
 from coop_gym.cli import positive_int
-from coop_gym.compiled import background
+from estimator.compiled import background
 
 
 def main(argv: list[str] | None = None) -> None:

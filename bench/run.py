@@ -54,8 +54,8 @@ import numpy as np
 from result_files import add_save_argument, save, summary
 
 from coop_gym.cli import positive_int as _positive_int
-from coop_gym.compiled import background
 from coop_gym.envs.core import available_threads
+from estimator.compiled import background
 
 ENV_ID = "CoopGym/SitToStand-v0"
 CARTPOLE_ID = "CartPole-v1"
@@ -195,7 +195,7 @@ class PPORunner:
 
 def interleaved(runners: list[Callable[[], int]], blocks: int) -> list[float]:
     """Rates (units/s) of the runners, their blocks alternating so load changes hit all of them."""
-    background.wait()  # compiled kernels, not their first calls' Python twins (coop_gym.compiled.background)
+    background.wait()  # compiled kernels, not their first calls' Python twins (estimator.compiled.background)
     units = [0] * len(runners)
     seconds = [0.0] * len(runners)
     for _ in range(blocks):

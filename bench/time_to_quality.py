@@ -232,7 +232,7 @@ def run(
     torch.set_num_threads(1)
     eval_seed = 1_000_000
     handbook = evaluate("handbook", env_id, "test", episodes, eval_seed)
-    from coop_gym.compiled import background
+    from estimator.compiled import background
 
     background.wait()  # on a fresh cache: train on compiled kernels, not their Python twins
     target = handbook.interval("success")[0]

@@ -40,8 +40,11 @@ ENV_IDS: dict[str, dict[str, Any]] = {
     "CoopGym/SitToStandHardIMM-v1": {"difficulty": "hard", "estimator": "imm"},
     "CoopGym/SitToStandHardHeldOut-v1": {"difficulty": "hard", "personas": "test"},
     # v2: the hard level chosen again against the widened blind family (coop_gym.model.difficulty);
-    # the other ids take it as difficulty="hard-v2".
+    # the variants that clients naming an env by id alone need (CleanRL's --env-id, RL Zoo, RLlib)
+    # are ids, the others take it as difficulty="hard-v2".
     "CoopGym/SitToStandHard-v2": {"difficulty": "hard-v2"},
+    "CoopGym/SitToStandHardDiscrete-v2": {"difficulty": "hard-v2", "action_type": "discrete"},
+    "CoopGym/SitToStandHardHeldOut-v2": {"difficulty": "hard-v2", "personas": "test"},
     # Unit: the same tasks with every observation feature scaled to about [-1, 1]
     # (contract.FEATURE_SCALES), learnable with a library's default settings; the physical
     # values are in info["unscaled_obs"]. New names, not a -v2 of the same ones: Gymnasium's
@@ -57,6 +60,17 @@ ENV_IDS: dict[str, dict[str, Any]] = {
         "observation_scale": "unit",
     },
     "CoopGym/SitToStandHardHeldOutUnit-v1": {"difficulty": "hard", "personas": "test", "observation_scale": "unit"},
+    "CoopGym/SitToStandHardUnit-v2": {"difficulty": "hard-v2", "observation_scale": "unit"},
+    "CoopGym/SitToStandHardDiscreteUnit-v2": {
+        "difficulty": "hard-v2",
+        "action_type": "discrete",
+        "observation_scale": "unit",
+    },
+    "CoopGym/SitToStandHardHeldOutUnit-v2": {
+        "difficulty": "hard-v2",
+        "personas": "test",
+        "observation_scale": "unit",
+    },
 }
 
 LEVEL_ENV_IDS: dict[str, str] = {

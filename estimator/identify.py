@@ -38,8 +38,8 @@ import scipy.optimize
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.checks import is_integer, is_number, python_scalar
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.checks import is_integer, is_number, python_scalar
 from estimator.kalman import NOMINAL, nominal_row
 from estimator.mode_kernels import N_MODES, mode_covariance_step, mode_mean_step
 from estimator.nominal import NominalModel

@@ -15,9 +15,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.checks import is_number, python_scalar
-from coop_gym.compiled.schema import index_table
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.checks import is_number, python_scalar
+from estimator.compiled.schema import index_table
 
 __all__ = ["JUDGE", "JUDGMENT_COLUMNS", "ThresholdJudgment", "judgment_substep", "threshold_judgment"]
 

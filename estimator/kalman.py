@@ -28,9 +28,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.schema import index_table
-from estimator.nominal import STATE_DIM, NominalModel, euler_transition
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.schema import index_table
+from estimator.nominal import EULER_FIELDS, STATE_DIM, NominalModel, euler_transition
 
 __all__ = [
     "NOMINAL",
@@ -40,18 +40,12 @@ __all__ = [
     "FastKalmanFilter",
     "PaperKalmanFilter",
     "kalman_step",
+    "nominal_parameters",
     "nominal_row",
-    "nominal_transition",
+    "predict_covariance",
 ]
 
-NOMINAL_FIELDS: tuple[str, ...] = (
-    "dt_s",
-    "damping_rate_per_s",
-    "voluntary_gain_per_s2",
-    "push_compliance_m_per_s2_n",
-    "push_gain_m_per_s_n",
-    "verbal_gain_m_per_s",
-)
+NOMINAL_FIELDS: tuple[str, ...] = EULER_FIELDS
 """The :class:`NominalModel` fields ``A`` and ``B`` are made of, packed as they are."""
 
 NOMINAL_DERIVED_COLUMNS: tuple[str, ...] = (
@@ -79,19 +73,15 @@ def nominal_row(model: NominalModel) -> NDArray[np.float64]:
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def nominal_transition(
-    nominal: NDArray[np.float64], push_force_n: float, verbal_cue: float
-) -> tuple[float, float, float, float, float, float]:
-    """:func:`~estimator.nominal.euler_transition` of a nominal row: ``(a01, a10, a11, a12, a23, b1)``."""
-    return euler_transition(  # type: ignore[no-any-return]
+def nominal_parameters(nominal: NDArray[np.float64]) -> tuple[float, float, float, float, float, float]:
+    """A nominal row's ``params`` of :func:`~estimator.nominal.euler_transition` and ``euler_step``."""
+    return (
         nominal[NOMINAL.dt_s],
         nominal[NOMINAL.damping_rate_per_s],
         nominal[NOMINAL.voluntary_gain_per_s2],
         nominal[NOMINAL.push_compliance_m_per_s2_n],
         nominal[NOMINAL.push_gain_m_per_s_n],
         nominal[NOMINAL.verbal_gain_m_per_s],
-        push_force_n,
-        verbal_cue,
     )
 
 
@@ -273,30 +263,51 @@ def _predict(
     m: NDArray[np.float64], P: NDArray[np.float64], nominal: NDArray[np.float64], push_force_n: float, verbal_cue: float
 ) -> None:
     """The prediction ``m = A m + B u``, ``P = A P A^T + Q``, A from the cues (eqs. 1, 6, 10 Euler-discretised)."""
-    a01, a10, a11, a12, a23, b1 = nominal_transition(nominal, push_force_n, verbal_cue)
+    transition = euler_transition(nominal_parameters(nominal), push_force_n, verbal_cue)
+    a01, a10, a11, a12, a23, b1 = transition
     m0, m1, m2, m3 = m[0], m[1], m[2], m[3]
     m[0] = m0 + a01 * m1
     m[1] = a10 * m0 + a11 * m1 + a12 * m2 + b1 * push_force_n
     m[2] = m2 + a23 * m3
     m[3] = m3
+    predict_covariance(P, STATE_DIM, transition, nominal)
+
+
+@njit(cache=True, error_model="numpy", fastmath=False, inline="always")
+def predict_covariance(
+    P: NDArray[np.float64], size: int, transition: tuple[float, ...], nominal: NDArray[np.float64]
+) -> None:
+    """``P = A P A^T + Q`` in place on ``P`` (size, size): the covariance prediction of every filter here.
+
+    ``size`` 4: the paper filter's ``[x, xdot, eta, xi]``; 3: a mode of the multiple-model filters,
+    ``[x, xdot, eta]`` with ``xi`` a known constant, whose ``F`` is ``A``'s upper-left block (``a23``
+    unused). ``A``'s rows are ``[1, a01, 0, 0]``, ``[a10, a11, a12, 0]``, ``[0, 0, 1, a23]``,
+    ``[0, 0, 0, 1]``: ``transition`` = ``(a01, a10, a11, a12, a23, b1)`` of
+    :func:`~estimator.nominal.euler_transition`; ``Q``'s diagonal comes from the ``nominal`` row.
+    Callers pass ``size`` as a literal, so each compiles to its own straight-line code.
+    """
+    a01, a10, a11, a12, a23, _ = transition
     # No temporaries: a heap allocation per call cost more than this arithmetic (the env
-    # calls it 5 times per agent step); the operations and their order are unchanged.
+    # calls it 5 times per agent step).
     # A P, in place column by column (column j of A P needs only column j of P).
-    for j in range(4):
-        p0, p1, p2, p3 = P[0, j], P[1, j], P[2, j], P[3, j]
+    for j in range(size):
+        p0, p1, p2 = P[0, j], P[1, j], P[2, j]
         P[0, j] = p0 + a01 * p1
         P[1, j] = a10 * p0 + a11 * p1 + a12 * p2
-        P[2, j] = p2 + a23 * p3
+        if size == STATE_DIM:
+            P[2, j] = p2 + a23 * P[3, j]
     # (A P) A^T + Q, in place row by row.
-    for i in range(4):
-        q0, q1, q2, q3 = P[i, 0], P[i, 1], P[i, 2], P[i, 3]
+    for i in range(size):
+        q0, q1, q2 = P[i, 0], P[i, 1], P[i, 2]
         P[i, 0] = q0 + a01 * q1
         P[i, 1] = a10 * q0 + a11 * q1 + a12 * q2
-        P[i, 2] = q2 + a23 * q3
+        if size == STATE_DIM:
+            P[i, 2] = q2 + a23 * P[i, 3]
     P[0, 0] += nominal[NOMINAL.q_position]
     P[1, 1] += nominal[NOMINAL.q_velocity]
     P[2, 2] += nominal[NOMINAL.q_intention]
-    P[3, 3] += nominal[NOMINAL.q_cooperativeness]
+    if size == STATE_DIM:
+        P[3, 3] += nominal[NOMINAL.q_cooperativeness]
 
 
 @njit(cache=True, error_model="numpy", fastmath=False, inline="always")

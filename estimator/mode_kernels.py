@@ -16,8 +16,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from estimator.kalman import NOMINAL, nominal_transition
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.kalman import NOMINAL, nominal_parameters, predict_covariance
+from estimator.nominal import euler_step, euler_transition
 
 __all__ = [
     "NON_FINITE_INPUT",
@@ -73,35 +74,21 @@ def _logaddexp(a: float, b: float) -> float:
 def mode_covariance_step(P: NDArray[np.float64], nominal: NDArray[np.float64], K: NDArray[np.float64]) -> float:
     """Predict and Joseph-update one mode covariance ``P`` (3, 3) in place; write the gain ``K`` (3,).
 
+    The prediction is the paper filter's (:func:`~estimator.kalman.predict_covariance`). The update
+    symmetrises the prediction first and expands the Joseph form for ``H = [1, 0, 0]`` entry by
+    entry, where the paper filter's (:func:`~estimator.kalman.kalman_step`) multiplies it out as
+    filterpy does: the two round differently, and each filter's recorded numbers are its own.
+
     Returns:
         The innovation variance ``S``.
     """
-    # F: the upper-left (3, 3) block of the nominal A, which the cues do not enter.
-    dt, f10, f11, f12, _, _ = nominal_transition(nominal, 0.0, 0.0)
-    # P = F P F^T + Q, with F's sparse rows [1, dt, 0], [f10, f11, f12], [0, 0, 1].
-    fp00 = P[0, 0] + dt * P[1, 0]
-    fp01 = P[0, 1] + dt * P[1, 1]
-    fp02 = P[0, 2] + dt * P[1, 2]
-    fp10 = f10 * P[0, 0] + f11 * P[1, 0] + f12 * P[2, 0]
-    fp11 = f10 * P[0, 1] + f11 * P[1, 1] + f12 * P[2, 1]
-    fp12 = f10 * P[0, 2] + f11 * P[1, 2] + f12 * P[2, 2]
-    fp20 = P[2, 0]
-    fp21 = P[2, 1]
-    fp22 = P[2, 2]
-    p00 = fp00 + dt * fp01 + nominal[NOMINAL.q_position]
-    p01 = f10 * fp00 + f11 * fp01 + f12 * fp02
-    p02 = fp02
-    p11 = f10 * fp10 + f11 * fp11 + f12 * fp12 + nominal[NOMINAL.q_velocity]
-    p12 = fp12
-    p22 = fp22 + nominal[NOMINAL.q_intention]
-    # Row 1 and 2 of (F P) F^T, column 0: symmetric counterparts computed from the other side.
-    p10 = fp10 + dt * fp11
-    p20 = fp20 + dt * fp21
-    p21 = f10 * fp20 + f11 * fp21 + f12 * fp22
+    # P = F P F^T + Q, F the upper-left (3, 3) block of the nominal A, which the cues do not enter.
+    predict_covariance(P, STATE_WIDTH, euler_transition(nominal_parameters(nominal), 0.0, 0.0), nominal)
+    p00, p11, p22 = P[0, 0], P[1, 1], P[2, 2]
     # Symmetrise the prediction (the two sides agree up to rounding).
-    p01 = 0.5 * (p01 + p10)
-    p02 = 0.5 * (p02 + p20)
-    p12 = 0.5 * (p12 + p21)
+    p01 = 0.5 * (P[0, 1] + P[1, 0])
+    p02 = 0.5 * (P[0, 2] + P[2, 0])
+    p12 = 0.5 * (P[1, 2] + P[2, 1])
     r = nominal[NOMINAL.r_position]
     # Scalar measurement H = [1, 0, 0]: S = H P H^T + R, K = P H^T / S.
     S = p00 + r
@@ -140,29 +127,13 @@ def mode_mean_step(
 ) -> float:
     """Predict ``m = F m + B_xi u`` and update with gain ``K``, in place on ``m`` (3,).
 
-    The mean is predicted in the difference form of eqs. 1 and 6 (``xdot + dt (...)``), not by
-    multiplying out :func:`~estimator.nominal.euler_transition`'s entries: the two round
-    differently, and the multiple-model estimators' recorded numbers are this form's.
+    The mean is predicted by :func:`~estimator.nominal.euler_step` (the difference form of
+    eqs. 1 and 6), whose rounding the multiple-model estimators' recorded numbers are.
 
     Returns:
         The innovation ``y - H m`` of the predicted mean.
     """
-    dt = nominal[NOMINAL.dt_s]
-    m0, m1, m2 = m[0], m[1], m[2]
-    # eq. 1 (Euler): x' = x + dt xdot ; xdot' = xdot + dt (-lambda1 xdot + k1 (eta - x) + k2 c_p)
-    p0 = m0 + dt * m1
-    p1 = m1 + dt * (
-        -nominal[NOMINAL.damping_rate_per_s] * m1
-        + nominal[NOMINAL.voluntary_gain_per_s2] * (m2 - m0)
-        + nominal[NOMINAL.push_compliance_m_per_s2_n] * push_force_n
-    )
-    # eq. 6: eta' = eta + xi (k3 c_p + k4 c_v) dt -- the only place the mode enters.
-    p2 = (
-        m2
-        + xi
-        * (nominal[NOMINAL.push_gain_m_per_s_n] * push_force_n + nominal[NOMINAL.verbal_gain_m_per_s] * verbal_cue)
-        * dt
-    )
+    p0, p1, p2 = euler_step(nominal_parameters(nominal), m[0], m[1], m[2], xi, push_force_n, verbal_cue)
     innovation = measured_position_m - p0
     m[0] = p0 + K[0] * innovation
     m[1] = p1 + K[1] * innovation

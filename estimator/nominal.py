@@ -24,13 +24,24 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.checks import is_number, python_scalar
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.checks import is_number, python_scalar
 
-__all__ = ["STATE_DIM", "NominalModel", "euler_transition"]
+__all__ = ["EULER_FIELDS", "STATE_DIM", "NominalModel", "euler_step", "euler_transition"]
 
 STATE_DIM = 4
 """Length of the paper filter's state ``[x, xdot, eta, xi]``."""
+
+EULER_FIELDS: tuple[str, ...] = (
+    "dt_s",
+    "damping_rate_per_s",
+    "voluntary_gain_per_s2",
+    "push_compliance_m_per_s2_n",
+    "push_gain_m_per_s_n",
+    "verbal_gain_m_per_s",
+)
+"""The :class:`NominalModel` fields eqs. 1 and 6 read, in the order of the ``params`` tuple of
+:func:`euler_transition` and :func:`euler_step`."""
 
 
 def _require_positive(name: str, value: Any, *, allow_zero: bool = False) -> float:
@@ -71,7 +82,7 @@ class NominalModel:
     push_gain_m_per_s_n: float = 0.006
     verbal_gain_m_per_s: float = 0.12
     position_noise_std_m: float = 0.004
-    # The paper filter's tuning, calibrated with estimator/experiment/calibrate.py so that the
+    # The paper filter's tuning, calibrated with coop_gym/experiment/calibrate.py so that the
     # thresholded judgment on the paper's protocol lands near the paper's Table I.
     velocity_process_std_m_per_s: float = 0.015
     intention_process_std_m: float = 0.002
@@ -112,25 +123,19 @@ class NominalModel:
             verbal_cue: Verbal cue ``c_v`` in {-1, 0, +1} during the step.
         """
         a = np.eye(STATE_DIM)
-        a[0, 1], a[1, 0], a[1, 1], a[1, 2], a[2, 3], _ = self._euler_transition(push_force_n, verbal_cue)
+        entries = euler_transition(self.euler_parameters, float(push_force_n), float(verbal_cue))
+        a[0, 1], a[1, 0], a[1, 1], a[1, 2], a[2, 3], _ = entries
         return a
 
-    def _euler_transition(self, push_force_n: float, verbal_cue: float) -> tuple[float, ...]:
-        return euler_transition(  # type: ignore[no-any-return]
-            self.dt_s,
-            self.damping_rate_per_s,
-            self.voluntary_gain_per_s2,
-            self.push_compliance_m_per_s2_n,
-            self.push_gain_m_per_s_n,
-            self.verbal_gain_m_per_s,
-            float(push_force_n),
-            float(verbal_cue),
-        )
+    @property
+    def euler_parameters(self) -> tuple[float, ...]:
+        """The fields of :data:`EULER_FIELDS`: the ``params`` of :func:`euler_transition` and :func:`euler_step`."""
+        return tuple(getattr(self, name) for name in EULER_FIELDS)
 
     @property
     def input_vector(self) -> NDArray[np.float64]:
         """``B`` (4,): the push force's direct effect on velocity, ``k2*dt`` (eq. 1)."""
-        return np.array([0.0, self._euler_transition(0.0, 0.0)[5], 0.0, 0.0])
+        return np.array([0.0, euler_transition(self.euler_parameters, 0.0, 0.0)[5], 0.0, 0.0])
 
     @property
     def measurement_matrix(self) -> NDArray[np.float64]:
@@ -172,20 +177,14 @@ class NominalModel:
 
 @njit(cache=True, error_model="numpy", inline="always")
 def euler_transition(
-    dt_s: float,
-    damping_rate_per_s: float,
-    voluntary_gain_per_s2: float,
-    push_compliance_m_per_s2_n: float,
-    push_gain_m_per_s_n: float,
-    verbal_gain_m_per_s: float,
-    push_force_n: float,
-    verbal_cue: float,
+    params: tuple[float, ...], push_force_n: float, verbal_cue: float
 ) -> tuple[float, float, float, float, float, float]:
     """The entries of ``A`` and ``B`` that differ from ``I`` and 0: eqs. 1 and 6, Euler-discretised.
 
-    The one form of the nominal transition: :meth:`NominalModel.transition_matrix`, the
-    paper filter's :func:`~estimator.kalman.kalman_step` and the multiple-model covariance step
-    read it from here.
+    The matrix form of the nominal transition: :meth:`NominalModel.transition_matrix`, the
+    paper filter's :func:`~estimator.kalman.kalman_step` and every covariance prediction read it
+    from here. ``params`` = ``(dt, lambda1, k1, k2, k3, k4)``, the fields of :data:`EULER_FIELDS`
+    (symbols as in :class:`NominalModel`).
 
     Returns:
         ``(a01, a10, a11, a12, a23, b1)``: eq. 1, ``x' = x + dt xdot`` and
@@ -194,13 +193,44 @@ def euler_transition(
         ``eta' = eta + xi (k3 c_p + k4 c_v) dt`` (bilinear, so the cue enters ``A``), gives
         ``a23 = (k3 c_p + k4 c_v) dt``.
     """
-    a01 = dt_s
-    a10 = -voluntary_gain_per_s2 * dt_s
-    a11 = 1.0 - damping_rate_per_s * dt_s
-    a12 = voluntary_gain_per_s2 * dt_s
-    a23 = (push_gain_m_per_s_n * push_force_n + verbal_gain_m_per_s * verbal_cue) * dt_s
-    b1 = push_compliance_m_per_s2_n * dt_s
+    dt, lambda1, k1, k2, k3, k4 = params
+    a01 = dt
+    a10 = -k1 * dt
+    a11 = 1.0 - lambda1 * dt
+    a12 = k1 * dt
+    a23 = (k3 * push_force_n + k4 * verbal_cue) * dt
+    b1 = k2 * dt
     return a01, a10, a11, a12, a23, b1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def euler_step(
+    params: tuple[float, ...],
+    x: Any,
+    xdot: Any,
+    eta: Any,
+    xi: Any,
+    push_force_n: Any,
+    verbal_cue: Any,
+) -> tuple[Any, Any, Any]:
+    """One Euler step of eqs. 1 and 6 in their difference form: ``(x', xdot', eta')``.
+
+    The same discretisation as :func:`euler_transition`, associated as the equations are
+    written (``xdot + dt (...)``) rather than multiplied out of ``A``'s entries. The two round
+    differently, and each keeps its recorded numbers: the paper filter's mean is ``A m + B u``
+    (:func:`euler_transition`), the multiple-model filters' mode means
+    (:func:`~estimator.mode_kernels.mode_mean_step`) and the nominal trials
+    (:mod:`estimator.nominal_trials`) are this form. Scalars or arrays of one shape (NumPy's
+    element-wise operations, the same numbers); ``params`` = ``(dt, lambda1, k1, k2, k3, k4)``,
+    the fields of :data:`EULER_FIELDS` (symbols as in :class:`NominalModel`).
+    """
+    dt, lambda1, k1, k2, k3, k4 = params
+    # eq. 1: x' = x + dt xdot ; xdot' = xdot + dt (-lambda1 xdot + k1 (eta - x) + k2 c_p)
+    x_next = x + dt * xdot
+    xdot_next = xdot + dt * (-lambda1 * xdot + k1 * (eta - x) + k2 * push_force_n)
+    # eq. 6: eta' = eta + xi (k3 c_p + k4 c_v) dt -- the only place the mode enters.
+    eta_next = eta + xi * (k3 * push_force_n + k4 * verbal_cue) * dt
+    return x_next, xdot_next, eta_next
 
 
 guard_kernel_cache(__name__)

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimator.identify import Trial
-from estimator.nominal import NominalModel
+from estimator.nominal import NominalModel, euler_step
 
 __all__ = ["simulate_nominal", "simulate_nominal_trials"]
 
@@ -29,23 +29,17 @@ def _simulate_batch(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Simulate (n, T) cue sequences; return measurements (n, T) and states (n, T, 4)."""
     n, t_len = push_force_n.shape
-    dt = model.dt_s
     q_std = np.sqrt(np.diag(model.process_covariance))[:3]
     states = np.empty((n, t_len, 4))
     s = np.broadcast_to(initial_state, (n, 3)).astype(np.float64).copy()
     states[:, 0, :3] = s
     states[:, :, 3] = xi
-    lam, k1, k2 = model.damping_rate_per_s, model.voluntary_gain_per_s2, model.push_compliance_m_per_s2_n
-    k3, k4 = model.push_gain_m_per_s_n, model.verbal_gain_m_per_s
     for t in range(1, t_len):
-        cp, cv = push_force_n[:, t], verbal_cue[:, t]
-        x, xdot, eta = s[:, 0], s[:, 1], s[:, 2]
         w = rng.normal(0.0, 1.0, (n, 3)) * q_std
-        # eq. 1 (Euler, as NominalModel.transition_matrix and B): the same discretisation the filter assumes.
-        new_x = x + dt * xdot
-        new_xdot = xdot + dt * (-lam * xdot + k1 * (eta - x) + k2 * cp)
-        # eq. 6: eta' = eta + xi (k3 c_p + k4 c_v) dt, xi held at its given value (no random walk).
-        new_eta = eta + xi[:, t] * (k3 * cp + k4 * cv) * dt
+        # eqs. 1 and 6 as the multiple-model filters predict them, xi held at its given value (no random walk).
+        new_x, new_xdot, new_eta = euler_step(
+            model.euler_parameters, s[:, 0], s[:, 1], s[:, 2], xi[:, t], push_force_n[:, t], verbal_cue[:, t]
+        )
         s = np.stack([new_x, new_xdot, new_eta], axis=1) + w
         states[:, t, :3] = s
     # y = H s + v, v ~ N(0, R).

@@ -30,7 +30,7 @@ std ``r`` is inflated above the camera's, and ``mode_jitter_per_s`` re-draws a p
 uniformly at that rate so no mode is ever locked out.
 
 Randomness: every particle draw comes from each env's own ``numpy.random.Generator`` (through
-:mod:`coop_gym.compiled.rng`, so the kernel's numbers are the ``Generator``'s), drawn in a fixed order
+:mod:`estimator.compiled.rng`, so the kernel's numbers are the ``Generator``'s), drawn in a fixed order
 (per step: particles in order, ``n_noises`` normals each, then one uniform for the jitter of each
 particle when the jitter is on, then one uniform if resampling) -- the reference
 implementation :func:`reference_run` in plain Python draws the same numbers and is held equal
@@ -51,9 +51,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.checks import check_integer, check_number
-from coop_gym.compiled.rng import bit_generator_row, random, standard_normal
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.checks import check_integer, check_number
+from estimator.compiled.rng import bit_generator_row, random, standard_normal
 
 __all__ = ["SwitchingParticleFilter", "reference_run"]
 

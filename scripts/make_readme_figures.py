@@ -26,10 +26,10 @@ Figures (each deterministic given the seeds below, each kept under ``--max-kb``,
   ``python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle
   --personas test --episodes N --plot FILE`` draws it.
 * ``protocol_trace.png`` and ``protocol_confusion.png`` -- the paper's experiment
-  (:mod:`estimator.experiment.protocol`): a Fig. 6-style trace of one trial and the confusion matrix of
-  requested vs judged cooperativeness beside the paper's (:func:`estimator.experiment.protocol.plot_trial`,
-  :func:`estimator.experiment.protocol.plot_confusion`; seed 0, 4 subjects x 25 trials, the paper's
-  thresholded Kalman filter), as ``python -m estimator.experiment.protocol --seed 0 --plot FILE
+  (:mod:`coop_gym.experiment.protocol`): a Fig. 6-style trace of one trial and the confusion matrix of
+  requested vs judged cooperativeness beside the paper's (:func:`coop_gym.experiment.protocol.plot_trial`,
+  :func:`coop_gym.experiment.protocol.plot_confusion`; seed 0, 4 subjects x 25 trials, the paper's
+  thresholded Kalman filter), as ``python -m coop_gym.experiment.protocol --seed 0 --plot FILE
   --plot-confusion FILE`` draws them.
 
 Every figure is rendered headless (pygame off-screen, matplotlib Agg) and then shrunk: scaled
@@ -179,13 +179,13 @@ def make_outcomes(out: Path, episodes: int) -> list[Path]:
 
 
 def make_protocol(out: Path) -> list[Path]:
-    """``protocol_trace.png``, ``protocol_confusion.png`` from :mod:`estimator.experiment.protocol`, if it can plot."""
-    from estimator.experiment import protocol
+    """``protocol_trace.png``, ``protocol_confusion.png`` from :mod:`coop_gym.experiment.protocol`, if it can plot."""
+    from coop_gym.experiment import protocol
 
     plot_trial = getattr(protocol, "plot_trial", None)
     plot_confusion = getattr(protocol, "plot_confusion", None)
     if plot_trial is None or plot_confusion is None:
-        print("  skipped: estimator.experiment.protocol has no plot_trial/plot_confusion")
+        print("  skipped: coop_gym.experiment.protocol has no plot_trial/plot_confusion")
         return []
     # The paper's experiment, seed 0: 4 subjects x 25 trials, the paper's thresholded filter.
     data = protocol.run_experiment(protocol.ProtocolConfig(), 0)

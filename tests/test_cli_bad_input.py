@@ -1,7 +1,7 @@
 """Bad command-line flags: exit status 2 and a message naming the problem on stderr.
 
 Covers the command lines that exist: ``python train.py``, ``python -m agents.evaluate``,
-``python -m agents.record``, ``python -m estimator.experiment.protocol`` and the ``bench/`` scripts
+``python -m agents.record``, ``python -m coop_gym.experiment.protocol`` and the ``bench/`` scripts
 (``run.py``, ``cold_start.py``, ``render.py``, ``cleanrl_defaults.py``, ``time_to_quality.py``).
 A command line that no longer imports, or has lost its ``main(argv)``, fails. Cases call
 ``main(argv)`` in-process (argparse exits through ``SystemExit``) under an alarm, so a bad flag
@@ -113,40 +113,40 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.evaluate", "unknown persona", ["--agent", "random", "--personas", "nobody"], r"--personas: unknown"),
     ("agents.evaluate", "unknown env", ["--agent", "random", "--env", "Nope-v0"], r"--env: unknown env id 'Nope-v0'"),
     ("agents.evaluate", "unknown backend", ["--agent", "random", "--backend", "gpu"], r"--backend: invalid choice"),
-    ("estimator.experiment.protocol", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
+    ("coop_gym.experiment.protocol", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "subjects 0",
         ["--subjects", "0"],
         r"--subjects: expected a positive integer, got 0",
     ),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "trials not a number",
         ["--trials", "x"],
         r"--trials: expected a positive integer, got 'x'",
     ),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "negative seed",
         ["--seed", "-1"],
         r"--seed: expected a non-negative integer seed",
     ),
-    ("estimator.experiment.protocol", "seeds 0", ["--seeds", "0"], r"--seeds: expected a positive integer, got 0"),
+    ("coop_gym.experiment.protocol", "seeds 0", ["--seeds", "0"], r"--seeds: expected a positive integer, got 0"),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "unknown estimator",
         ["--estimator", "particle"],
         r"--estimator: invalid choice: 'particle'",
     ),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "unknown decision",
         ["--decision", "vote"],
         r"--decision: invalid choice: 'vote'",
     ),
-    ("estimator.experiment.protocol", "unknown persona", ["--personas", "nobody"], r"nobody"),
-    ("estimator.experiment.protocol", "plot not png", ["--plot", "trace.txt"], r"plot paths must end in \.png"),
+    ("coop_gym.experiment.protocol", "unknown persona", ["--personas", "nobody"], r"nobody"),
+    ("coop_gym.experiment.protocol", "plot not png", ["--plot", "trace.txt"], r"plot paths must end in \.png"),
     # Issue #13's table: a non-coop_gym env id, seeds outside [0, 2**32), plot types, checkpoints.
     (
         "train.py",
@@ -202,33 +202,33 @@ CASES: list[tuple[str, str, list[str], str]] = [
         ["--agent", "handbook", "--seed", str(2**63 - 1), "--out", "v"],
         r"below 2\*\*32",
     ),
-    ("estimator.experiment.protocol", "seed 2**64", ["--seed", str(2**64)], r"--seed: seeds must be below 2\*\*32"),
+    ("coop_gym.experiment.protocol", "seed 2**64", ["--seed", str(2**64)], r"--seed: seeds must be below 2\*\*32"),
     # Issue #13: numbers that are not integers where counts and seeds are expected.
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "subjects 2.5",
         ["--subjects", "2.5"],
         r"--subjects: expected a positive integer, got '2\.5'",
     ),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "trials 1e3",
         ["--trials", "1e3"],
         r"--trials: expected a positive integer, got '1e3'",
     ),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "seed nan",
         ["--seed", "nan"],
         r"--seed: expected a non-negative integer seed, got 'nan'",
     ),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "seeds True",
         ["--seeds", "True"],
         r"--seeds: expected a positive integer, got 'True'",
     ),
-    ("estimator.experiment.protocol", "seed 2**32", ["--seed", str(2**32)], r"--seed: seeds must be below 2\*\*32"),
+    ("coop_gym.experiment.protocol", "seed 2**32", ["--seed", str(2**32)], r"--seed: seeds must be below 2\*\*32"),
     ("bench/run.py", "repeats inf", ["--repeats", "inf"], r"--repeats: expected a positive integer, got 'inf'"),
     ("bench/run.py", "unknown flag", ["--bogus"], r"unrecognized arguments: --bogus"),
     ("bench/run.py", "repeats 0", ["--repeats", "0"], r"--repeats: expected a positive integer, got 0"),
@@ -291,7 +291,7 @@ LATE_CASES: list[tuple[str, str, list[str], str]] = [
         r"--out: .*a_file is not a folder",
     ),
     (
-        "estimator.experiment.protocol",
+        "coop_gym.experiment.protocol",
         "plot in a folder that cannot be created",
         ["--subjects", "1", "--trials", "1", "--plot", "{blocked}/trace.png"],
         r"a_file",
@@ -451,8 +451,8 @@ def test_bad_output_path_exits_2_before_the_work(cli: str, argv: list[str], matc
 END_TO_END = {
     "train.py": ([sys.executable, str(ROOT / "train.py"), "--timesteps", "0"], r"--timesteps must be >= 1"),
     "agents.evaluate": ([sys.executable, "-m", "agents.evaluate", "--agent", "nobody"], r"neither a scripted agent"),
-    "estimator.experiment.protocol": (
-        [sys.executable, "-m", "estimator.experiment.protocol", "--subjects", "0"],
+    "coop_gym.experiment.protocol": (
+        [sys.executable, "-m", "coop_gym.experiment.protocol", "--subjects", "0"],
         r"positive integer",
     ),
     "bench/run.py": ([sys.executable, str(ROOT / "bench" / "run.py"), "--bogus"], r"unrecognized arguments"),
@@ -504,7 +504,7 @@ def _left(folder: Path) -> list[str]:
             ["--agent", "random", "--episodes", "2", "--n-envs", "2", "--csv", "{out}/a.csv",
              "--json-out", "{out}/a.json", "--plot", "{out}/a.png"],
         ),
-        ("estimator.experiment.protocol", ["--subjects", "1", "--trials", "1", "--plot", "{out}/trace.png"]),
+        ("coop_gym.experiment.protocol", ["--subjects", "1", "--trials", "1", "--plot", "{out}/trace.png"]),
         ("agents.record", ["--agent", "handbook", "--max-steps", "5", "--out", "{out}"]),
         ("train.py", ["--timesteps", "64", "--eval-episodes", "1", "--baselines", "", "--out", "{out}"]),
     ],

@@ -1,27 +1,42 @@
 """Imports run one way (STYLE.md "Layout", docs/ARCHITECTURE.md): no upward import, no cycle.
 
-Imports are read with ``ast`` from every module of the project, function-local imports
-included (a lazy import is still a dependency).
+Two checks. The packages: each is imported, every module of it, in a fresh interpreter, and
+``sys.modules`` must then hold no higher package (a package's ``__init__`` runs at the import of
+any of its modules, which an ``ast`` scan of the module does not see). The modules: imports are
+read with ``ast`` from every module of the project, function-local imports included (a lazy
+import is still a dependency), and each must run down :data:`LAYERS`.
 """
 
 from __future__ import annotations
 
 import ast
+import json
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
+PACKAGES: tuple[str, ...] = ("estimator", "coop_gym", "agents")
+"""The packages, lowest first: importing one loads none after it."""
+
+HEAVY = ("torch", "stable_baselines3", "ray")
+"""Loaded only from ``agents`` up (STYLE.md "Layout")."""
+
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("coop_gym.compiled",),
+    ("estimator.compiled",),
     ("coop_gym.model", "estimator"),
     ("coop_gym",),
-    ("estimator.experiment", "agents"),
+    ("coop_gym.experiment", "agents"),
     ("train", "scripts", "bench"),
 )
 """The layer order, lowest first: a module may import its own group and any lower layer.
 
 Groups of one layer (e.g. the model and the filters) may not import each other.
-``coop_gym.model`` is its own group below the rest of ``coop_gym`` (the envs, registration, cli).
+``estimator.compiled`` is its own group below the filters; ``coop_gym.model`` is its own group
+below the rest of ``coop_gym`` (the envs, registration, cli), and ``coop_gym.experiment`` above it.
 """
 
 KNOWN_CYCLES: frozenset[frozenset[str]] = frozenset()
@@ -79,6 +94,40 @@ def group_of(name: str) -> tuple[int, str]:
 def import_graph() -> dict[str, set[str]]:
     modules = project_modules()
     return {name: imports_of(name, path, modules) for name, path in modules.items()}
+
+
+def _fresh_import(modules: list[str]) -> list[str]:
+    """``sys.modules`` of a fresh interpreter after importing ``modules``."""
+    code = (
+        "import importlib, json, sys\n"
+        f"for name in {modules!r}:\n"
+        "    importlib.import_module(name)\n"
+        "print(json.dumps(sorted(sys.modules)))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300, check=True
+    )
+    return list(json.loads(out.stdout.splitlines()[-1]))
+
+
+def _modules_of(package: str) -> list[str]:
+    return sorted(n for n in project_modules() if n.split(".")[0] == package and not n.endswith("__main__"))
+
+
+@pytest.mark.parametrize("package", PACKAGES[:-1])
+def test_importing_a_package_loads_no_higher_one(package: str) -> None:
+    higher = set(PACKAGES[PACKAGES.index(package) + 1 :]) | set(HEAVY)
+    loaded = {name.partition(".")[0] for name in _fresh_import(_modules_of(package))}
+    assert package in loaded
+    assert not loaded & higher, f"importing {package} loads {sorted(loaded & higher)}"
+
+
+def test_the_compiled_boundary_loads_no_other_project_module() -> None:
+    boundary = [n for n in _modules_of("estimator") if group_of(n)[0] == 0]
+    loaded = _fresh_import(boundary)
+    project = [n for n in loaded if n.partition(".")[0] in PACKAGES]
+    assert boundary and set(boundary) <= set(project)
+    assert [n for n in project if n != "estimator" and n not in boundary] == []
 
 
 def test_every_import_runs_down_the_layers() -> None:
@@ -150,16 +199,17 @@ def test_the_checker_sees_cycles_and_upward_imports() -> None:
     assert group_of("coop_gym.model.dynamics") == (1, "coop_gym.model")
     assert group_of("coop_gym.envs.core") == (2, "coop_gym")
     assert group_of("estimator.identify") == (1, "estimator")
-    assert group_of("estimator.experiment.protocol") == (3, "estimator.experiment")
-    assert group_of("coop_gym.compiled.rng") == (0, "coop_gym.compiled")
+    assert group_of("coop_gym.experiment.protocol") == (3, "coop_gym.experiment")
+    assert group_of("estimator.compiled.rng") == (0, "estimator.compiled")
 
 
-def test_estimator_filters_import_nothing_of_coop_gym() -> None:
-    graph = import_graph()
-
-    def leaked(target: str) -> bool:
-        return target.startswith("coop_gym") and not target.startswith("coop_gym.compiled")
-
-    filters = [name for name in graph if name.startswith("estimator") and not name.startswith("estimator.experiment")]
-    leaks = {name: sorted(t for t in graph[name] if leaked(t)) for name in filters}
-    assert filters and not {k: v for k, v in leaks.items() if v}
+def test_no_module_imports_a_higher_package() -> None:
+    rank = {package: i for i, package in enumerate(PACKAGES)}
+    bad = [
+        f"{name} imports {target}"
+        for name, imported in sorted(import_graph().items())
+        if name.split(".")[0] in rank
+        for target in sorted(imported)
+        if rank.get(target.split(".")[0], -1) > rank[name.split(".")[0]]
+    ]
+    assert not bad, "imports of a higher package:\n" + "\n".join(bad)

@@ -33,7 +33,7 @@ def test_mypy_is_clean() -> None:
 
 
 def test_every_kernel_uses_numpys_error_model() -> None:
-    """Every project kernel is ``@njit(cache=True, error_model="numpy")`` but one (``coop_gym.compiled``)."""
+    """Every project kernel is ``@njit(cache=True, error_model="numpy")`` but one (``estimator.compiled``)."""
     import re
 
     decorators = []

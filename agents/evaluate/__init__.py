@@ -58,8 +58,8 @@ from agents.evaluate.results import (
 )
 from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from coop_gym.cli import SEED_LIMIT, output_path_problem
-from coop_gym.compiled.checks import check_integer
 from coop_gym.model.personas import Persona, resolve_personas
+from estimator.compiled.checks import check_integer
 
 __all__ = [
     "BLIND_AGENTS",

@@ -23,7 +23,7 @@ import coop_gym  # noqa: F401 -- registers the env ids
 from agents.hyperparams import ALGORITHMS, TrainingConfig
 from agents.sb3_vec import make_sb3_vec_env
 from coop_gym.cli import SEED_LIMIT
-from coop_gym.compiled.checks import check_integer
+from estimator.compiled.checks import check_integer
 
 __all__ = [
     "LinearDecay",

@@ -10,13 +10,13 @@ from gymnasium import spaces
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.checks import is_integer
-from coop_gym.compiled.schema import index_table
 from coop_gym.envs.config import (
     ACTION_TYPES,
 )
 from coop_gym.model.params import Cues
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.checks import is_integer
+from estimator.compiled.schema import index_table
 
 __all__ = [
     "ACTION_SHAPE",

@@ -11,7 +11,6 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from coop_gym.compiled.checks import check_choice
 from coop_gym.envs.actions import action_space_for
 from coop_gym.envs.config import (
     ACTION_TYPES,
@@ -34,6 +33,7 @@ from coop_gym.envs.observation import (
 from coop_gym.model.difficulty import Difficulty, get_difficulty
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas
+from estimator.compiled.checks import check_choice
 from estimator.judgment import ThresholdJudgment
 
 __all__ = [

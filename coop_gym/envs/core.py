@@ -12,10 +12,10 @@ Randomness: env ``i`` draws only from its own ``numpy.random.Generator`` -- at r
 order of :func:`coop_gym.envs.reset.draw_reset`, then ``substeps x NORMALS_PER_SUBSTEP``
 standard normals per non-lift step. So env ``i`` of a vector env seeded ``s`` and a single env
 seeded ``s + i`` see identical streams. The kernels draw through the generator's own C
-functions with NumPy's algorithms (:mod:`coop_gym.compiled.rng`), so the ``Generator`` object stays the
+functions with NumPy's algorithms (:mod:`estimator.compiled.rng`), so the ``Generator`` object stays the
 single source of truth. Envs seeded together (:meth:`SitToStandCore.seed_envs`, the vector
 env's ``reset(seed=...)``) keep that ``Generator``'s PCG64 state in arrays instead
-(:mod:`coop_gym.compiled.seeding`) until ``rngs[i]`` asks for the object. A batch of at least 2 x
+(:mod:`estimator.compiled.seeding`) until ``rngs[i]`` asks for the object. A batch of at least 2 x
 :data:`~coop_gym.envs.threads.MIN_ENVS_PER_THREAD` envs steps on several threads
 (:mod:`coop_gym.envs.threads`), with the same numbers.
 """
@@ -28,9 +28,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.compiled.checks import is_integer
-from coop_gym.compiled.rng import G_STATE
-from coop_gym.compiled.seeding import EnvGenerators
 from coop_gym.envs.actions import CMD, CMD_COLUMNS
 from coop_gym.envs.config import LiftCriteria, RewardWeights
 from coop_gym.envs.layout import (
@@ -52,6 +49,9 @@ from coop_gym.envs.threads import available_threads, check_threads, plan_threads
 from coop_gym.model.dynamics import DELAY_LINE_LENGTH, PARAM_COLUMNS, STATE_COLUMNS
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona
+from estimator.compiled.checks import is_integer
+from estimator.compiled.rng import G_STATE
+from estimator.compiled.seeding import EnvGenerators
 from estimator.judgment import JUDGMENT_COLUMNS, ThresholdJudgment
 from estimator.kalman import NOMINAL_COLUMNS
 from estimator.nominal import STATE_DIM, NominalModel
@@ -212,8 +212,8 @@ class SitToStandCore:
     def seed_envs(self, indices: NDArray[np.int64], seeds: NDArray[np.uint64]) -> None:
         """Env ``indices[r]`` draws from ``Generator(PCG64(seeds[r]))`` from now on, all seeded in one call.
 
-        The same numbers as :meth:`set_rng` with those generators (``coop_gym.compiled.seeding``); seeds up to
-        ``coop_gym.compiled.seeding.MAX_BATCH_SEED``.
+        The same numbers as :meth:`set_rng` with those generators (``estimator.compiled.seeding``); seeds up to
+        ``estimator.compiled.seeding.MAX_BATCH_SEED``.
         """
         self.rngs.seed(indices, seeds)
         self._chunks = 0

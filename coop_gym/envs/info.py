@@ -9,13 +9,14 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.envs.arguments import SitToStandConfig
 from coop_gym.envs.config import (
     Outcome,
 )
-from coop_gym.envs.observation import FEATURES, PROBABILITY_FEATURES, observation_space_for
+from coop_gym.envs.observation import PROBABILITY_FEATURES
 from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
+from coop_gym.envs.step import select_and_clip
+from estimator.compiled.cache import guard_kernel_cache
 
 __all__ = [
     "NUMERIC_INFO_KEYS",
@@ -29,21 +30,26 @@ __all__ = [
 _OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)
 _OUTCOME_LABEL_ARRAY = np.array(_OUTCOME_LABELS, dtype=object)
 
-# report_info unpacks report rows by position: fail at import if the layout moved (an explicit
-# check, not an assert: it must hold under python -O too).
-_REPORT_LAYOUT = (
-    *FEATURES,
-    *("reward_success", "reward_unsafe", "reward_premature", "reward_time", "reward_force", "reward", "outcome"),
-    *("push_force_n", "true_x_m", "true_xdot_m_per_s", "true_eta_m", "info_true_xi", "persona_index"),
+_INFO_ENTRIES: tuple[tuple[str, int, str], ...] = (
+    ("true_x_m", REPORT.true_x_m, "float"),
+    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, "float"),
+    ("true_eta_m", REPORT.true_eta_m, "float"),
+    ("true_xi", REPORT.info_true_xi, "int"),
+    ("persona", REPORT.persona_index, "label"),
+    ("outcome", REPORT.outcome, "label"),
+    ("judgment", REPORT.judgment, "int"),
+    ("xi_estimate", REPORT.xi_hat, "float"),
+    ("push_force_n", REPORT.push_force_n, "float"),
+    ("verbal_cue", REPORT.verbal_cue, "int"),
+    ("elapsed_s", REPORT.elapsed_s, "float"),
 )
+"""The one list of the info's keys, in order: (key, report column, kind). A ``"label"`` is a name
+looked up by the column's integer (the persona's, the outcome's); its number is the key of
+:data:`_CODE_KEYS` in the numeric info and beside the label in the vector info. Every info adds
+the reward terms (:data:`~coop_gym.envs.report.REWARD_TERMS`) and, with a multiple-model
+estimator, the mode probabilities."""
 
-
-def _check_report_layout() -> None:
-    if REPORT_COLUMNS != _REPORT_LAYOUT:
-        raise RuntimeError("REPORT_COLUMNS changed: update report_info")
-
-
-_check_report_layout()
+_CODE_KEYS = {"persona": "persona_index", "outcome": "outcome_code"}
 
 
 def report_info(r: list[float], persona_names: Sequence[str], probabilities: bool) -> dict[str, Any]:
@@ -54,7 +60,7 @@ def report_info(r: list[float], persona_names: Sequence[str], probabilities: boo
         persona_names: Names of the env's personas, by index.
         probabilities: Add ``xi_probabilities`` (a multiple-model estimator runs).
     """
-    # Unpacked by position (checked against REPORT_COLUMNS at import): one bytecode
+    # Unpacked by position (checked against _INFO_ENTRIES at import): one bytecode
     # instead of ~25 indexed look-ups on the hot path.
     (_pos, _force, verbal, _since, _x_hat, _xdot_hat, _eta_hat, xi_hat, _xi_std, judgment, elapsed,
      p_uncoop, p_unresp, p_coop, _true_xi_feature,
@@ -85,39 +91,54 @@ def report_info(r: list[float], persona_names: Sequence[str], probabilities: boo
     return info
 
 
-# The vector info's keys in order: (key, report column, as int) or a derived entry (None); report_info
-# gives the same keys (bar persona_index and outcome_code), one row at a time, unpacked by position
-# for speed (tests/coop_gym/test_contract.py holds the two equal).
-_INFO_COLUMNS: tuple[tuple[str, int | None, bool], ...] = (
-    ("true_x_m", REPORT.true_x_m, False),
-    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
-    ("true_eta_m", REPORT.true_eta_m, False),
-    ("true_xi", REPORT.info_true_xi, True),
-    ("persona", None, False),
-    ("persona_index", None, False),
-    ("outcome", None, False),
-    ("outcome_code", None, False),
-    ("judgment", REPORT.judgment, True),
-    ("xi_estimate", REPORT.xi_hat, False),
-    ("push_force_n", REPORT.push_force_n, False),
-    ("verbal_cue", REPORT.verbal_cue, True),
-    ("elapsed_s", REPORT.elapsed_s, False),
+def _check_report_info() -> None:
+    """Raise unless :func:`report_info` reads each key from the column :data:`_INFO_ENTRIES` names.
+
+    report_info unpacks the row by position, for speed; this reads a row whose every value tells
+    its column apart (an explicit check, not an assert: it must hold under python -O too).
+    """
+    row = [float(100 + column) for column in range(len(REPORT_COLUMNS))]
+    row[REPORT.outcome] = float(len(_OUTCOME_LABELS) - 1)
+    names = [f"column {column}" for column in range(200 + len(REPORT_COLUMNS))]
+    labels = {"persona": names, "outcome": _OUTCOME_LABELS}
+    try:
+        expected: dict[str, Any] = {
+            key: labels[key][int(row[column])]
+            if kind == "label"
+            else int(row[column])
+            if kind == "int"
+            else row[column]
+            for key, column, kind in _INFO_ENTRIES
+        }
+        expected["xi_probabilities"] = [row[REPORT.p_uncooperative + k] for k in range(len(PROBABILITY_FEATURES))]
+        expected["reward_terms"] = {name: row[REPORT.reward_success + k] for k, name in enumerate(REWARD_TERMS)}
+        info = report_info(row, names, True)
+        info["xi_probabilities"] = info["xi_probabilities"].tolist()
+        matches = list(info.items()) == list(expected.items())
+    except (IndexError, ValueError):  # a column outside the row, a label read from a column that holds no code
+        matches = False
+    if not matches:
+        raise RuntimeError("report_info reads other columns or keys than _INFO_ENTRIES: update report_info")
+
+
+_check_report_info()
+
+
+# The vector info's keys in order: (key, report column, as int) or a label (column None), each
+# label followed by its code's key; report_info gives the same keys bar the codes
+# (tests/coop_gym/test_contract.py holds the two equal).
+_INFO_COLUMNS: tuple[tuple[str, int | None, bool], ...] = tuple(
+    entry
+    for key, column, kind in _INFO_ENTRIES
+    for entry in (
+        [(key, None, False), (_CODE_KEYS[key], None, False)] if kind == "label" else [(key, column, kind == "int")]
+    )
 )
 
 
 # (key, report column, as int): the numeric info, one entry per key, scalars in the single env.
 _NUMERIC_INFO: tuple[tuple[str, int, bool], ...] = (
-    ("true_x_m", REPORT.true_x_m, False),
-    ("true_xdot_m_per_s", REPORT.true_xdot_m_per_s, False),
-    ("true_eta_m", REPORT.true_eta_m, False),
-    ("true_xi", REPORT.info_true_xi, True),
-    ("persona_index", REPORT.persona_index, True),
-    ("outcome_code", REPORT.outcome, True),
-    ("judgment", REPORT.judgment, True),
-    ("xi_estimate", REPORT.xi_hat, False),
-    ("push_force_n", REPORT.push_force_n, False),
-    ("verbal_cue", REPORT.verbal_cue, True),
-    ("elapsed_s", REPORT.elapsed_s, False),
+    *((_CODE_KEYS.get(key, key), column, kind != "float") for key, column, kind in _INFO_ENTRIES),
     *((f"reward_{name}", REPORT.reward_success + k, False) for k, name in enumerate(REWARD_TERMS)),
 )
 _NUMERIC_PROBABILITIES: tuple[tuple[str, int, bool], ...] = tuple(
@@ -156,6 +177,19 @@ def _gather_info_columns(
             ints[k, i] = int(report[i, column])
 
 
+@njit(cache=True, error_model="numpy")
+def _unscaled_rows(
+    report: NDArray[np.float64],
+    columns: NDArray[np.float64],
+    low: NDArray[np.float64],
+    high: NDArray[np.float64],
+    obs: NDArray[np.float32],
+) -> None:
+    # The physical observation of each report row, selected and clipped as the step selects it.
+    for i in range(report.shape[0]):
+        select_and_clip(report[i], columns, low, high, obs[i])
+
+
 class InfoBuilder:
     """The info of an env of ``config``, single (:meth:`single`) or batched (:meth:`batched`), from report rows.
 
@@ -177,11 +211,9 @@ class InfoBuilder:
         self.numeric = config.info_mode == "numeric"
         self.unscaled = config.observation_scale == "unit"
         self._entries = _NUMERIC_INFO + (_NUMERIC_PROBABILITIES if self.probabilities else ())
-        # The physical observation rebuilt from a report row exactly as the kernel builds it:
-        # the features clipped in float64, then rounded to float32.
-        features = config.physical_features
-        self._obs_columns = np.array([REPORT_COLUMNS.index(f) for f in features], dtype=np.int64)
-        physical = observation_space_for(features, config.timing.episode_s)
+        # The physical observation rebuilt from a report row by the step's own selection.
+        self._obs_columns = np.array([REPORT_COLUMNS.index(f) for f in config.physical_features], dtype=np.float64)
+        physical = config.physical_observation_space()
         self._obs_low = physical.low.astype(np.float64)
         self._obs_high = physical.high.astype(np.float64)
         self._plan_all_envs()
@@ -236,8 +268,10 @@ class InfoBuilder:
 
     def unscaled_observation(self, rows: NDArray[np.float64]) -> NDArray[np.float32]:
         """The physical observation of report rows (one row or a batch)."""
-        values = np.take(rows, self._obs_columns, axis=-1)
-        return np.clip(values, self._obs_low, self._obs_high).astype(np.float32)  # type: ignore[no-any-return]
+        batch = np.atleast_2d(rows)
+        obs = np.empty((batch.shape[0], self._obs_columns.shape[0]), dtype=np.float32)
+        _unscaled_rows(batch, self._obs_columns, self._obs_low, self._obs_high, obs)
+        return obs if rows.ndim == 2 else obs[0]
 
     def single(self, r: list[float]) -> dict[str, Any]:
         """The single env's info from one report row (``core.report[i].tolist()``)."""

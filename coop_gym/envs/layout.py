@@ -4,7 +4,7 @@ A compiled call costs ~0.1 us per argument, as much as a whole env step's arithm
 kernels take few arrays: each env's whole state in one row of blocks (:data:`BLOCKS`), the
 settings in one constants row (:data:`CONSTS`, filled by :func:`pack_consts` from the settings
 dataclasses) and the personas in one table (:data:`PERSONA_BLOCKS`, :func:`pack_personas`).
-Every column is named from a list (:mod:`coop_gym.compiled.schema`), never numbered by hand.
+Every column is named from a list (:mod:`estimator.compiled.schema`), never numbered by hand.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.compiled.schema import field_values, index_table, offset_table
 from coop_gym.envs.config import LiftCriteria, RewardWeights
 from coop_gym.envs.report import REPORT_COLUMNS
 from coop_gym.model.dynamics import DELAY_LINE_LENGTH, PARAM_COLUMNS, STATE_COLUMNS, pack_person
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import VARIED_PARAMETERS, Persona
+from estimator.compiled.schema import field_values, index_table, offset_table
 from estimator.judgment import JUDGMENT_COLUMNS, ThresholdJudgment
 from estimator.kalman import NOMINAL_COLUMNS, nominal_row
 from estimator.nominal import STATE_DIM, NominalModel

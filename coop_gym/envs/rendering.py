@@ -31,7 +31,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.compiled.checks import is_integer
 from coop_gym.envs.canvas import (
     ARC,
     ARC_RADIUS,
@@ -79,6 +78,7 @@ from coop_gym.envs.canvas import (
     rounded_rect,
 )
 from coop_gym.envs.render_state import OUTCOMES, RenderState
+from estimator.compiled.checks import is_integer
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pygame

@@ -8,13 +8,13 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.schema import index_table
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import (
     Outcome,
 )
 from coop_gym.envs.observation import FEATURES
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.schema import index_table
 
 __all__ = [
     "EPISODE_END",
@@ -25,6 +25,7 @@ __all__ = [
     "TRUNCATES",
     "check_outcome_codes",
     "count_steps_and_end_episodes",
+    "episode_end",
 ]
 
 
@@ -77,6 +78,27 @@ TRUNCATES = np.array([o.truncates for o in Outcome])
 """Indexed by outcome code: does the episode clock truncate it?"""
 
 
+def episode_end(outcome: int, episode_steps: int, max_episode_steps: int) -> tuple[bool, bool]:
+    """``(terminated, truncated)`` of a step: the episode-end rule of the single and the vector env.
+
+    The step's outcome code terminates (a lift) or truncates (the episode clock,
+    :data:`EPISODE_END`), and a step that leaves the episode out of steps truncates it too -- also
+    when it terminated: a lift on the last allowed step is ``terminated`` and ``truncated``,
+    exactly as Gymnasium's ``TimeLimit`` reports it.
+
+    Args:
+        outcome: The step's outcome code (:class:`~coop_gym.envs.config.Outcome`).
+        episode_steps: Steps of the episode, this one included.
+        max_episode_steps: Steps an episode may take.
+    """
+    terminated, truncated = EPISODE_END[outcome]
+    return terminated, truncated or episode_steps >= max_episode_steps
+
+
+# The same rule inside the vector env's compiled pass (the single env calls the Python function).
+_episode_end_kernel = njit(cache=True, error_model="numpy", inline="always")(episode_end)
+
+
 @njit(cache=True, error_model="numpy")
 def count_steps_and_end_episodes(
     report: NDArray[np.float64],
@@ -91,18 +113,14 @@ def count_steps_and_end_episodes(
 
     Each env stepped (``cmd`` active) counts a step in ``episode_steps`` and is out of steps at
     ``max_episode_steps``; ``rewards`` gets the report's reward of stepped envs, 0 elsewhere. A
-    stepped env terminates by its outcome (:data:`TERMINATES`) and truncates by its outcome
-    (:data:`TRUNCATES`) or when out of steps -- also when the step terminated it: a lift on
-    the last allowed step is ``terminated`` and ``truncated``, exactly as Gymnasium's
-    ``TimeLimit`` reports it for the single env. Envs not stepped neither terminate nor truncate.
+    stepped env ends by :func:`episode_end`; envs not stepped neither terminate nor truncate.
     """
     for i in range(report.shape[0]):
         if cmd[i, CMD.active] > 0.5:
             episode_steps[i] += 1
             code = int(report[i, REPORT.outcome])
             rewards[i] = report[i, REPORT.reward]
-            terminated[i] = TERMINATES[code]
-            truncated[i] = episode_steps[i] >= max_episode_steps or TRUNCATES[code]
+            terminated[i], truncated[i] = _episode_end_kernel(code, episode_steps[i], max_episode_steps)
         else:
             rewards[i] = 0.0
             terminated[i] = False

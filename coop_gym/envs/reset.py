@@ -13,8 +13,6 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.rng import G_STATE, integers, random, standard_normal
 from coop_gym.envs.layout import BLOCKS, CONSTS, DRAWS, NO_OVERRIDE, PERSONA_BLOCKS
 from coop_gym.envs.report import REPORT, REPORT_COLUMNS
 from coop_gym.envs.step import observe_row
@@ -25,6 +23,8 @@ from coop_gym.model.dynamics import (
     fill_initial_state,
     zoh_coefficients_batch,
 )
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.rng import G_STATE, integers, random, standard_normal
 from estimator.judgment import JUDGE
 from estimator.kalman import NOMINAL, NOMINAL_COLUMNS
 from estimator.nominal import STATE_DIM

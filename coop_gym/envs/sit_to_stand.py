@@ -16,7 +16,7 @@ from coop_gym.envs.config import Outcome
 from coop_gym.envs.core import SitToStandCore
 from coop_gym.envs.info import InfoBuilder
 from coop_gym.envs.observation import FEATURES, observation_features
-from coop_gym.envs.report import EPISODE_END, REPORT
+from coop_gym.envs.report import REPORT, episode_end
 from coop_gym.model.params import Cues, Timing
 from coop_gym.model.personas import Persona
 
@@ -181,7 +181,7 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
     (a policy needs memory); ``"oracle"`` appends the true ``xi`` (an upper bound).
     Values are clipped into the bounds. The judgment is 0 until the first one is made.
 
-    ``observation_scale="unit"`` (the ``...Unit-v0`` / ``...Unit-v1`` ids) divides each feature
+    ``observation_scale="unit"`` (the ``...Unit-v0`` / ``-v1`` / ``-v2`` ids) divides each feature
     by a scale (``coop_gym.envs.contract.FEATURE_SCALES``) and clips into [-1, 1]: positions
     0.5 m, speed 0.5 m/s, force 40 N, ``xi`` estimate 2, its std 1.25, clocks the episode
     length (30 s), the rest 1. Every feature then spans [-1, 1] or [0, 1] (the force
@@ -248,6 +248,8 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
 
     * v0: initial release.
     * v1: difficulty levels (``difficulty``) and the safety-priced reward.
+    * v2: the hard level chosen again (``difficulty="hard-v2"``): ``SitToStandHard-v2`` and its
+      ``Discrete``, ``HeldOut`` and ``Unit`` variants.
     * ``Unit`` ids (``SitToStandUnit-v0``, ``SitToStandHardUnit-v1``, ...): the ids they
       scale, with ``observation_scale="unit"``; same task and dynamics, so same version
       (a new name, not a ``-v2``: Gymnasium warns that an id is out of date once a higher
@@ -332,11 +334,8 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
         self.core.step_commands(self._actions.single(action, self._cmd))
         r = self._report_row.tolist()
         self._outcome = outcome = int(r[REPORT.outcome])
-        # A lift terminates. The episode clock of ``timing`` truncates; its last step is truncated
-        # whatever it did, a lift too, as Gymnasium's TimeLimit (and the vector env) report it.
-        terminated, truncated = EPISODE_END[outcome]
         self._episode_steps += 1
-        truncated = truncated or self._episode_steps >= self._max_episode_steps
+        terminated, truncated = episode_end(outcome, self._episode_steps, self._max_episode_steps)
         self._last_lift = terminated
         self._needs_reset = terminated or truncated
         self._stepped = True

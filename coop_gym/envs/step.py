@@ -12,8 +12,6 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.rng import G_STATE, standard_normal
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import Outcome
 from coop_gym.envs.layout import BLOCKS, CONSTS, CUE_COLUMNS, CUES
@@ -29,6 +27,8 @@ from coop_gym.model.dynamics import (
     person_substep,
 )
 from coop_gym.model.params import EPISODE_CLOCK_TOLERANCE_S
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.rng import G_STATE, standard_normal
 from estimator.judgment import JUDGE, JUDGMENT_COLUMNS, judgment_substep
 from estimator.kalman import NOMINAL_COLUMNS, kalman_step
 from estimator.nominal import STATE_DIM
@@ -194,12 +194,33 @@ def _report_truth(report: NDArray[np.float64], person: NDArray[np.float64], outc
 @njit(cache=True, error_model="numpy", nogil=True)
 def observe_row(row: NDArray[np.float64], obs_row: NDArray[np.float32], consts: NDArray[np.float64]) -> None:
     """The env's observation from its report: the selected features clipped into their bounds, float32."""
-    # Select the features and clip in float64, then round: as np.clip(f, low, high).astype(float32).
     n_obs = int(consts[CONSTS.n_obs])
     at = int(consts[CONSTS.obs_at])
-    for k in range(n_obs):
-        value = row[BLOCKS.report + int(consts[at + k])]
-        obs_row[k] = min(max(value, consts[at + n_obs + k]), consts[at + 2 * n_obs + k])
+    select_and_clip(
+        row[BLOCKS.report :],
+        consts[at : at + n_obs],
+        consts[at + n_obs : at + 2 * n_obs],
+        consts[at + 2 * n_obs : at + 3 * n_obs],
+        obs_row,
+    )
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def select_and_clip(
+    report_row: NDArray[np.float64],
+    columns: NDArray[np.float64],
+    low: NDArray[np.float64],
+    high: NDArray[np.float64],
+    obs_row: NDArray[np.float32],
+) -> None:
+    """The physical observation of a report row: column ``columns[k]`` clipped into ``[low[k], high[k]]``.
+
+    The one selection of the observation: the step's (:func:`observe_row`) and the info's
+    ``unscaled_obs`` (:class:`~coop_gym.envs.info.InfoBuilder`). Clipped in float64, then rounded
+    into ``obs_row``'s float32: as ``np.clip(f, low, high).astype(np.float32)``.
+    """
+    for k in range(obs_row.shape[0]):
+        obs_row[k] = min(max(report_row[int(columns[k])], low[k]), high[k])
 
 
 @njit(cache=True, error_model="numpy")

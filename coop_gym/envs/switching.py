@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.compiled.checks import check_flag, check_integer, check_number
 from coop_gym.model.difficulty import Difficulty, get_difficulty
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
@@ -34,6 +33,7 @@ from coop_gym.model.dynamics import (
 )
 from coop_gym.model.params import PersonParams, Realism, Timing
 from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS, get_persona, sample_person
+from estimator.compiled.checks import check_flag, check_integer, check_number
 from estimator.kalman import NOMINAL_COLUMNS
 from estimator.particle import SwitchingParticleFilter
 
@@ -258,7 +258,7 @@ def level_filter(
     """A switching particle filter of ``len(rngs)`` envs on the hypotheses of ``options.difficulty``'s level.
 
     :func:`switching_filter` over :func:`hypothesis_bank`: what the envs' ``estimator="switching"``
-    runs, and what ``estimator.experiment``'s ``switching`` estimator runs on the paper's trials.
+    runs, and what ``coop_gym.experiment``'s ``switching`` estimator runs on the paper's trials.
     """
     options = _as_options(options)
     difficulty = None if options.difficulty is None else get_difficulty(options.difficulty)

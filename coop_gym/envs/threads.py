@@ -20,11 +20,11 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.atomics import atomic_add, atomic_cas, atomic_load
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.checks import is_integer
-from coop_gym.compiled.rng import G_STATE
 from coop_gym.envs.step import step_envs
+from estimator.compiled.atomics import atomic_add, atomic_cas, atomic_load
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.checks import is_integer
+from estimator.compiled.rng import G_STATE
 
 __all__ = [
     "ENVS_PER_BLOCK",

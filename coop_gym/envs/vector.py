@@ -12,14 +12,14 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
-from coop_gym.compiled.checks import is_integer
-from coop_gym.compiled.rng import G_STATE
-from coop_gym.compiled.seeding import MAX_BATCH_SEED
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import check_threads
 from coop_gym.envs.report import REPORT, count_steps_and_end_episodes
 from coop_gym.envs.sit_to_stand import ConfiguredEnv, render_state_for
+from estimator.compiled.checks import is_integer
+from estimator.compiled.rng import G_STATE
+from estimator.compiled.seeding import MAX_BATCH_SEED
 
 __all__ = ["SitToStandVectorEnv"]
 

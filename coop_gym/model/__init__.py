@@ -1,6 +1,5 @@
 """The pure human model: parameters, personas and the three levels (paper §III)."""
 
-from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.model.dynamics import Trajectory, pack_person, simulate
 from coop_gym.model.params import (
     Biomechanics,
@@ -21,6 +20,7 @@ from coop_gym.model.personas import (
     resolve_personas,
     sample_person,
 )
+from estimator.compiled.cache import guard_kernel_cache
 
 __all__ = [
     "PERSONAS",

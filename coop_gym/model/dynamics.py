@@ -30,9 +30,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.checks import check_choice
-from coop_gym.compiled.schema import field_names, field_values, index_table
 from coop_gym.model.params import MAX_REACTION_DELAY_S, PersonParams, Timing
+from estimator.compiled.checks import check_choice
+from estimator.compiled.schema import field_names, field_values, index_table
 
 __all__ = [
     "DELAY_LINE_LENGTH",

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from coop_gym.compiled.checks import check_choice, check_flag, check_integer, check_number
+from estimator.compiled.checks import check_choice, check_flag, check_integer, check_number
 
 __all__ = [
     "EPISODE_CLOCK_TOLERANCE_S",
@@ -39,7 +39,7 @@ _RATE_RANGE = (0.0, 100.0)
 
 
 def _validate_ranges(obj: Any, ranges: dict[str, tuple[float, float]]) -> None:
-    """Check each field of ``obj`` named in ``ranges`` (:func:`coop_gym.compiled.checks.check_number`).
+    """Check each field of ``obj`` named in ``ranges`` (:func:`estimator.compiled.checks.check_number`).
 
     A NumPy scalar is stored as the Python number of the same value (the dataclass is frozen, so
     through ``object.__setattr__``, as in its own ``__init__``).
@@ -73,7 +73,7 @@ class Biomechanics:
     voluntary_gain_per_s2: float = 9.0
     push_compliance_m_per_s2_n: float = 0.012
     accel_noise_std_m_per_s2: float = 0.02
-    # Calibrated (estimator/experiment/calibrate.py) so the paper's thresholded KF on the paper's
+    # Calibrated (coop_gym/experiment/calibrate.py) so the paper's thresholded KF on the paper's
     # protocol lands near its Table I: a disengaged person holds still against a push
     # (0.5), a resisting one stiffens less but leans away (0.8).
     stiffness_factor_uncooperative: float = 0.8

@@ -45,7 +45,7 @@ class Persona:
     name: str
     description: str
     params: PersonParams
-    # Calibrated with estimator/experiment/calibrate.py (people differ by about +/-20 %).
+    # Calibrated with coop_gym/experiment/calibrate.py (people differ by about +/-20 %).
     variation_relative_std: float = 0.2
 
     def __post_init__(self) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from coop_gym.compiled.atomics import atomic_add, atomic_cas, atomic_load
+from estimator.compiled.atomics import atomic_add, atomic_cas, atomic_load
 
 
 @njit(nogil=True)

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coop_gym.compiled.background import ENV_SWITCH, python_twin
-from coop_gym.compiled.cache import guard_kernel_cache
 from coop_gym.envs.core import SitToStandCore
 from coop_gym.envs.reset import draw_reset, start_episodes
 from coop_gym.envs.step import step_all
 from coop_gym.envs.vector import SitToStandVectorEnv
+from estimator.compiled.background import ENV_SWITCH, python_twin
+from estimator.compiled.cache import guard_kernel_cache
 from tests.compiled.fresh import ENV_IDS, ROLLOUT, ROOT, environment, run_python, write_toy_package
 
 
@@ -50,7 +50,7 @@ def test_the_python_twins_of_the_reset_and_step_kernels_give_the_compiled_number
 
 ROLLOUT_AS_PYTHON = ROLLOUT + textwrap.dedent(
     """
-    from coop_gym.compiled import background
+    from estimator.compiled import background
     from coop_gym.envs.step import step_all
     out["ran_as_python"] = not step_all.signatures
     if background._compiler is not None:
@@ -69,7 +69,7 @@ def test_a_cold_start_steps_the_envs_as_python_on_the_compiled_numbers(tmp_path:
 
 
 TOY = (
-    "import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+    "import numpy as np\nfrom numba import njit\n\nfrom estimator.compiled.cache import guard_kernel_cache\n\n"
     "@njit(cache=True)\ndef half(x):\n    return x * 0.5\n\n"
     "@njit(cache=True)\ndef kernel(n):\n    out = np.empty(n)\n    for i in range(n):\n        out[i] = half(i)\n"
     "    return out\n\nguard_kernel_cache(__name__)\n"
@@ -77,7 +77,7 @@ TOY = (
 
 TOY_RUN = textwrap.dedent(
     """
-    from coop_gym.compiled import background
+    from estimator.compiled import background
     from toy.kern import kernel
     first = kernel(4).tolist()
     compiled_at_once = bool(kernel.signatures)

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from coop_gym.compiled.background import ENV_SWITCH
-from coop_gym.compiled.cache import guarded_kernels, project_sources
+from estimator.compiled.background import ENV_SWITCH
+from estimator.compiled.cache import guarded_kernels, project_sources
 from tests.compiled.fresh import ROOT, environment, run_python, write_toy_package
 
 KERNEL_PACKAGES = ("coop_gym", "estimator")
@@ -34,7 +34,7 @@ def test_the_env_kernels_are_keyed_by_the_model_filter_judgment_and_rng_sources(
         "estimator/kalman.py",
         "estimator/judgment.py",
         "estimator/nominal.py",
-        "coop_gym/compiled/rng.py",
+        "estimator/compiled/rng.py",
     } <= sources
 
 
@@ -59,7 +59,7 @@ def test_every_cached_kernel_of_the_project_is_guarded() -> None:
         importlib.import_module(name)
         unguarded += [f"{name}.{k.__name__}" for k in guarded_kernels(name) if not hasattr(k._cache, "source_guard")]
     assert not unguarded, (
-        f"call coop_gym.compiled.cache.guard_kernel_cache(__name__) at the end of their modules: {unguarded}"
+        f"call estimator.compiled.cache.guard_kernel_cache(__name__) at the end of their modules: {unguarded}"
     )
 
 
@@ -76,8 +76,8 @@ def test_importing_the_project_touches_no_cache_file() -> None:
     code = textwrap.dedent(
         """
         import coop_gym.envs, estimator.identify, estimator.multiple_model
-        from coop_gym.compiled.cache import guarded_kernels
-        names = ["coop_gym.envs.core", "coop_gym.model.dynamics", "estimator.identify", "coop_gym.compiled.rng"]
+        from estimator.compiled.cache import guarded_kernels
+        names = ["coop_gym.envs.core", "coop_gym.model.dynamics", "estimator.identify", "estimator.compiled.rng"]
         print(any(k._cache.source_guard.checked for n in names for k in guarded_kernels(n)))
         """
     )
@@ -91,7 +91,7 @@ def test_editing_an_inlined_dependency_recompiles_the_kernel(tmp_path: Path) -> 
     write_toy_package(
         tmp_path,
         dep=_GAIN.format(1),
-        kern="from numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n"
+        kern="from numba import njit\n\nfrom estimator.compiled.cache import guard_kernel_cache\n"
         "from toy.dep import gain\n\n"
         "@njit(cache=True)\ndef kernel():\n    return 10 * gain()\n\nguard_kernel_cache(__name__)\n",
     )
@@ -173,7 +173,7 @@ def test_kernels_of_modules_outside_the_compiled_boundary_keep_numbas_error(tmp_
         "from numba import njit\n\n@njit(cache=True)\ndef kernel():\n    return 1\n"
     )
     out = subprocess.run(
-        [sys.executable, "-c", "import coop_gym.compiled.cache, plain"],
+        [sys.executable, "-c", "import estimator.compiled.cache, plain"],
         cwd=tmp_path,
         env=env,
         capture_output=True,
@@ -188,7 +188,7 @@ def _toy_package(tmp_path: Path, kernels: str) -> dict[str, str]:
     """Package ``toy`` with module ``kern`` (``kernels``, guarded) under ``tmp_path``; the environment to run it in."""
     write_toy_package(
         tmp_path,
-        kern="import numpy as np\nfrom numba import njit\n\nfrom coop_gym.compiled.cache import guard_kernel_cache\n\n"
+        kern="import numpy as np\nfrom numba import njit\n\nfrom estimator.compiled.cache import guard_kernel_cache\n\n"
         f"{kernels}\n\nguard_kernel_cache(__name__)\n",
     )
     return _compiled_here(tmp_path, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
@@ -225,7 +225,7 @@ def test_a_warm_start_loads_kernels_without_numbas_registries_or_parsing_sources
     code = textwrap.dedent(
         """
         import sys
-        from coop_gym.compiled import cache
+        from estimator.compiled import cache
         parsed = []
         original = cache._imported_names
         cache._imported_names = lambda *args: parsed.append(args) or original(*args)

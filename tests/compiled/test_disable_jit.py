@@ -1,6 +1,6 @@
 """Debug mode: with ``NUMBA_DISABLE_JIT=1`` every kernel runs as Python, on the same numbers.
 
-The env's kernels draw through :mod:`coop_gym.compiled.rng`, whose compiled path calls the bit
+The env's kernels draw through :mod:`estimator.compiled.rng`, whose compiled path calls the bit
 generator's C functions through LLVM intrinsics; without the JIT the same C functions are
 called through ctypes and NumPy's ziggurat runs in Python with libm's ``exp``/``log1p``, so a
 debug run reproduces a compiled run draw for draw.
@@ -20,7 +20,7 @@ DRAWS = textwrap.dedent(
     import json
     import numpy as np
     from numba import config
-    from coop_gym.compiled import rng as compiled_rng
+    from estimator.compiled import rng as compiled_rng
     assert config.DISABLE_JIT
     out = []
     for bit_generator in (np.random.PCG64, np.random.MT19937, np.random.Philox, np.random.SFC64):

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from coop_gym.compiled import rng as compiled_rng
-from coop_gym.compiled.rng import ZIGGURAT_TABLES
+from estimator.compiled import rng as compiled_rng
+from estimator.compiled.rng import ZIGGURAT_TABLES
 
 # sha256 of NumPy's normal-ziggurat tables as numba.np.random._constants ships them
 # (numba 0.68 / NumPy 2.4; unchanged in NumPy since 1.17).

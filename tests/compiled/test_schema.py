@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from coop_gym.compiled.schema import field_names, field_values, index_table, offset_table
+from estimator.compiled.schema import field_names, field_values, index_table, offset_table
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,9 @@ def test_unit_ids_scale_the_paper_model_and_each_difficulty_level() -> None:
             "CoopGym/SitToStandHardUnit-v1",
             "CoopGym/SitToStandHardDiscreteUnit-v1",
             "CoopGym/SitToStandHardHeldOutUnit-v1",
+            "CoopGym/SitToStandHardUnit-v2",
+            "CoopGym/SitToStandHardDiscreteUnit-v2",
+            "CoopGym/SitToStandHardHeldOutUnit-v2",
         ]
     )
     # Each scales an id that exists, with the same version (same task, same dynamics).
@@ -211,7 +214,7 @@ def test_numeric_vector_infos_are_numeric_arrays_matching_the_single_env() -> No
             single_infos.append(info)
 
 
-@pytest.mark.parametrize("env_id", ["CoopGym/SitToStandMM-v0", "CoopGym/SitToStandHardDiscreteUnit-v1"])
+@pytest.mark.parametrize("env_id", ["CoopGym/SitToStandMM-v0", "CoopGym/SitToStandHardDiscreteUnit-v2"])
 def test_numeric_info_envs_pass_both_checkers(env_id: str) -> None:
     env_checker = pytest.importorskip("stable_baselines3.common.env_checker")
     with warnings.catch_warnings():

@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from coop_gym.compiled.schema import field_values
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,
@@ -40,6 +39,7 @@ from coop_gym.model.personas import (
     resolve_personas,
     sample_person,
 )
+from estimator.compiled.schema import field_values
 
 TIMING = Timing()
 IDEAL = PersonParams().with_realism(Realism.off())

@@ -6,7 +6,8 @@ spaces, so a Gymnasium upgrade cannot change them) through each ``-v0`` id, sing
 native vector env, and compares observations, rewards, termination, truncation and every info
 value to the recording in ``data/recorded_v0.npz`` exactly. A selection of the ``-v1`` ids
 (difficulty levels, oracle, IMM) is held the same way by ``data/recorded_v1.npz``, and the
-``-v2`` id by ``data/recorded_v2.npz``.
+``-v2`` ids (the level, its discrete and held-out variants) by ``data/recorded_v2.npz``. The
+``Unit`` ids are their physical twins scaled (``test_client_options.py``).
 
 Bit for bit holds at one NumPy SIMD level: NumPy's AVX-512 ``exp`` differs from its AVX2 ``exp``
 in the last bit, and each person is drawn through ``np.exp``. The recording was made at the AVX2
@@ -52,7 +53,11 @@ V1_IDS = (
     "CoopGym/SitToStandHardOracle-v1",
     "CoopGym/SitToStandHardIMM-v1",
 )
-V2_IDS = ("CoopGym/SitToStandHard-v2",)
+V2_IDS = (
+    "CoopGym/SitToStandHard-v2",
+    "CoopGym/SitToStandHardDiscrete-v2",
+    "CoopGym/SitToStandHardHeldOut-v2",
+)
 SINGLE_SEEDS = (0, 3, 11)
 SINGLE_STEPS = 400  # crosses several episode ends (lifts and a 300-step truncation)
 VECTOR_SEED = 5

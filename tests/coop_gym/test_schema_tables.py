@@ -1,4 +1,4 @@
-"""The env core's packed rows are laid out from named lists (coop_gym.compiled.schema), never by hand."""
+"""The env core's packed rows are laid out from named lists (estimator.compiled.schema), never by hand."""
 
 from __future__ import annotations
 

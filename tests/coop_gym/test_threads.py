@@ -13,11 +13,11 @@ from gymnasium.vector import AutoresetMode
 from numpy.typing import NDArray
 
 import coop_gym
-from coop_gym.compiled.rng import G_STATE
 from coop_gym.envs import threads as threads_module
 from coop_gym.envs.contract import CMD
 from coop_gym.envs.vector import SitToStandVectorEnv
 from coop_gym.model.params import Timing
+from estimator.compiled.rng import G_STATE
 
 SHORT = {"timing": {"episode_s": 2.0}}  # 20-step episodes: truncations as well as lifts
 TWO_THREADS = 2

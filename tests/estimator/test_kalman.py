@@ -7,10 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from coop_gym.compiled.schema import field_values
 from coop_gym.envs.core import nominal_model_for
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import PersonParams, Timing
+from estimator.compiled.schema import field_values
 from estimator.judgment import ThresholdJudgment, judgment_substep, threshold_judgment
 from estimator.kalman import (
     NOMINAL,

@@ -9,10 +9,8 @@ import numpy as np
 import pytest
 
 from coop_gym.envs.core import nominal_model_for
-from coop_gym.model.personas import PERSONAS
-from estimator import metrics
-from estimator.experiment import calibrate, protocol
-from estimator.experiment.protocol import (
+from coop_gym.experiment import calibrate, protocol
+from coop_gym.experiment.protocol import (
     PAPER_RESULTS,
     ProtocolConfig,
     TrialSpec,
@@ -22,6 +20,8 @@ from estimator.experiment.protocol import (
     run_experiment,
     run_protocol,
 )
+from coop_gym.model.personas import PERSONAS
+from estimator import metrics
 from estimator.judgment import JUDGMENT_COLUMNS, judgment_substep
 from estimator.kalman import PaperKalmanFilter
 from estimator.nominal import NominalModel

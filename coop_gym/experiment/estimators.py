@@ -13,18 +13,18 @@ when confident:
 * ``multiple_model`` / ``imm`` -- MMAE and IMM of :mod:`estimator.multiple_model` on
   the same nominal model, MAP judgment.
 * ``delay_aware`` -- the same MMAE fed the *delayed* intention drive
-  (:func:`~estimator.experiment.banks.intention_drive`, the persona's typical reaction
+  (:func:`~coop_gym.experiment.banks.intention_drive`, the persona's typical reaction
   delay): the linear model with the person's reaction delay, on the unchanged kernel.
 * ``persona_bank`` -- a bank of three delay-aware filters, one per ``xi``, each with its
   own push compliance (the persona's state-dependent stiffness) and the persona's noise
-  intensities (:func:`~estimator.experiment.banks.bank_log_likelihoods`); Bayes over the
+  intensities (:func:`~coop_gym.experiment.banks.bank_log_likelihoods`); Bayes over the
   three, MAP.
 * ``calibrated`` -- ``persona_bank`` with a per-subject temperature and class offsets
   learned on a separate labelled calibration session of that subject
   (:func:`fit_recalibration`): the subject's history, used discriminatively.
 * ``identified`` -- per-subject, per-``xi`` models fitted by maximum likelihood
   (:func:`estimator.identify.identify`) on the calibration session
-  (:func:`~estimator.experiment.banks.identified_banks`): the subject's history, used
+  (:func:`~coop_gym.experiment.banks.identified_banks`): the subject's history, used
   generatively.
 * ``switching`` -- the switching particle filter the belief caregiver reads
   (:mod:`estimator.particle`, built as the envs' ``estimator="switching"`` builds it): the
@@ -34,7 +34,7 @@ when confident:
 * ``oracle`` -- the bank on each subject's *true* parameters: not an estimator but the
   information bound of linear delay-aware filters at the judgment instant.
 
-``python -m estimator.experiment.calibrate`` reports all of them over 20 seeds. In short, on the
+``python -m coop_gym.experiment.calibrate`` reports all of them over 20 seeds. In short, on the
 calibrated defaults: the thresholded KF lands near the paper's Table I; MMAE and IMM on
 the paper's nominal model do *worse* than the thresholded KF (MAP needs more evidence
 than the 0.3 threshold, and the nominal model misses the reaction delay); the delay-aware
@@ -55,7 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr
 
 from coop_gym.envs.switching import level_filter
-from estimator.experiment.banks import (
+from coop_gym.experiment.banks import (
     bank_log_likelihoods,
     drive_model,
     identified_banks,
@@ -64,7 +64,7 @@ from estimator.experiment.banks import (
     persona_banks,
     subject_models,
 )
-from estimator.experiment.simulation import ExperimentData, judgment_step
+from coop_gym.experiment.simulation import ExperimentData, judgment_step
 from estimator.kalman import FastKalmanFilter, nominal_row
 from estimator.multiple_model import IMMEstimator, MultipleModelEstimator, map_judgment, sequential_judgment
 from estimator.nominal import NominalModel

@@ -6,7 +6,7 @@ costs ~0.3 s. :class:`EnvGenerators` holds the generators of ``N`` envs instead 
 C state structs in two arrays, seeded by :func:`seed_states` -- NumPy's ``SeedSequence`` hash and
 PCG64 seeding repeated step for step (tests/compiled/test_seeding.py holds them equal, seed by
 seed) -- and the kernels draw from them through NumPy's PCG64 C functions, exactly as from a
-``Generator``'s state (:mod:`coop_gym.compiled.rng`). An env's ``Generator`` object is made only when one is
+``Generator``'s state (:mod:`estimator.compiled.rng`). An env's ``Generator`` object is made only when one is
 asked for (``generators[i]``): it takes over the env's state where the stream stands, and the
 env draws from it from then on. So the numbers are those of ``Generator(PCG64(seed))`` either way.
 
@@ -26,9 +26,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.compiled.background import run_as_python
-from coop_gym.compiled.cache import guard_kernel_cache
-from coop_gym.compiled.rng import G_STATE, LOW32, U1, U32, bit_generator_row
+from estimator.compiled.background import run_as_python
+from estimator.compiled.cache import guard_kernel_cache
+from estimator.compiled.rng import G_STATE, LOW32, U1, U32, bit_generator_row
 
 __all__ = ["LAYOUT", "MAX_BATCH_SEED", "MIN_BATCH_ENVS", "EnvGenerators", "seed_states"]
 
@@ -191,7 +191,7 @@ _TEMPLATE = bit_generator_row(np.random.Generator(np.random.PCG64(0)))  # PCG64'
 
 
 class EnvGenerators:
-    """The random generators of ``n`` envs and their kernel rows (:func:`coop_gym.compiled.rng.bit_generator_row`).
+    """The random generators of ``n`` envs and their kernel rows (:func:`estimator.compiled.rng.bit_generator_row`).
 
     ``rows`` (n, 4) are what the kernels draw through (a zero state address: no generator yet).
     An env seeded by :meth:`seed` draws from a PCG64 C state kept in this object's arrays; one

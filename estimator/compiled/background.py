@@ -7,7 +7,7 @@ though, is the same maths and runs as it is: ``NUMBA_DISABLE_JIT=1`` runs it dra
 the machine code (``tests/compiled/test_disable_jit.py``). So a kernel called with a signature
 that is not in Numba's disk cache
 
-1. asks a background process (``python -m coop_gym.compiled.background``, one per process, started
+1. asks a background process (``python -m estimator.compiled.background``, one per process, started
    at the first such call) to compile it into the cache, and
 2. runs as its *Python twin* (:func:`python_twin`: its ``py_func`` whose kernels, intrinsics and
    libm-bound names are replaced by their Python twins) until that process reports it done;
@@ -23,7 +23,7 @@ there).
 Not used -- the kernel compiles in this process as Numba does -- where it cannot help: with
 ``COOP_GYM_BACKGROUND_COMPILE=0``, on a single core (the compile would take the core the Python
 twins run on), for batches too large to step as Python (:data:`MAX_PYTHON_ELEMENTS`), for
-kernels without a disk cache (:mod:`coop_gym.compiled.cache` runs those uncached) and in the
+kernels without a disk cache (:mod:`estimator.compiled.cache` runs those uncached) and in the
 background process itself. :func:`wait` blocks until the kernels asked for so far are compiled
 (a benchmark timing the compiled step calls it first).
 """

@@ -40,7 +40,7 @@ from typing import Any
 from numba.core.caching import CacheImpl, FunctionCache, NullCache, _CacheLocator
 from numba.core.runtime import rtsys
 
-from coop_gym.compiled import background
+from estimator.compiled import background
 
 __all__ = ["KernelCacheWarning", "guard_kernel_cache", "guarded_kernels", "project_sources", "source_digest"]
 
@@ -200,7 +200,7 @@ def _warn_uncached(reason: str, filename: str = __file__, lineno: int = 1) -> No
 
 
 _PACKAGE = __name__.rpartition(".")[0]
-"""``coop_gym.compiled``: a kernel module built on it imports something from it."""
+"""``estimator.compiled``: a kernel module built on it imports something from it."""
 
 
 def _built_on_compiled(py_func: Any) -> bool:
@@ -281,7 +281,7 @@ def guard_kernel_cache(module_name: str, *, compile_here: tuple[str, ...] = ()) 
     Call at the end of a module that defines ``@njit(cache=True)`` kernels:
     ``guard_kernel_cache(__name__)``. No file is touched until a kernel is first called.
     Uncompiled kernels run as Python while a background process compiles them
-    (:mod:`coop_gym.compiled.background`), except those named in ``compile_here``: kernels
+    (:mod:`estimator.compiled.background`), except those named in ``compile_here``: kernels
     whose one call can be long (a filter over a whole recorded sequence), which would run
     far longer as Python than their compile takes, compile in the calling process.
     """

@@ -2,6 +2,6 @@
 
 A layer above :mod:`coop_gym.envs` (docs/STYLE.md, "Layout"): it builds simulated subjects
 from the model, the filters' nominal models with :func:`coop_gym.envs.core.nominal_model_for`,
-and scores :mod:`estimator`'s filters on them. ``python -m estimator.experiment.protocol`` runs
-one experiment; ``python -m estimator.experiment.calibrate`` the calibration report.
+and scores :mod:`estimator`'s filters on them. ``python -m coop_gym.experiment.protocol`` runs
+one experiment; ``python -m coop_gym.experiment.calibrate`` the calibration report.
 """

@@ -17,7 +17,7 @@ derived columns declared beside it -- never numbered by hand:
 A table is a ``namedtuple`` instance of ints. Numba freezes a global tuple into the
 machine code, so ``p[SPRING.stiffness_n_per_m]`` inside ``@njit`` compiles to the same
 constant index as a literal ``0`` (the bench checks it stays as fast), and
-:mod:`coop_gym.compiled.cache` re-keys the disk cache when the list changes.
+:mod:`estimator.compiled.cache` re-keys the disk cache when the list changes.
 """
 
 from __future__ import annotations

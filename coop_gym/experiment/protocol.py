@@ -1,10 +1,10 @@
 """The paper's experiment (§V) as a reproducible protocol, and better estimators on it.
 
-``python -m estimator.experiment.protocol --help``. The parts: the trial design and the simulated
-subjects (:mod:`estimator.experiment.simulation`), the registry of estimators
-(:mod:`estimator.experiment.estimators`) and the subject models they read
-(:mod:`estimator.experiment.banks`), scores and the paper's tables (:mod:`estimator.experiment.tables`),
-figures (:mod:`estimator.experiment.plots`); this module runs them from the command line and
+``python -m coop_gym.experiment.protocol --help``. The parts: the trial design and the simulated
+subjects (:mod:`coop_gym.experiment.simulation`), the registry of estimators
+(:mod:`coop_gym.experiment.estimators`) and the subject models they read
+(:mod:`coop_gym.experiment.banks`), scores and the paper's tables (:mod:`coop_gym.experiment.tables`),
+figures (:mod:`coop_gym.experiment.plots`); this module runs them from the command line and
 re-exports their public names.
 """
 
@@ -19,9 +19,8 @@ from typing import Any, Literal
 from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
-from coop_gym.model.difficulty import DIFFICULTIES
-from estimator.experiment.banks import identified_banks, intention_drive
-from estimator.experiment.estimators import (
+from coop_gym.experiment.banks import identified_banks, intention_drive
+from coop_gym.experiment.estimators import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
     EstimateResult,
@@ -29,10 +28,11 @@ from estimator.experiment.estimators import (
     fit_recalibration,
     gaussian_xi_probabilities,
 )
-from estimator.experiment.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
-from estimator.experiment.plots import plot_confusion, plot_trial
-from estimator.experiment.simulation import ExperimentData, ProtocolConfig, TrialSpec, draw_trials, run_experiment
-from estimator.experiment.tables import aggregate, format_aggregate, format_tables, summarize
+from coop_gym.experiment.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
+from coop_gym.experiment.plots import plot_confusion, plot_trial
+from coop_gym.experiment.simulation import ExperimentData, ProtocolConfig, TrialSpec, draw_trials, run_experiment
+from coop_gym.experiment.tables import aggregate, format_aggregate, format_tables, summarize
+from coop_gym.model.difficulty import DIFFICULTIES
 
 __all__ = [
     "ESTIMATORS",
@@ -86,9 +86,9 @@ def run_protocol(
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``python -m estimator.experiment.protocol`` argument parser."""
+    """The ``python -m coop_gym.experiment.protocol`` argument parser."""
     parser = argparse.ArgumentParser(
-        prog="python -m estimator.experiment.protocol",
+        prog="python -m coop_gym.experiment.protocol",
         description="Bell & Asada's cooperativeness-judgment experiment on simulated subjects: the paper's "
         "three tables side by side with its numbers on real people.",
     )

@@ -20,7 +20,7 @@ from numba.core import cgutils
 from numba.core.extending import intrinsic
 from numpy.typing import NDArray
 
-from coop_gym.compiled.background import run_as_python
+from estimator.compiled.background import run_as_python
 
 __all__ = ["atomic_add", "atomic_cas", "atomic_load"]
 
@@ -96,7 +96,7 @@ def _python_add(array: NDArray[np.int64], index: int, amount: int) -> int:
 
 
 # The Python twins run in debug mode and in a kernel's first calls while it compiles
-# (coop_gym.compiled.background).
+# (estimator.compiled.background).
 atomic_load: Any = run_as_python(intrinsic(_load_intrinsic), _python_load)
 atomic_cas: Any = run_as_python(intrinsic(_cas_intrinsic), _python_cas)
 atomic_add: Any = run_as_python(intrinsic(_add_intrinsic), _python_add)

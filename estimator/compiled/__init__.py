@@ -1,16 +1,16 @@
 """The compiled boundary: what every Numba kernel of the project relies on (the lowest layer).
 
-- :mod:`coop_gym.compiled.cache`: Numba's on-disk cache keyed by every project source a kernel
-  compiles in (:func:`~coop_gym.compiled.cache.guard_kernel_cache`).
-- :mod:`coop_gym.compiled.background`: a kernel missing from that cache runs as Python while a
+- :mod:`estimator.compiled.cache`: Numba's on-disk cache keyed by every project source a kernel
+  compiles in (:func:`~estimator.compiled.cache.guard_kernel_cache`).
+- :mod:`estimator.compiled.background`: a kernel missing from that cache runs as Python while a
   background process compiles it (a fresh install's first step without waiting for the compile).
-- :mod:`coop_gym.compiled.checks`: what counts as a number (NumPy scalars yes, bools and arrays no) for
+- :mod:`estimator.compiled.checks`: what counts as a number (NumPy scalars yes, bools and arrays no) for
   every validator of the project.
-- :mod:`coop_gym.compiled.rng`: NumPy's random streams inside kernels, number for number the
+- :mod:`estimator.compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
-- :mod:`coop_gym.compiled.seeding`: ``PCG64(seed)`` of many envs in one call (NumPy's seeding repeated
+- :mod:`estimator.compiled.seeding`: ``PCG64(seed)`` of many envs in one call (NumPy's seeding repeated
   step for step), their states kept in arrays until a ``Generator`` object is asked for.
-- :mod:`coop_gym.compiled.atomics`: atomic loads, compare-and-swap and add on int64 array elements (how
+- :mod:`estimator.compiled.atomics`: atomic loads, compare-and-swap and add on int64 array elements (how
   the threaded step shares work without the GIL).
 
 Every kernel is ``@njit(cache=True, error_model="numpy")``: NumPy's error model leaves out the
@@ -21,10 +21,11 @@ non-zero number; where a divisor can be zero the kernels test it first
 the particle filter's, whose first-class function argument Numba cannot find in a disk
 cache (``estimator/particle.py``).
 
-Imports nothing of ``coop_gym``, ``estimator`` or ``agents``; both the model/env side and
-the filters may import it.
+Imports nothing else of the project: it sits in :mod:`estimator`, the lowest package, so the
+filters import it without loading the envs, and the model and the envs (``coop_gym``, above)
+import it too.
 """
 
-from coop_gym.compiled.cache import guard_kernel_cache
+from estimator.compiled.cache import guard_kernel_cache
 
 __all__ = ["guard_kernel_cache"]

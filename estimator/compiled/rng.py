@@ -34,8 +34,8 @@ from numba.core.extending import intrinsic
 from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 from numpy.typing import NDArray
 
-from coop_gym.compiled.background import run_as_python
-from coop_gym.compiled.cache import guard_kernel_cache
+from estimator.compiled.background import run_as_python
+from estimator.compiled.cache import guard_kernel_cache
 
 __all__ = [
     "G_NEXT_DOUBLE",
@@ -105,7 +105,7 @@ def _python_caller(restype: Any) -> Any:
 
 
 # The kernels' Python twins (NUMBA_DISABLE_JIT=1, or their first calls while they compile: see
-# coop_gym.compiled.background) call the same C functions through ctypes, and libm's exp and log1p
+# estimator.compiled.background) call the same C functions through ctypes, and libm's exp and log1p
 # (the math module), as NumPy's C code does: a NumPy ufunc may not be libm.
 _call_uint64: Any = run_as_python(
     _state_function_caller("_call_uint64", types.uint64, ir.IntType(64)), _python_caller(ctypes.c_uint64)
@@ -120,7 +120,7 @@ _exp: Any = run_as_python(np.exp, math.exp)
 _log1p: Any = run_as_python(np.log1p, math.log1p)
 
 # uint64 constants (a Python int beside a uint64 would make Numba compute in int64 or float);
-# U1, U32 and LOW32 serve coop_gym.compiled.seeding too.
+# U1, U32 and LOW32 serve estimator.compiled.seeding too.
 U1 = np.uint64(1)
 U32 = np.uint64(32)
 LOW32 = np.uint64(0xFFFFFFFF)

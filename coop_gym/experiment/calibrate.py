@@ -1,10 +1,10 @@
 """Calibration report: the simulated experiment against the paper, and the estimators against each other.
 
-``python -m estimator.experiment.calibrate [--seeds 20] [--seed 0] [--estimators ...] [--json]``
+``python -m coop_gym.experiment.calibrate [--seeds 20] [--seed 0] [--estimators ...] [--json]``
 
 1. **Calibration to the paper.** The paper's thresholded Kalman filter on the paper's
-   protocol (:mod:`estimator.experiment.protocol`), every cell of Tables I-III as mean +/- std over
-   seeds, beside the paper's numbers on real people (:data:`estimator.experiment.protocol.PAPER_RESULTS`).
+   protocol (:mod:`coop_gym.experiment.protocol`), every cell of Tables I-III as mean +/- std over
+   seeds, beside the paper's numbers on real people (:data:`coop_gym.experiment.protocol.PAPER_RESULTS`).
    The simulator's realism defaults and the filter's noise defaults were chosen with this
    report so that the simulated people are not easier than real ones.
 2. **Better estimators, same trials.** Balanced accuracy, accuracy, log loss, Brier
@@ -32,7 +32,7 @@ import numpy as np
 
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
-from estimator.experiment.protocol import (
+from coop_gym.experiment.protocol import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
     PAPER_RESULTS,
@@ -68,11 +68,11 @@ def compare_estimators(
     Args:
         config: Protocol settings.
         seeds: Seeds of the experiments.
-        estimators: Names from :data:`estimator.experiment.protocol.ESTIMATORS`.
+        estimators: Names from :data:`coop_gym.experiment.protocol.ESTIMATORS`.
         sequential: Also score the multiple-model estimators with the early (sequential) decision rule.
 
     Returns:
-        Per estimator label: :func:`~estimator.experiment.protocol.aggregate` of its per-seed summaries,
+        Per estimator label: :func:`~coop_gym.experiment.protocol.aggregate` of its per-seed summaries,
         plus ``per_seed_balanced_accuracy`` and ``seconds`` (compute time).
     """
     unknown = [e for e in estimators if e not in ESTIMATORS]
@@ -160,7 +160,7 @@ def format_sweep(sweep: dict[str, dict[str, list[float]]], delays_s: Sequence[fl
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; usage errors exit with status 2."""
     parser = argparse.ArgumentParser(
-        prog="python -m estimator.experiment.calibrate", description=__doc__.splitlines()[0]
+        prog="python -m coop_gym.experiment.calibrate", description=__doc__.splitlines()[0]
     )
     parser.add_argument("--seeds", type=_positive_int, default=20, help="number of seeds (>= 20 for the report)")
     parser.add_argument("--seed", type=_seed, default=0, help="first seed")

@@ -1,6 +1,6 @@
 """The filters' models of each subject: the nominal model and the delay-aware banks of three modes.
 
-The estimators of :mod:`estimator.experiment.estimators` read a subject through these:
+The estimators of :mod:`coop_gym.experiment.estimators` read a subject through these:
 
 * :func:`subject_models` -- the persona's nominal model (the persona's typical gains, not
   the subject's varied ones), as the paper's filter gets it;
@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from coop_gym.envs.core import nominal_model_for
+from coop_gym.experiment.paper import XI_VALUES
+from coop_gym.experiment.simulation import ExperimentData
 from coop_gym.model.params import PersonParams, Timing
-from estimator.experiment.paper import XI_VALUES
-from estimator.experiment.simulation import ExperimentData
 from estimator.identify import Trial, identify
 from estimator.kalman import NOMINAL_COLUMNS, FastKalmanFilter
 from estimator.nominal import NominalModel

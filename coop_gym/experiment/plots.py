@@ -6,9 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from coop_gym.io import save_figure
-from estimator.experiment.estimators import EstimateResult, estimate
-from estimator.experiment.paper import (
+from coop_gym.experiment.estimators import EstimateResult, estimate
+from coop_gym.experiment.paper import (
     PAPER_RESULTS,
     XI_NAMES,
     XI_SHORT,
@@ -16,8 +15,9 @@ from estimator.experiment.paper import (
     balanced_accuracy,
     conditional_tables,
 )
-from estimator.experiment.simulation import ExperimentData
-from estimator.experiment.tables import _pct
+from coop_gym.experiment.simulation import ExperimentData
+from coop_gym.experiment.tables import _pct
+from coop_gym.io import save_figure
 
 __all__ = ["plot_confusion", "plot_trial"]
 

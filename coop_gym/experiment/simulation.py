@@ -27,11 +27,11 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from coop_gym.experiment.paper import PAPER_RESULTS, XI_VALUES
 from coop_gym.model.difficulty import get_difficulty
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas, sample_person
-from estimator.experiment.paper import PAPER_RESULTS, XI_VALUES
 from estimator.judgment import JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
 
 __all__ = [

@@ -10,9 +10,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from estimator import metrics
-from estimator.experiment.estimators import EstimateResult
-from estimator.experiment.paper import (
+from coop_gym.experiment.estimators import EstimateResult
+from coop_gym.experiment.paper import (
     PAPER_RESULTS,
     XI_NAMES,
     XI_SHORT,
@@ -22,7 +21,8 @@ from estimator.experiment.paper import (
     conditional_tables,
     confusion_matrix,
 )
-from estimator.experiment.simulation import ExperimentData
+from coop_gym.experiment.simulation import ExperimentData
+from estimator import metrics
 
 __all__ = [
     "aggregate",
