@@ -88,7 +88,7 @@ def _seeds(text: str) -> list[int]:
     return seeds
 
 
-def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path) -> dict[str, Any]:
+def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int) -> dict[str, Any]:
     """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out."""
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
@@ -107,7 +107,7 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path)
     half = timesteps // 2
     every = max(1, (timesteps - half) // 8)
     checkpoints = folder / f"{name}__{seed}__{timesteps}_checkpoints"
-    selection = SelectionCallback(checkpoints, row.algo, ENV_ID, 1000, 8, half, every, env_kwargs=row.env_kwargs)
+    selection = SelectionCallback(checkpoints, row.algo, ENV_ID, validation, 8, half, every, env_kwargs=row.env_kwargs)
     started = time.perf_counter()
     model.learn(timesteps, callback=selection)
     selected = selection.finish(model)
@@ -141,9 +141,13 @@ def aggregate(runs: list[dict[str, Any]], blind: float, oracle: float) -> dict[s
     from agents.evaluate.headroom import iqm_across_runs
 
     success = [r["success_rate"] for r in runs]
-    scores = [(s - blind) / (oracle - blind) for s in success]
+    # The score is undefined where the oracle does not beat the best blind policy (nothing to read).
+    scores = [(s - blind) / (oracle - blind) for s in success] if oracle > blind else []
     out: dict[str, Any] = {"runs": len(runs), "training_seeds": [r["training_seed"] for r in runs]}
+    out["score"] = {"iqm": None, "ci95": [None, None]}
     for key, values in (("success", success), ("score", scores)):
+        if not values:
+            continue
         if len(values) >= 2:
             found = iqm_across_runs({ENV_ID: values})
             out[key] = {"iqm": found.iqm, "ci95": list(found.ci95)}
@@ -162,6 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=_seeds, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
     parser.add_argument("--timesteps", type=positive_int, default=1_000_000, help="training budget per run")
     parser.add_argument("--episodes", type=positive_int, default=2000, help="held-out episodes per agent")
+    parser.add_argument("--validation-episodes", type=positive_int, default=1000, help="per selection score")
     parser.add_argument("--runs", type=Path, default=Path("runs/learners"), help="folder of finished runs")
     add_save_argument(parser, "learners.json")
     args = parser.parse_args(argv)
@@ -184,7 +189,8 @@ def main(argv: list[str] | None = None) -> int:
         for seed in args.seeds:
             path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
             if not path.exists():
-                write_json(path, train_one(name, seed, args.timesteps, args.episodes, args.runs))
+                run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes)
+                write_json(path, run)
             run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
             if run["episodes"] != args.episodes:
                 parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
@@ -193,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
         table[name] = {"what": ROWS[name].what, **aggregate(runs, blind, oracle), "per_seed": runs}
     for name, row in table.items():
         s, c = row["success"], row["score"]
-        print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']:.2f} {c['ci95']}")
+        print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']} {c['ci95']}")
     report = {
         "env_id": ENV_ID,
         "timesteps": args.timesteps,
@@ -202,6 +208,9 @@ def main(argv: list[str] | None = None) -> int:
         "scripted": {k: {m: v[m] for m in ("success_rate", "unsafe_rate")} for k, v in reference.items()},
     }
     if args.save:
+        import stable_baselines3  # noqa: F401 -- the runs' torch and SB3 versions go into the results file
+        import torch  # noqa: F401
+
         save(args.save, "learners", argv, report)
     return 0
 

@@ -360,12 +360,13 @@ def learners(results: Results) -> str:
         success, score = row["success"], row["score"]
         per_seed = ", ".join(f"{100 * run['success_rate']:.1f}" for run in row["per_seed"])
         score_ci = "" if score["ci95"][0] is None else f" [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]"
+        score_text = "—" if score["iqm"] is None else f"{score['iqm']:.2f}{score_ci}"
         rows.append(
             [
                 f"`{name}`: {row['what']}",
                 str(row["runs"]),
                 f"{_pct(success['iqm'])} {_ci(success['ci95']) if success['ci95'][0] is not None else ''}".rstrip(),
-                f"{score['iqm']:.2f}{score_ci}",
+                score_text,
                 per_seed,
                 _pct(row["unsafe_rate_mean"]),
                 f"{row['train_wall_s_median']:.0f} s",

@@ -95,6 +95,25 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "library_defaults_dqn_SitToStandDiscrete-v0_64",
         ),
         (
+            "learners",
+            [
+                "--rows",
+                "ppo-kalman",
+                "--seeds",
+                "0",
+                "--timesteps",
+                "64",
+                "--episodes",
+                "4",
+                "--validation-episodes",
+                "4",
+                "--runs",
+                str(tmp / "learners"),
+            ],
+            "learners.json",
+            "learners",
+        ),
+        (
             "cleanrl_defaults",
             [
                 "--script",
