@@ -183,10 +183,7 @@ def test_generic_vector_envs_go_through_the_dict_of_arrays_path_with_the_same_re
     rng = np.random.default_rng(1)
     done_count = 0
     for _ in range(30):
-        actions = np.column_stack([rng.integers(0, 3, n), rng.integers(0, 3, n), rng.random(n) < 0.2])
-        obs_f, rew_f, done_f, infos_f = fast.step(actions)
-        obs_g, rew_g, done_g, infos_g = generic.step(actions)
-        assert np.array_equal(obs_f, obs_g) and np.array_equal(rew_f, rew_g) and np.array_equal(done_f, done_g)
+        _, infos_f, infos_g = _step_alike(fast, generic, rng, 0.2)
         for got, expected in zip(infos_f, infos_g, strict=True):
             if "terminal_observation" in expected:
                 assert np.array_equal(got.pop("terminal_observation"), expected.pop("terminal_observation"))
@@ -194,6 +191,18 @@ def test_generic_vector_envs_go_through_the_dict_of_arrays_path_with_the_same_re
                 done_count += 1
             _assert_same_info(got, expected)
     assert done_count >= 3
+
+
+def _step_alike(
+    first: SB3VecEnvAdapter, second: SB3VecEnvAdapter, rng: np.random.Generator, lift_probability: float
+) -> tuple[Any, list[dict[str, Any]], list[dict[str, Any]]]:
+    """One random step of both adapters; their observations, rewards and dones must agree."""
+    n = first.num_envs
+    actions = np.column_stack([rng.integers(0, 3, n), rng.integers(0, 3, n), rng.random(n) < lift_probability])
+    obs_a, rew_a, done_a, infos_a = first.step(actions)
+    obs_b, rew_b, done_b, infos_b = second.step(actions)
+    assert np.array_equal(obs_a, obs_b) and np.array_equal(rew_a, rew_b) and np.array_equal(done_a, done_b)
+    return done_a, infos_a, infos_b
 
 
 @pytest.mark.parametrize("generic", [False, True])
@@ -220,11 +229,8 @@ def test_finished_step_infos_keep_every_finished_episodes_info_and_nothing_else(
     rng = np.random.default_rng(2)
     finished = 0
     for _ in range(60):
-        actions = np.column_stack([rng.integers(0, 3, n), rng.integers(0, 3, n), rng.random(n) < 0.1])
-        obs_a, rew_a, done_a, infos_a = full.step(actions)
-        obs_l, rew_l, done_l, infos_l = lean.step(actions)
-        assert np.array_equal(obs_a, obs_l) and np.array_equal(rew_a, rew_l) and np.array_equal(done_a, done_l)
-        for done, got, expected in zip(done_l, infos_l, infos_a, strict=True):
+        dones, infos_a, infos_l = _step_alike(full, lean, rng, 0.1)
+        for done, got, expected in zip(dones, infos_l, infos_a, strict=True):
             if not done:
                 assert got == {}
                 continue
