@@ -15,8 +15,7 @@ import importlib
 from typing import Any
 
 from agents.base import Agent, action_type_of, encode_actions, features_of
-from agents.hyperparams import ALGORITHMS, DEFAULT_ENV_IDS, HYPERPARAMS, TrainingConfig, hyperparams_for
-from agents.scripted import (
+from agents.caregivers.scripted import (
     SCRIPTED_AGENTS,
     HandbookCaregiver,
     HandbookSettings,
@@ -29,6 +28,7 @@ from agents.scripted import (
     ScriptedAgent,
     make_scripted,
 )
+from agents.runs.hyperparams import ALGORITHMS, DEFAULT_ENV_IDS, HYPERPARAMS, TrainingConfig, hyperparams_for
 
 # name -> module, imported on first use, so `import agents` stays cheap: agents.evaluate
 # builds envs and tables, the rest need torch / SB3.
@@ -37,14 +37,14 @@ _LAZY = {
     "EvaluationResult": "agents.evaluate",
     "wilson_interval": "agents.evaluate",
     "SB3Agent": "agents.rl",
-    "ObsNormalizer": "agents.normalize",
+    "ObsNormalizer": "agents.rl.normalize",
     "load_agent": "agents.rl",
     "load_model": "agents.rl",
     "make_model": "agents.rl",
     "make_train_env": "agents.rl",
     "save_agent": "agents.rl",
-    "SB3VecEnvAdapter": "agents.sb3_vec",
-    "make_sb3_vec_env": "agents.sb3_vec",
+    "SB3VecEnvAdapter": "agents.rl.sb3_vec",
+    "make_sb3_vec_env": "agents.rl.sb3_vec",
 }
 
 

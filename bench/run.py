@@ -17,7 +17,7 @@ ratio. Every figure is the median over ``--repeats`` repeats with its min..max s
    step). The three alternate block by block in one run;
 3. SB3 PPO: timesteps/s of ``PPO("MlpPolicy").learn(T)`` on our env with 8 envs, as a
    ``DummyVecEnv`` of 8 ``Monitor``-wrapped single envs vs the batched env through
-   :class:`agents.sb3_vec.SB3VecEnvAdapter`. Two settings: ``rollout`` (``n_steps=64``,
+   :class:`agents.rl.sb3_vec.SB3VecEnvAdapter`. Two settings: ``rollout`` (``n_steps=64``,
    one epoch over one 512-sample batch: collecting experience dominates, where the env
    speed shows) and ``default`` (SB3's 10 epochs of 64-sample minibatches: gradient steps
    dominate and the env matters less). A third, no-work ``VecEnv`` measures PPO's own
@@ -172,7 +172,7 @@ class PPORunner:
         from stable_baselines3.common.monitor import Monitor
         from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
-        from agents.sb3_vec import make_sb3_vec_env
+        from agents.rl.sb3_vec import make_sb3_vec_env
 
         venv: VecEnv
         if backend == "dummy":

@@ -80,8 +80,8 @@ LEVEL_ENV_IDS: dict[str, str] = {
 """The id of each level (``v0``: the paper's model; then each difficulty by name), from :data:`ENV_IDS`."""
 
 HARD_ENV_ID = LEVEL_ENV_IDS["hard-v2"]
-"""The hard level's newest id: what ``train.py``, ``agents.play``, ``agents.reading`` and
-``agents.tune_belief`` play by default."""
+"""The hard level's newest id: what ``train.py``, ``agents.tools.play``, ``agents.caregivers.reading`` and
+``agents.caregivers.tune_belief`` play by default."""
 
 
 def register_envs() -> None:

@@ -25,7 +25,7 @@ under pushing, refusals). With a scalar position reading ``y`` (std ``r``):
   ``1 / sum_i w_i^2`` falls below ``resample_fraction * M``.
 
 Model mismatch (a frail person's push compliance is four times the nominal one) is absorbed
-by two robustness knobs chosen on the training personas (``agents/belief.py``): the reading
+by two robustness knobs chosen on the training personas (``agents/caregivers/belief.py``): the reading
 std ``r`` is inflated above the camera's, and ``mode_jitter_per_s`` re-draws a particle's mode
 uniformly at that rate so no mode is ever locked out.
 

@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 
 import coop_gym  # noqa: F401  (registers the ids)
 from agents.base import Agent, level_of
-from agents.belief import BeliefCaregiver
+from agents.caregivers.belief import BeliefCaregiver
 from agents.evaluate.results import wilson_interval
 from coop_gym.envs.switching import SwitchingOptions, hypothesis_people, pack_at_level, switching_filter
 from coop_gym.model.difficulty import get_difficulty

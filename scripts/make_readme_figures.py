@@ -12,17 +12,17 @@ Figures (each deterministic given the seeds below, each kept under ``--max-kb``,
   handbook-caregiver episode: the person leaning forward under the soft push (arrow) while
   the robot says "lean forward" (speech bubble), the estimator's gauge with the ±threshold
   band and the judgment, and the true cooperativeness as a face.
-* ``timeline_handbook.png`` -- :func:`agents.timeline.plot_timeline` of that episode on
+* ``timeline_handbook.png`` -- :func:`agents.tools.timeline.plot_timeline` of that episode on
   ``CoopGym/SitToStand-v0``: the first seed (from 0) whose person starts uncooperative, is
   judged so, and is guided to cooperation and a safe lift. The script prints the seed and
-  the ``python -m agents.record`` command that writes the same figure (and the video).
+  the ``python -m agents.tools.record`` command that writes the same figure (and the video).
 * ``timeline_push_then_lift.png`` -- the paper's failure scenario: the push-then-lift caregiver
   on a frail person whom the push moves past the lean threshold although they resist
   (``xi = -1``), so the lift is unsafe (the first such seed from 0; the script prints the
-  ``python -m agents.record --agent push_then_lift --persona frail`` command).
+  ``python -m agents.tools.record --agent push_then_lift --persona frail`` command).
 * ``outcomes.png`` -- outcome rates (95 % Wilson intervals) of every scripted caregiver on
   the held-out personas (:func:`agents.evaluate.evaluate`, ``--episodes`` each, seeds from 0;
-  :func:`agents.plots.plot_outcome_rates`), as
+  :func:`agents.tools.plots.plot_outcome_rates`), as
   ``python -m agents.evaluate --compare random,lift_at_once,push_then_lift,handbook,oracle
   --personas test --episodes N --plot FILE`` draws it.
 * ``protocol_trace.png`` and ``protocol_confusion.png`` -- the paper's experiment
@@ -55,9 +55,9 @@ from PIL import Image
 
 import coop_gym  # noqa: F401  (registers the ids)
 from agents.base import action_type_of, features_of
-from agents.record import play_episode
-from agents.scripted import SCRIPTED_AGENTS, make_scripted
-from agents.timeline import Trace, judgment_events, plot_timeline
+from agents.caregivers.scripted import SCRIPTED_AGENTS, make_scripted
+from agents.tools.record import play_episode
+from agents.tools.timeline import Trace, judgment_events, plot_timeline
 from coop_gym.cli import output_path_problem
 from coop_gym.io import save_with
 
@@ -153,7 +153,7 @@ def make_failure(out: Path) -> list[Path]:
     trace, _ = scripted_episode("push_then_lift", seed, personas="frail")
     print(f"  push_then_lift, frail, seed {seed}: {trace.outcome} at {trace.time_s[-1]:.1f} s")
     print(
-        "  same episode with its video: python -m agents.record --agent push_then_lift --persona frail "
+        "  same episode with its video: python -m agents.tools.record --agent push_then_lift --persona frail "
         f"--seed {seed} --out DIR"
     )
     return [plot_timeline(trace, out / "timeline_push_then_lift.png", width_px=900, height_px=760, dpi=100)]
@@ -162,7 +162,7 @@ def make_failure(out: Path) -> list[Path]:
 def make_outcomes(out: Path, episodes: int) -> list[Path]:
     """``outcomes.png``: outcome rates of the scripted caregivers on held-out personas."""
     from agents.evaluate import evaluate
-    from agents.plots import plot_outcome_rates
+    from agents.tools.plots import plot_outcome_rates
 
     results = []
     for name in ("random", "lift_at_once", "push_then_lift", "handbook", "oracle"):
@@ -232,7 +232,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         episode = scripted_episode("handbook", seed)
         trace = episode[0]
         print(f"handbook episode: seed {seed}, persona {trace.persona}, {trace.outcome} at {trace.time_s[-1]:.1f} s")
-        print(f"  same episode with its video: python -m agents.record --agent handbook --seed {seed} --out DIR")
+        print(f"  same episode with its video: python -m agents.tools.record --agent handbook --seed {seed} --out DIR")
     makers: dict[str, Callable[[], list[Path]]] = {
         "scene": lambda: make_scene(args.out, *episode),  # type: ignore[misc]
         "timeline": lambda: make_timeline(args.out, episode[0]),  # type: ignore[index]

@@ -1,4 +1,4 @@
-"""Record a played episode of ``python -m agents.play`` as a GIF (for the docs), headless.
+"""Record a played episode of ``python -m agents.tools.play`` as a GIF (for the docs), headless.
 
 The player is a fixed key script: say "lean forward", push softly, say it again, lift
 at 5.1 s. Every drawn step becomes a frame (0.1 s, real time); the end-of-episode summary
@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from agents.play import DEFAULT_CSV, DEFAULT_ENV_ID, play, scripted_keys  # noqa: E402
+from agents.tools.play import DEFAULT_CSV, DEFAULT_ENV_ID, play, scripted_keys  # noqa: E402
 
 # Two paused frames, then Space and "lean forward"; soft push from 1.0 s; "lean forward"
 # again at 2.5 s; lift at 5.1 s; Enter closes the summary.

@@ -1,7 +1,7 @@
 """Bad command-line flags: exit status 2 and a message naming the problem on stderr.
 
 Covers the command lines that exist: ``python train.py``, ``python -m agents.evaluate``,
-``python -m agents.record``, ``python -m coop_gym.experiment.protocol`` and the ``bench/`` scripts
+``python -m agents.tools.record``, ``python -m coop_gym.experiment.protocol`` and the ``bench/`` scripts
 (``run.py``, ``cold_start.py``, ``render.py``, ``cleanrl_defaults.py``, ``time_to_quality.py``).
 A command line that no longer imports, or has lost its ``main(argv)``, fails. Cases call
 ``main(argv)`` in-process (argparse exits through ``SystemExit``) under an alarm, so a bad flag
@@ -185,19 +185,19 @@ CASES: list[tuple[str, str, list[str], str]] = [
         r"--plot: unsupported file type '.txt'",
     ),
     (
-        "agents.record",
+        "agents.tools.record",
         "env not a coop_gym id",
         ["--agent", "handbook", "--env", "CartPole-v1", "--out", "videos"],
         r"unknown env id 'CartPole-v1' \(not a coop_gym env\)",
     ),
     (
-        "agents.record",
+        "agents.tools.record",
         "seed 2**64",
         ["--agent", "handbook", "--seed", str(2**64), "--out", "v"],
         r"--seed: seeds must be below 2\*\*32",
     ),
     (
-        "agents.record",
+        "agents.tools.record",
         "seed 2**63-1",
         ["--agent", "handbook", "--seed", str(2**63 - 1), "--out", "v"],
         r"below 2\*\*32",
@@ -285,7 +285,7 @@ LATE_CASES: list[tuple[str, str, list[str], str]] = [
         r"--json-out: .*a_file",
     ),
     (
-        "agents.record",
+        "agents.tools.record",
         "out in a folder that cannot be created",
         ["--agent", "handbook", "--max-steps", "3", "--out", "{blocked}"],
         r"--out: .*a_file is not a folder",
@@ -309,8 +309,8 @@ def make_artifacts(folder: Path) -> dict[str, str]:
 
     import torch
 
-    from agents.hyperparams import hyperparams_for
     from agents.rl import make_model, make_train_env, save_agent
+    from agents.runs.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)
     config = hyperparams_for("ppo")
@@ -373,9 +373,14 @@ MODEL_CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.evaluate", "bad agent.json", ["--model", "{bad_agent_json}", "--episodes", "1"], r"agent.json: not valid"),
     ("agents.evaluate", "bad vecnormalize.pkl", ["--model", "{bad_vecnormalize}"], r"vecnormalize.pkl: not a readable"),
     ("agents.evaluate", "model of another id", ["--model", "{model}", "--env", _ORACLE, "--episodes", "1"], _DIFFER),
-    ("agents.record", "empty model.zip", ["--model", "{empty}", "--out", "{out}"], r"--model .*could not load"),
-    ("agents.record", "bad agent.json", ["--model", "{bad_agent_json}", "--out", "{out}"], r"agent.json: not valid"),
-    ("agents.record", "model of another id", ["--model", "{model}", "--env", _ORACLE, "--out", "{out}"], _DIFFER),
+    ("agents.tools.record", "empty model.zip", ["--model", "{empty}", "--out", "{out}"], r"--model .*could not load"),
+    (
+        "agents.tools.record",
+        "bad agent.json",
+        ["--model", "{bad_agent_json}", "--out", "{out}"],
+        r"agent.json: not valid",
+    ),
+    ("agents.tools.record", "model of another id", ["--model", "{model}", "--env", _ORACLE, "--out", "{out}"], _DIFFER),
 ]
 
 
@@ -403,7 +408,7 @@ def test_record_into_a_read_only_folder_exits_2(tmp_path: Path) -> None:
     out.mkdir()
     out.chmod(0o500)
     try:
-        code, err = run_main(_main_of("agents.record"), ["--agent", "handbook", "--out", str(out)])
+        code, err = run_main(_main_of("agents.tools.record"), ["--agent", "handbook", "--out", str(out)])
     finally:
         out.chmod(0o700)
     assert code == 2 and re.search(r"--out: .* is not writable", err), err
@@ -414,7 +419,7 @@ def test_read_only_check_names_the_folder(tmp_path: Path, monkeypatch: pytest.Mo
     out = tmp_path / "videos"
     out.mkdir()
     monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != out)
-    code, err = run_main(_main_of("agents.record"), ["--agent", "handbook", "--out", str(out)])
+    code, err = run_main(_main_of("agents.tools.record"), ["--agent", "handbook", "--out", str(out)])
     assert code == 2 and re.search(rf"--out: cannot create {re.escape(str(out))}: .* is not writable", err), err
 
 
@@ -505,12 +510,12 @@ def _left(folder: Path) -> list[str]:
              "--json-out", "{out}/a.json", "--plot", "{out}/a.png"],
         ),
         ("coop_gym.experiment.protocol", ["--subjects", "1", "--trials", "1", "--plot", "{out}/trace.png"]),
-        ("agents.record", ["--agent", "handbook", "--max-steps", "5", "--out", "{out}"]),
+        ("agents.tools.record", ["--agent", "handbook", "--max-steps", "5", "--out", "{out}"]),
         ("train.py", ["--timesteps", "64", "--eval-episodes", "1", "--baselines", "", "--out", "{out}"]),
     ],
 )  # fmt: skip
 def test_a_full_disk_leaves_no_partial_file(cli, argv, tmp_path, full_disk):
-    if cli == "agents.record" and importlib.util.find_spec("pygame") is None:
+    if cli == "agents.tools.record" and importlib.util.find_spec("pygame") is None:
         pytest.skip("rendering needs pygame")
     out = tmp_path / "out"
     out.mkdir()

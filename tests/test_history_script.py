@@ -10,7 +10,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from agents.belief import BeliefCaregiver
+from agents.caregivers.belief import BeliefCaregiver
 from coop_gym.envs.switching import SwitchingOptions, hypothesis_people
 from coop_gym.model.params import PersonParams
 from coop_gym.model.personas import VARIED_PARAMETERS

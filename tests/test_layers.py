@@ -213,3 +213,27 @@ def test_no_module_imports_a_higher_package() -> None:
         if rank.get(target.split(".")[0], -1) > rank[name.split(".")[0]]
     ]
     assert not bad, "imports of a higher package:\n" + "\n".join(bad)
+
+
+MAX_MODULES_PER_FOLDER = 12
+"""STYLE.md "Rooms with names on the doors": a folder of more modules is split into named subpackages."""
+
+CROWDED_FOLDERS: dict[str, int] = {"bench": 17, "coop_gym/envs": 18}
+"""Folders not yet split, each held to the modules it has now: it may shrink, never grow."""
+
+
+def test_no_folder_holds_more_than_a_dozen_modules() -> None:
+    roots = sorted({prefix.split(".")[0] for layer in LAYERS for prefix in layer})
+    folders: dict[str, int] = {}
+    for root in roots:
+        for path in (ROOT / root).rglob("*.py") if (ROOT / root).is_dir() else []:
+            if path.name != "__init__.py":
+                folder = path.parent.relative_to(ROOT).as_posix()
+                folders[folder] = folders.get(folder, 0) + 1
+    assert folders["agents"] <= MAX_MODULES_PER_FOLDER
+    crowded = {
+        folder: count
+        for folder, count in sorted(folders.items())
+        if count > CROWDED_FOLDERS.get(folder, MAX_MODULES_PER_FOLDER)
+    }
+    assert not crowded, f"more than {MAX_MODULES_PER_FOLDER} modules: split into named subpackages: {crowded}"

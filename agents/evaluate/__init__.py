@@ -13,7 +13,7 @@ tables and files: :mod:`agents.evaluate.report`.
 
 Command line: ``python -m agents.evaluate --agent handbook --personas test`` (see
 :mod:`agents.evaluate.cli`, kept apart because it loads saved models through
-:mod:`agents.rl` and :mod:`agents.rllib`, which evaluate through this module).
+:mod:`agents.rl` and :mod:`agents.rl.rllib`, which evaluate through this module).
 
 Importing this module does not import torch.
 """
@@ -28,6 +28,7 @@ import gymnasium as gym
 
 import coop_gym  # noqa: F401 -- registers the env ids
 from agents.base import Agent, feature_mismatch
+from agents.caregivers.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.evaluate.episodes import make_slots, play
 from agents.evaluate.headroom import (
     BLIND_AGENTS,
@@ -56,7 +57,6 @@ from agents.evaluate.results import (
     EvaluationResult,
     wilson_interval,
 )
-from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.model.personas import Persona, resolve_personas
 from estimator.compiled.checks import check_integer

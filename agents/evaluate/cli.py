@@ -1,7 +1,7 @@
 r"""The command line of :mod:`agents.evaluate`: ``python -m agents.evaluate ...``.
 
 A module of its own because it loads saved models: SB3 bundles (:mod:`agents.rl`) and
-RLlib runs (:mod:`agents.rllib`), which themselves evaluate through :mod:`agents.evaluate`.
+RLlib runs (:mod:`agents.rl.rllib`), which themselves evaluate through :mod:`agents.evaluate`.
 Kept here, the imports run one way (``cli -> rl -> evaluate``). Examples::
 
     python -m agents.evaluate --agent handbook --personas test --episodes 1000
@@ -29,6 +29,7 @@ from pathlib import Path
 
 import coop_gym  # registers the env ids
 from agents.base import Agent, feature_mismatch
+from agents.caregivers.scripted import SCRIPTED_AGENTS
 from agents.evaluate import (
     DEFAULT_ENV_ID,
     PLOT_SUFFIXES,
@@ -41,8 +42,7 @@ from agents.evaluate import (
 )
 from agents.evaluate.runs import RunScore, aggregate_runs, finished_run_score, is_run_folder, run_folders_in
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
-from agents.run_folder import is_rllib_run
-from agents.scripted import SCRIPTED_AGENTS
+from agents.runs.run_folder import is_rllib_run
 from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 
@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
     who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
     who.add_argument(
         "--model",
-        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent), an RLlib run folder (agents.rllib) "
+        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent), an RLlib run folder (agents.rl.rllib) "
         f"or a model shipped with the package ({', '.join(PREFIX + n for n in pretrained_names())})",
     )
     who.add_argument(
@@ -70,7 +70,8 @@ def _parser() -> argparse.ArgumentParser:
     who.add_argument(
         "--human",
         metavar="CSV",
-        help="add the episodes played with python -m agents.play as the 'human' row (replayed on their own seeds; "
+        help="add the episodes played with python -m agents.tools.play as the 'human' row "
+        "(replayed on their own seeds; "
         "scored against blind and oracle on those seeds, never the best non-oracle). A CSV of several env ids "
         "needs --env: its episodes of that env are scored",
     )
@@ -147,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         results.append(result)
     if args.human:
-        from agents.play_log import score_played
+        from agents.tools.play_log import score_played
 
         try:
             results.append(score_played(args.human, human_env))
@@ -170,7 +171,7 @@ def _human_env(
         parser.error(f"--human: the agents play on different envs ({', '.join(envs)}): give --env")
     if args.env is not None:
         return str(args.env)
-    from agents.play_log import read_played
+    from agents.tools.play_log import read_played
 
     try:
         played = sorted({e.env_id for e in read_played(args.human)})
@@ -196,7 +197,7 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
     if not entries and not args.human:
         parser.error("give --agent NAME, --model PATH, --compare NAME,NAME,... or --human CSV")
     if args.human and not Path(args.human).is_file():
-        parser.error(f"--human: no played-episodes CSV at {args.human} (python -m agents.play writes one)")
+        parser.error(f"--human: no played-episodes CSV at {args.human} (python -m agents.tools.play writes one)")
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
     if args.n_envs < 1:
@@ -268,7 +269,7 @@ def _planned(
 
     torch.set_num_threads(args.threads)  # the policy's forward passes (SB3's and RLlib's)
     if not is_pretrained(entry) and is_rllib_run(entry):
-        from agents.rllib import load_rllib_agent
+        from agents.rl.rllib import load_rllib_agent
 
         try:
             rllib_agent = load_rllib_agent(entry)
@@ -319,7 +320,7 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
         if args.json_out:
             write_json(results, args.json_out, episodes=True)
         if args.plot:
-            from agents.plots import plot_outcome_rates
+            from agents.tools.plots import plot_outcome_rates
 
             plot_outcome_rates(results, args.plot)
     except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)

@@ -4,7 +4,7 @@ On one level (one env id) and the same seeded episodes, three success rates anch
 
 * the oracle's (it sees the true ``xi``: the upper bound),
 * the best mental-state-blind policy's (:data:`BLIND_AGENTS`; the tuned ``blind`` of
-  ``agents.scripted.make_scripted("blind", level=LEVEL)`` is the family's best),
+  ``agents.caregivers.scripted.make_scripted("blind", level=LEVEL)`` is the family's best),
 * and every other agent's.
 
 From them: the **value of reading the mind** = oracle - best blind (what knowing ``xi`` is
@@ -18,7 +18,7 @@ percentile bootstrap: episodes are resampled, and the agent, the best blind poli
 oracle are scored on the same resampled episodes (they played the same seeds), so the
 interval reflects the episodes drawn, not three independent samples.
 
-A person's row (:data:`HUMAN_AGENTS`, the episodes played with ``python -m agents.play``)
+A person's row (:data:`HUMAN_AGENTS`, the episodes played with ``python -m agents.tools.play``)
 is never the best non-oracle: a person plays a handful of seeds of their own choosing, not
 the comparison's episodes, so their success rate is not comparable with the agents' and
 would silently become the "achieved insight". The headroom is computed from the other rows;
@@ -63,7 +63,7 @@ ORACLE_AGENTS = ("oracle",)
 BLIND_AGENTS = ("blind", "push_then_lift", "lift_at_once", "random")
 """Scripted agents that never use the cue-response evidence (lean, timers and pushes only)."""
 HUMAN_AGENTS = ("human",)
-"""Rows of episodes people played (:func:`agents.play_log.score_played`): scored on their own
+"""Rows of episodes people played (:func:`agents.tools.play_log.score_played`): scored on their own
 episodes, never the "best non-oracle"."""
 N_RESAMPLES = 2000
 """Bootstrap resamples: the percentile interval's ends move by well under a point beyond this."""

@@ -18,8 +18,8 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import KVWriter, Logger, TensorBoardOutputFormat
 
-from agents.normalize import ObsNormalizer
 from agents.rl.bundle import SB3Agent, read_bundle, save_model_bundle
+from agents.rl.normalize import ObsNormalizer
 from agents.rl.training import find_vec_normalize
 from coop_gym.envs.config import Outcome
 

@@ -1,14 +1,14 @@
 """One ``train.py`` run with Stable-Baselines3: its plan and run folder, then training with checkpoints.
 
 * :func:`plan_run` -- what the run does, settled before any work: the algorithm's settings
-  (:mod:`agents.hyperparams`) overridden by the flags, a saved model checked against the env,
+  (:mod:`agents.runs.hyperparams`) overridden by the flags, a saved model checked against the env,
   and the run folder (the unfinished one being resumed, or a new one holding ``args.json``);
 * :func:`train` -- the training env, the model (restored from the last checkpoint, continued
   from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
   checkpoints), ``learn``, then the saved agent and ``training.json``.
 
 What happens after training (the evaluation against the baselines, the report) is
-:func:`agents.run_report.evaluate_and_report`; the arguments are ``train.Args``.
+:func:`agents.runs.run_report.evaluate_and_report`; the arguments are ``train.Args``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from typing import Any
 import torch
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.hyperparams import hyperparams_for
 from agents.rl import (
     CheckpointCallback,
     OutcomeStatsCallback,
@@ -39,10 +38,11 @@ from agents.rl import (
     save_agent,
     saved_model_problem,
 )
-from agents.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
-from agents.run_report import new_run_folder
-from agents.train_args import RunProblem, personas_arg, recorded_settings
-from agents.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
+from agents.runs.hyperparams import hyperparams_for
+from agents.runs.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
+from agents.runs.run_report import new_run_folder
+from agents.runs.train_args import RunProblem, personas_arg, recorded_settings
+from agents.runs.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
 from coop_gym.io import write_json
 
 __all__ = ["plan_run", "train"]
@@ -109,7 +109,7 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     """Train to the step budget, checkpointing on the way; the training summary (also in ``training.json``).
 
     Raises:
-        agents.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last rollout.
+        agents.runs.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last rollout.
         RunProblem: a damaged checkpoint or saved model (the message names it).
     """
     run_dir, config = plan.run_dir, plan.config

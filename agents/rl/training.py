@@ -1,11 +1,11 @@
 """Building what SB3 trains: the training ``VecEnv`` and the algorithm with the project's defaults.
 
 * :func:`make_train_env` -- ``n_envs`` envs seeded ``seed, seed + 1, ...`` through the
-  batched env's SB3 adapter (:mod:`agents.sb3_vec`) or SB3's ``DummyVecEnv`` of single envs
+  batched env's SB3 adapter (:mod:`agents.rl.sb3_vec`) or SB3's ``DummyVecEnv`` of single envs
   (the same episodes), with episode statistics (``VecMonitor``) and optional observation
   normalisation (``VecNormalize``).
 * :func:`make_model` -- PPO, RecurrentPPO or DQN with the hyperparameters of
-  :mod:`agents.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
+  :mod:`agents.runs.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
 
 import coop_gym  # noqa: F401 -- registers the env ids
-from agents.hyperparams import ALGORITHMS, TrainingConfig
-from agents.sb3_vec import make_sb3_vec_env
+from agents.rl.sb3_vec import make_sb3_vec_env
+from agents.runs.hyperparams import ALGORITHMS, TrainingConfig
 from coop_gym.cli import SEED_LIMIT
 from estimator.compiled.checks import check_integer
 
@@ -36,7 +36,7 @@ __all__ = [
 
 
 def algorithm_class(algo: str) -> type[BaseAlgorithm]:
-    """The SB3 class of an algorithm name (:data:`agents.hyperparams.ALGORITHMS`)."""
+    """The SB3 class of an algorithm name (:data:`agents.runs.hyperparams.ALGORITHMS`)."""
     if algo == "ppo":
         return PPO
     if algo == "dqn":
@@ -72,7 +72,7 @@ def make_train_env(
         monitor_append: Append to an existing ``monitor_file`` (a resumed run) instead of replacing it.
         env_kwargs: Extra env kwargs.
         backend: ``"batched"`` or ``"auto"`` (the native vector env through
-            :mod:`agents.sb3_vec`), ``"dummy"`` (SB3 ``DummyVecEnv`` of single envs).
+            :mod:`agents.rl.sb3_vec`), ``"dummy"`` (SB3 ``DummyVecEnv`` of single envs).
 
     Returns:
         The ``VecEnv`` (``VecMonitor``-wrapped; ``VecNormalize`` outermost if asked).

@@ -24,7 +24,7 @@ __all__ = [
     "ConfiguredEnv",
     "SitToStandEnv",
     "make_core",
-    "observation_features",  # the contract's, for the importers of this module (agents.scripted)
+    "observation_features",  # the contract's, for the importers of this module (agents.caregivers.scripted)
     "render_state_for",
 ]
 
@@ -239,7 +239,7 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
     batched :class:`coop_gym.envs.vector.SitToStandVectorEnv` (one compiled call steps all
     ``N``; ``autoreset_mode`` next-step, same-step or disabled); env ``i`` seeded ``s + i``
     matches a single env seeded ``s + i``, across autoresets too. For Stable-Baselines3,
-    ``agents.sb3_vec.make_sb3_vec_env(id, N, seed)`` wraps it as an SB3 ``VecEnv``.
+    ``agents.rl.sb3_vec.make_sb3_vec_env(id, N, seed)`` wraps it as an SB3 ``VecEnv``.
 
     Random stream: a reset draws ``integers``, the person's variation normals, ``random``
     and one normal from ``self.np_random``; each non-lift step then draws 25 standard normals.

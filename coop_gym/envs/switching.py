@@ -57,7 +57,7 @@ class SwitchingOptions:
     """Settings of the switching particle filter (``estimator_options`` of ``estimator="switching"``).
 
     The defaults were compared on the training personas through the belief caregiver
-    (``agents/belief.py``; 250 episodes each): 1024 particles over 128 hypotheses with a
+    (``agents/caregivers/belief.py``; 250 episodes each): 1024 particles over 128 hypotheses with a
     compliance range of 8 read them best of the settings tried. The reading std, mode jitter and
     compliance range sit on a flat top: nearby values move the caregiver's leave-one-out success
     by less than the noise (docs/HARD_LEVEL.md, "The belief caregiver"). The filter costs about
@@ -79,7 +79,7 @@ class SwitchingOptions:
         hypothesis_spread: Std of the log of each varied parameter of a drawn hypothesis.
         personas: The personas the hypotheses are drawn around (names; default the training
             personas): a caregiver's idea of the people it will meet. Leaving one out and
-            scoring on it (``python -m agents.tune_belief``) measures what meeting an unknown
+            scoring on it (``python -m agents.caregivers.tune_belief``) measures what meeting an unknown
             kind of person costs.
         compliance_range: A drawn hypothesis's effective push compliance (``k2`` times the
             stiffness factor of its mode) is further scaled by a factor log-uniform in

@@ -12,7 +12,6 @@ import torch
 
 import coop_gym
 from agents.evaluate import evaluate
-from agents.hyperparams import hyperparams_for
 from agents.rl import (
     AGENT_FILE,
     BUNDLE_INFO,
@@ -24,6 +23,7 @@ from agents.rl import (
     make_train_env,
     save_agent,
 )
+from agents.runs.hyperparams import hyperparams_for
 
 torch.set_num_threads(1)
 

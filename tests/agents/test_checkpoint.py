@@ -7,7 +7,6 @@ from pathlib import Path
 import pytest
 import torch
 
-from agents.hyperparams import ALGORITHMS, hyperparams_for
 from agents.rl import (
     CHECKPOINTS_DIR,
     CheckpointCallback,
@@ -17,6 +16,7 @@ from agents.rl import (
     make_train_env,
     restore_checkpoint,
 )
+from agents.runs.hyperparams import ALGORITHMS, hyperparams_for
 
 torch.set_num_threads(1)
 

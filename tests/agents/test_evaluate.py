@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import coop_gym  # noqa: F401
+from agents.caregivers.scripted import HandbookCaregiver, OracleAgent
 from agents.evaluate import (
     OUTCOMES,
     TABLE_COLUMNS,
@@ -29,7 +30,6 @@ from agents.evaluate import (
     write_csv,
 )
 from agents.evaluate.cli import main
-from agents.scripted import HandbookCaregiver, OracleAgent
 
 
 def test_wilson_interval_known_values():
@@ -421,7 +421,7 @@ def test_cli_compare_names_two_models_of_one_folder_apart(tmp_path, capsys):
 
 
 def test_cli_human_csv_of_several_envs_needs_env(tmp_path, capsys, monkeypatch):
-    from agents.play_log import PlayedEpisode, append_played
+    from agents.tools.play_log import PlayedEpisode, append_played
 
     csv_path = tmp_path / "played.csv"
     for env_id in ("CoopGym/SitToStandHard-v2", "CoopGym/SitToStand-v0"):

@@ -10,9 +10,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.belief import TUNED_BELIEF
+from agents.caregivers.belief import TUNED_BELIEF
+from agents.caregivers.scripted import (
+    TUNED_BLIND,
+    TUNED_PROBER,
+    BlindAgent,
+    BlindSettings,
+    ProbingCaregiver,
+    make_scripted,
+)
 from agents.evaluate import OUTCOMES, EpisodeRecord, EvaluationResult, evaluate, headroom
-from agents.scripted import TUNED_BLIND, TUNED_PROBER, BlindAgent, BlindSettings, ProbingCaregiver, make_scripted
 from coop_gym.envs.sit_to_stand import observation_features
 from coop_gym.model.difficulty import DIFFICULTIES
 
@@ -165,8 +172,8 @@ def test_the_tuned_settings_cover_every_level() -> None:
 def test_the_blind_search_scores_candidates_as_the_evaluation_does() -> None:
     # play_population (many candidates in one batched env) gives each candidate the episodes
     # agents.evaluate gives it: same seeds, same people, same outcomes.
-    from agents.scripted import CuePhase
-    from agents.tune_baselines import play_population
+    from agents.caregivers.scripted import CuePhase
+    from agents.caregivers.tune_baselines import play_population
 
     env_id = "CoopGym/SitToStandHard-v1"
     candidates = [

@@ -1,4 +1,4 @@
-"""agents.play driven headless by scripted key presses; the played-episodes CSV and its score."""
+"""agents.tools.play driven headless by scripted key presses; the played-episodes CSV and its score."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ pytest.importorskip("pygame")
 import pygame
 
 from agents.base import LIFT, PUSH_FIRM, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE, WAIT
-from agents.play import Controls, main, play, pygame_keys, score_played, scripted_keys
-from agents.play_log import PLAYED_COLUMNS, PlayedEpisode, append_played, next_seed, read_played
+from agents.tools.play import Controls, main, play, pygame_keys, score_played, scripted_keys
+from agents.tools.play_log import PLAYED_COLUMNS, PlayedEpisode, append_played, next_seed, read_played
 
 ENV_ID = "CoopGym/SitToStandHard-v1"
 # Paused at the start; Space and a firm push, "lean forward" at 1.0 s, soft push from 2.0 s, lift at 4.0 s, Enter.

@@ -1,4 +1,4 @@
-"""agents.reading: the estimator tables, on a few episodes, at the level of the env they are read on."""
+"""agents.caregivers.reading: the estimator tables, on a few episodes, at the level of the env they are read on."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from agents.reading import ESTIMATORS, collect, main, summarise
+from agents.caregivers.reading import ESTIMATORS, collect, main, summarise
 
 
 @pytest.mark.parametrize("env_id", ["CoopGym/SitToStandHard-v2", "CoopGym/SitToStandHard-v1"])
@@ -32,7 +32,7 @@ def test_every_estimator_is_read_on_the_same_steps_and_summarised(env_id: str) -
     ("env_id", "level"), [("CoopGym/SitToStandHard-v2", "hard-v2"), ("CoopGym/SitToStand-v0", None)]
 )
 def test_the_level_of_the_env_sets_the_caregiver_and_the_true_person_filter(monkeypatch, env_id, level) -> None:
-    import agents.reading as reading
+    import agents.caregivers.reading as reading
 
     seen: dict[str, object] = {}
     real_make, real_options = reading.make_scripted, reading.SwitchingOptions
@@ -62,7 +62,7 @@ def test_command_line_writes_the_summary(tmp_path, capsys) -> None:
 
 
 def test_a_lag_with_too_few_steps_is_left_out_of_the_latency_curve() -> None:
-    from agents.reading import MIN_STEPS_PER_LAG
+    from agents.caregivers.reading import MIN_STEPS_PER_LAG
 
     many, few = MIN_STEPS_PER_LAG, MIN_STEPS_PER_LAG - 1
     # Steps 0.1 s after a probe's onset (lag 0.0) and 0.6 s after (lag 0.5); every estimator right.

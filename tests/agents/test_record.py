@@ -1,4 +1,4 @@
-"""Videos and timelines: RecordVideo / VecVideoRecorder over our env, agents.record, agents.timeline."""
+"""Videos and timelines: RecordVideo / VecVideoRecorder over our env, agents.tools.record, agents.tools.timeline."""
 
 from __future__ import annotations
 
@@ -19,8 +19,8 @@ import pytest
 from gymnasium.wrappers import RecordVideo
 
 import coop_gym  # noqa: F401  (registers the ids)
-from agents import record
-from agents.timeline import OUTCOME_COLOURS, Trace, TraceBuilder, judgment_events, plot_timeline
+from agents.tools import record
+from agents.tools.timeline import OUTCOME_COLOURS, Trace, TraceBuilder, judgment_events, plot_timeline
 
 pytest.importorskip("moviepy")
 PIL = pytest.importorskip("PIL.Image")
@@ -77,7 +77,7 @@ def test_record_command_runs_headless_and_writes_video_and_timeline(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}
     env["MPLBACKEND"] = "TkAgg"  # would need a display if pyplot were used: the command must not use it
     proc = subprocess.run(
-        [sys.executable, "-m", "agents.record", "--agent", "handbook", "--seed", "0", "--out", "tmp"],
+        [sys.executable, "-m", "agents.tools.record", "--agent", "handbook", "--seed", "0", "--out", "tmp"],
         cwd=tmp_path,
         env=env,
         capture_output=True,
@@ -156,7 +156,7 @@ def test_oracle_gets_the_oracle_observation_on_the_default_id(tmp_path):
 
 
 def test_a_named_caregiver_is_recorded_with_the_settings_chosen_for_the_level():
-    from agents.scripted import TUNED_BLIND, TUNED_PROBER
+    from agents.caregivers.scripted import TUNED_BLIND, TUNED_PROBER
 
     # As agents.evaluate plays them: the hard level's blind and probing settings on a hard id.
     for env_id, level in (("CoopGym/SitToStandHard-v1", "hard"), (ENV_ID, "v0")):
@@ -232,7 +232,7 @@ def test_bad_flags_exit_2_with_a_clear_message(argv, message, capsys, tmp_path, 
 
 def test_bad_flag_exit_status_of_the_real_process(tmp_path):
     proc = subprocess.run(
-        [sys.executable, "-m", "agents.record", "--agent", "handbook", "--out", "o", "--fps", "-1"],
+        [sys.executable, "-m", "agents.tools.record", "--agent", "handbook", "--out", "o", "--fps", "-1"],
         cwd=tmp_path,
         capture_output=True,
         text=True,

@@ -25,8 +25,7 @@ from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import coop_gym  # noqa: F401
 from agents.evaluate import evaluate
-from agents.hyperparams import hyperparams_for
-from agents.rllib import (
+from agents.rl.rllib import (
     CHECKPOINT_DIR,
     DEFAULT_NUM_ENVS,
     OBS_CLIP,
@@ -39,6 +38,7 @@ from agents.rllib import (
     load_rllib_agent,
     ppo_config,
 )
+from agents.runs.hyperparams import hyperparams_for
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV_ID = "CoopGym/SitToStand-v0"

@@ -16,7 +16,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor, VecNormalize
 
 import coop_gym
-from agents.sb3_vec import SB3VecEnvAdapter, make_sb3_vec_env
+from agents.rl.sb3_vec import SB3VecEnvAdapter, make_sb3_vec_env
 
 SHORT = {"timing": {"episode_s": 2.0}, "max_episode_steps": 20}  # truncation within a short test
 

@@ -10,9 +10,8 @@ import pytest
 
 import coop_gym  # noqa: F401
 from agents.base import encode_actions
-from agents.belief import TUNED_BELIEF
-from agents.evaluate import evaluate
-from agents.scripted import (
+from agents.caregivers.belief import TUNED_BELIEF
+from agents.caregivers.scripted import (
     SCRIPTED_AGENTS,
     TUNED_BLIND,
     TUNED_PROBER,
@@ -26,6 +25,7 @@ from agents.scripted import (
     RandomAgent,
     make_scripted,
 )
+from agents.evaluate import evaluate
 from coop_gym.envs.sit_to_stand import observation_features
 from coop_gym.model.difficulty import DIFFICULTIES
 
@@ -255,9 +255,9 @@ def test_scripted_agents_and_evaluation_import_without_torch():
     import sys
 
     code = (
-        "import sys, agents, agents.scripted, agents.evaluate, agents.hyperparams; "
+        "import sys, agents, agents.caregivers.scripted, agents.evaluate, agents.runs.hyperparams; "
         "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules, 'torch was imported'; "
-        "assert agents.HandbookCaregiver is agents.scripted.HandbookCaregiver"
+        "assert agents.HandbookCaregiver is agents.caregivers.scripted.HandbookCaregiver"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
@@ -309,7 +309,7 @@ def _lean_walks(n_envs, steps, seed=0):
 
 def _grid_sample(every):
     """Every ``every``-th schedule of the searched grid, each under a different one of its lift rules."""
-    from agents.tune_baselines import lift_rules, schedule_grid
+    from agents.caregivers.tune_baselines import lift_rules, schedule_grid
 
     picked = []
     for k, schedule in enumerate(list(schedule_grid())[::every]):
@@ -327,8 +327,8 @@ def _blind_obs(features, now, x, silent):
 
 
 def test_the_original_blind_settings_are_members_and_behave_as_before():
-    from agents.scripted import BlindAgent
-    from agents.tune_baselines import lift_rules, original_blind_grid, schedule_grid
+    from agents.caregivers.scripted import BlindAgent
+    from agents.caregivers.tune_baselines import lift_rules, original_blind_grid, schedule_grid
 
     original = list(original_blind_grid())
     assert len(original) == 648
@@ -350,7 +350,7 @@ def test_the_original_blind_settings_are_members_and_behave_as_before():
 
 
 def test_blind_schedule_phases_run_in_order_for_their_durations():
-    from agents.scripted import BlindAgent, BlindSettings, CuePhase
+    from agents.caregivers.scripted import BlindAgent, BlindSettings, CuePhase
 
     features = observation_features("belief", "kalman")
     schedule = (CuePhase("none", "forward", 1.0), CuePhase("soft", "forward", 2.0), CuePhase("none", "none", 0.5))
@@ -369,7 +369,7 @@ def test_blind_schedule_phases_run_in_order_for_their_durations():
 
 
 def test_blind_lifts_only_in_phases_that_allow_it_and_on_the_last_call():
-    from agents.scripted import BlindAgent, BlindSettings, CuePhase
+    from agents.caregivers.scripted import BlindAgent, BlindSettings, CuePhase
 
     features = observation_features("belief", "kalman")
     schedule = (CuePhase("soft", "forward", 1.0, lift=False), CuePhase("none", "forward", 1.0))
@@ -390,7 +390,7 @@ def test_blind_lifts_only_in_phases_that_allow_it_and_on_the_last_call():
 
 
 def test_per_env_blind_settings_equal_one_agent_per_setting():
-    from agents.scripted import BlindAgent
+    from agents.caregivers.scripted import BlindAgent
 
     features = observation_features("belief", "kalman")
     picked = _grid_sample(38)[:24]
@@ -407,7 +407,7 @@ def test_per_env_blind_settings_equal_one_agent_per_setting():
 
 
 def test_the_blind_family_reads_only_its_clock_its_words_and_the_lean():
-    from agents.scripted import BlindAgent
+    from agents.caregivers.scripted import BlindAgent
 
     assert set(BlindAgent.needs) == set(_BLIND_COLUMNS)
     features = observation_features("oracle", "imm")  # every mind feature there is, true xi included
@@ -443,7 +443,7 @@ def test_the_blind_family_reads_only_its_clock_its_words_and_the_lean():
     ],
 )
 def test_bad_blind_settings_raise_naming_the_field(make, match):
-    from agents.scripted import BlindSettings, CuePhase
+    from agents.caregivers.scripted import BlindSettings, CuePhase
 
     with pytest.raises(ValueError, match=match):
         make(BlindSettings, CuePhase)
@@ -469,8 +469,8 @@ def test_a_level_of_ones_own_has_no_chosen_settings_and_says_so():
 
 
 def test_for_env_plays_the_settings_chosen_for_the_envs_level():
-    from agents.belief import BeliefCaregiver, BeliefSettings
-    from agents.scripted import BlindAgent, ProbingCaregiver
+    from agents.caregivers.belief import BeliefCaregiver, BeliefSettings
+    from agents.caregivers.scripted import BlindAgent, ProbingCaregiver
 
     single = gym.make("CoopGym/SitToStandHard-v2", estimator="switching")
     vector = gym.make_vec("CoopGym/SitToStandHard-v2", num_envs=2, vectorization_mode="vector_entry_point")

@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from gymnasium.vector import AutoresetMode
 
 import coop_gym
-from agents.scripted import HandbookCaregiver
+from agents.caregivers.scripted import HandbookCaregiver
 from coop_gym.envs.contract import (
     FEATURE_SCALES,
     FEATURES,

@@ -4,7 +4,7 @@ It reads the mind through the switching particle filter (``estimator="switching"
 :mod:`estimator.particle`), which models the hard level's person -- a push bends an
 unresponsive person, an idle one leans on their own, willingness lapses and wears down
 under pushing -- so a lean is evidence of cooperation only as far as the person model says.
-The caregiver has no displacement rule of its own (unlike :class:`agents.scripted.ProbingCaregiver`,
+The caregiver has no displacement rule of its own (unlike :class:`agents.caregivers.scripted.ProbingCaregiver`,
 which lifts on a forward answer of ``answer_m``); it only chooses which cue to give:
 
 1. **recruit**: a gentle push with "lean forward" for ``burst_s``, ended as soon as
@@ -25,7 +25,7 @@ during a burst or the settle after it: there the body still moves under the push
 that has the body slightly wrong reads that motion as the answer.
 
 The settings were chosen on the TRAINING personas, each played with a filter whose hypotheses
-were drawn around the OTHER training personas (``python -m agents.tune_belief``: meeting a kind
+were drawn around the OTHER training personas (``python -m agents.caregivers.tune_belief``: meeting a kind
 of person the caregiver has not seen is what the held-out personas test), one entry of
 :data:`TUNED_BELIEF` per hard level (``agents.evaluate`` plays each level's), and are scored on
 the held-out ones by :mod:`agents.evaluate`.
@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE, WAIT
-from agents.scripted_base import EPS_S, PhaseState, ScriptedAgent
+from agents.caregivers.scripted_base import EPS_S, PhaseState, ScriptedAgent
 from estimator.compiled.checks import check_flag, check_number
 
 __all__ = ["TUNED_BELIEF", "BeliefCaregiver", "BeliefSettings"]
@@ -98,8 +98,8 @@ class BeliefSettings:
         check_flag("BeliefSettings.hold_words", self.hold_words)
 
 
-# Winners of `python -m agents.tune_belief --env ID` (its settings_grid, 128 episodes of each training persona
-# from seed 1,000,000, each met by a filter drawn around the other four); the command prints every setting's
+# Winners of `python -m agents.caregivers.tune_belief --env ID` (its settings_grid, 128 episodes of each training
+# persona from seed 1,000,000, each met by a filter drawn around the other four); the command prints every setting's
 # success, and docs/HARD_LEVEL.md ("The belief caregiver") keeps the final table. Rerun after a model change.
 TUNED_BELIEF: dict[str, BeliefSettings] = {
     # The grid was run on the hard levels only; the others play the defaults.

@@ -1,4 +1,4 @@
-r"""The played-episodes CSV of :mod:`agents.play`, and its score as the "human" row.
+r"""The played-episodes CSV of :mod:`agents.tools.play`, and its score as the "human" row.
 
 One line per episode a person played, appended as it ends::
 
@@ -271,7 +271,7 @@ def score_played(csv_path: str | Path, env_id: str, name: str = "human") -> Eval
     index among the env's lines; ``seed`` is the first line's seed.
 
     Args:
-        csv_path: A CSV written by ``python -m agents.play``.
+        csv_path: A CSV written by ``python -m agents.tools.play``.
         env_id: The env id whose lines are scored (other ids are left out).
         name: The agent name of the result row.
 

@@ -3,13 +3,13 @@
 Every headline figure (value of reading the mind, achieved insight, mind-reading score) is
 measured against the best mental-state-blind policy, so the blind search must be wide.
 
-**The blind family** (:class:`agents.scripted.BlindSettings`): a fixed schedule of cue
+**The blind family** (:class:`agents.caregivers.scripted.BlindSettings`): a fixed schedule of cue
 phases -- each a push (none/soft/firm), words (none/"lean forward"/"lean back"), a duration
 and whether a lift may come in it -- played in order from the start, then either repeated
 or followed by a final phase held to the end; and a lift rule on the shoulder estimate and
 the clock (lean threshold, hold time, earliest lift, release on lean, a last-call lift).
 It reads ``elapsed_s``, ``verbal_cue`` (its own utterance) and ``x_hat_m``, never a mind
-feature. The grid searched here (``python -m agents.tune_baselines blind --level LEVEL``):
+feature. The grid searched here (``python -m agents.caregivers.tune_baselines blind --level LEVEL``):
 
 * **schedules** (:func:`schedule_grid`, 1,605): the 5 one-routine schedules of the original
   family (push x words held from the start); openings of one or two phases followed by a
@@ -40,15 +40,15 @@ personas from :data:`TUNING_SEED` (common random numbers: candidates meet identi
 3. the winner: the best on those 1000 episodes (success, then fewer unsafe lifts).
 
 About 490,000 episodes a level, about 5 minutes of one core (the batched env's step is ~3 us
-per env and agent step; ``time python -m agents.tune_baselines blind --level hard``).
+per env and agent step; ``time python -m agents.caregivers.tune_baselines blind --level hard``).
 Candidates are scored many at a time in one natively batched vector env
 (:func:`play_population`: slot ``i`` plays candidate ``i // episodes`` on episode
 ``i % episodes``, the episodes :func:`agents.evaluate.evaluate` would play). The winners
-are kept in :data:`agents.scripted.TUNED_BLIND` and scored by :mod:`agents.evaluate` on the
+are kept in :data:`agents.caregivers.scripted.TUNED_BLIND` and scored by :mod:`agents.evaluate` on the
 held-out personas with fresh seeds (``--personas test``, seeds from 0).
-``python -m agents.tune_baselines prober --level LEVEL`` searches :class:`agents.scripted.ProbingCaregiver`
-(36 settings, 300 episodes each of the training personas); the winners are kept in
-:data:`agents.scripted.TUNED_PROBER`. Rerun both after a model change.
+``python -m agents.caregivers.tune_baselines prober --level LEVEL`` searches
+:class:`agents.caregivers.scripted.ProbingCaregiver` (36 settings, 300 episodes each of the training
+personas); the winners are kept in :data:`agents.caregivers.scripted.TUNED_PROBER`. Rerun both after a model change.
 """
 
 from __future__ import annotations
@@ -66,8 +66,15 @@ from numpy.typing import NDArray
 
 import coop_gym  # noqa: F401 -- registers the env ids
 from agents.base import action_type_of, features_of
+from agents.caregivers.scripted import (
+    BlindAgent,
+    BlindSettings,
+    CuePhase,
+    ProbingCaregiver,
+    ProbingSettings,
+    ScriptedAgent,
+)
 from agents.evaluate import evaluate
-from agents.scripted import BlindAgent, BlindSettings, CuePhase, ProbingCaregiver, ProbingSettings, ScriptedAgent
 from coop_gym.envs.config import Outcome
 from coop_gym.registration import LEVEL_ENV_IDS
 
@@ -389,7 +396,9 @@ def describe(settings: BlindSettings) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run a search and print the best settings."""
-    parser = argparse.ArgumentParser(prog="python -m agents.tune_baselines", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m agents.caregivers.tune_baselines", description=__doc__.split("\n")[0]
+    )
     parser.add_argument("family", choices=("blind", "prober"))
     parser.add_argument("--level", choices=tuple(LEVEL_ENV_IDS), default="hard")
     parser.add_argument(

@@ -1,6 +1,6 @@
 """How well each estimator reads the mind on a level, under a caregiver's cue sequence.
 
-``python -m agents.reading --policy prober --episodes 2000`` plays the caregiver's first
+``python -m agents.caregivers.reading --policy prober --episodes 2000`` plays the caregiver's first
 episode in each of ``episodes`` seeded envs of ``--env`` (default ``CoopGym/SitToStandHard-v2``;
 held-out personas) and, on the very same substep readings and cues, runs side by side:
 
@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from scipy.special import erfc
 
 import coop_gym  # noqa: F401  (registers the ids)
-from agents.scripted import make_scripted
+from agents.caregivers.scripted import make_scripted
 from coop_gym.envs.switching import SwitchingEstimator, SwitchingOptions
 from coop_gym.registration import HARD_ENV_ID
 from estimator.multiple_model import IMMEstimator
@@ -179,7 +179,7 @@ def _plot(summary: dict[str, Any], prefix: str, title: str) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: see the module docstring."""
-    parser = argparse.ArgumentParser(prog="python -m agents.reading", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m agents.caregivers.reading", description=__doc__.splitlines()[0])
     parser.add_argument("--policy", default="prober", help="the scripted caregiver whose cues are played")
     parser.add_argument("--env", default=DEFAULT_ENV_ID, help=f"a registered id (default {DEFAULT_ENV_ID})")
     parser.add_argument("--episodes", type=int, default=2000)

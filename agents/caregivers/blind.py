@@ -4,7 +4,7 @@ A blind caregiver never reads the cue-response evidence: it plays its own schedu
 phases (push, words, duration; then repeated, or a routine held to the end) and lifts once the
 shoulder estimate has shown a lean for long enough, at the times its schedule allows. It reads
 only ``elapsed_s``, ``verbal_cue`` (its own utterance) and ``x_hat_m``. The best of the family
-on each level (:data:`TUNED_BLIND`, searched by :mod:`agents.tune_baselines`) anchors the value
+on each level (:data:`TUNED_BLIND`, searched by :mod:`agents.caregivers.tune_baselines`) anchors the value
 of reading the mind and every mind-reading score.
 """
 
@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.base import LIFT, PUSH_BY_NAME, PUSH_NONE, VERBAL_BY_NAME, VERBAL_NONE, WAIT
-from agents.scripted_base import EPS_S as _EPS_S
-from agents.scripted_base import PhaseState, ScriptedAgent
+from agents.caregivers.scripted_base import EPS_S as _EPS_S
+from agents.caregivers.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.envs.config import LiftCriteria
 from estimator.compiled.checks import check_flag, check_number
 
@@ -182,8 +182,8 @@ class _BlindTable:
         )
 
 
-# Winners of `python -m agents.tune_baselines blind --level LEVEL` (the coarse-to-fine search of that module's
-# docstring on the training personas from seed 1,000,000); the command prints the finalists' success on its
+# Winners of `python -m agents.caregivers.tune_baselines blind --level LEVEL` (the coarse-to-fine search of that
+# module's docstring on the training personas from seed 1,000,000); the command prints the finalists' success on its
 # final 1000 episodes, and docs/HARD_LEVEL.md ("The blind family") keeps the final table. Rerun after a
 # model change.
 _EXPLAIN_AND_GUIDE = (CuePhase("soft", "forward", 1.0), CuePhase("none", "forward", 2.0))
@@ -210,7 +210,7 @@ class BlindAgent(ScriptedAgent):
     :class:`BlindSettings` for the schedule and the rule.
 
     ``settings`` is one :class:`BlindSettings` for every env, or a sequence giving env
-    ``i`` its own (how :mod:`agents.tune_baselines` scores many candidates in one batched env).
+    ``i`` its own (how :mod:`agents.caregivers.tune_baselines` scores many candidates in one batched env).
     """
 
     name = "blind"

@@ -1,4 +1,4 @@
-"""The window of :mod:`agents.play`: the env's rgb frame with a control panel below it.
+"""The window of :mod:`agents.tools.play`: the env's rgb frame with a control panel below it.
 
 The scene itself is the env's own ``rgb_array`` frame (:mod:`coop_gym.envs.rendering`);
 this module only draws around it, on one off-screen surface that the window shows and a
@@ -25,7 +25,7 @@ from coop_gym.envs.rendering import SitToStandRenderer
 __all__ = ["KEY_HELP", "PlayView", "Summary"]
 
 KEY_HELP = "1/2/3 push none/soft/firm (held)   B lean back   F lean forward   L lift   Space pause   Esc quit"
-"""One line of key help, shown under the scene (the keys are :data:`agents.play.KEYS`)."""
+"""One line of key help, shown under the scene (the keys are :data:`agents.tools.play.KEYS`)."""
 
 _PANEL_H = 210
 _BG = (248, 248, 245)

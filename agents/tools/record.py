@@ -2,17 +2,18 @@
 
 Usage::
 
-    python -m agents.record --agent handbook --seed 0 --out videos/
-    python -m agents.record --model runs/ppo/model.zip --env CoopGym/SitToStandHeldOut-v0 --persona frail --out videos/
+    python -m agents.tools.record --agent handbook --seed 0 --out videos/
+    python -m agents.tools.record --model runs/ppo/model.zip --env CoopGym/SitToStandHeldOut-v0 \
+        --persona frail --out videos/
 
 writes ``{name}-seed{S}-episode-0.mp4`` (the env's ``rgb_array`` frames through
 :class:`gymnasium.wrappers.RecordVideo`, which writes with moviepy) and
-``{name}-seed{S}-timeline.png`` (:func:`agents.timeline.plot_timeline`) into ``--out``. If
+``{name}-seed{S}-timeline.png`` (:func:`agents.tools.timeline.plot_timeline`) into ``--out``. If
 the MP4 cannot be written (moviepy or ffmpeg missing or failing) the same frames are
 written as an animated GIF (Pillow) and the command says so. Runs headless: frames are
 drawn off-screen by pygame and the plot on matplotlib's Agg canvas.
 
-Agents: ``--agent NAME`` is a scripted caregiver (:data:`agents.scripted.SCRIPTED_AGENTS`),
+Agents: ``--agent NAME`` is a scripted caregiver (:data:`agents.caregivers.scripted.SCRIPTED_AGENTS`),
 run on the observation it reads exactly as :mod:`agents.evaluate` does (the oracle gets the
 oracle observation, see :func:`agents.evaluate.env_kwargs_for`); ``--model PATH`` is a saved
 Stable-Baselines3 model (loaded with :func:`load_model`; its env id is the default ``--env``
@@ -40,8 +41,8 @@ from gymnasium.wrappers import RecordVideo
 
 import coop_gym
 from agents.base import Agent, action_type_of, feature_mismatch, features_of, level_of
-from agents.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
-from agents.timeline import Trace, TraceBuilder, plot_timeline
+from agents.caregivers.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
+from agents.tools.timeline import Trace, TraceBuilder, plot_timeline
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.cli import positive_int as _positive_int
 from coop_gym.cli import seed as _seed
@@ -388,7 +389,7 @@ def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
     parser = argparse.ArgumentParser(
-        prog="python -m agents.record",
+        prog="python -m agents.tools.record",
         description="Record one episode of an agent: a video (MP4, else GIF) and a timeline plot (PNG).",
     )
     who = parser.add_mutually_exclusive_group(required=True)

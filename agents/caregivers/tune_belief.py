@@ -1,7 +1,7 @@
-"""The search behind :class:`agents.belief.BeliefCaregiver`'s settings, on the training personas.
+"""The search behind :class:`agents.caregivers.belief.BeliefCaregiver`'s settings, on the training personas.
 
-``python -m agents.tune_belief`` plays every setting of :func:`settings_grid` on the same
-seeded episodes of the TRAINING personas (from :data:`agents.tune_baselines.TUNING_SEED`, far
+``python -m agents.caregivers.tune_belief`` plays every setting of :func:`settings_grid` on the same
+seeded episodes of the TRAINING personas (from :data:`agents.caregivers.tune_baselines.TUNING_SEED`, far
 from the evaluation seeds), with the switching particle filter in the observation, and prints
 each one's success and unsafe rates and the best (most successes, then fewest unsafe lifts).
 
@@ -11,7 +11,7 @@ personas are people the caregiver has not met, and a filter scored only on the p
 hypotheses were drawn around would choose settings that lean on knowing them. ``--wide``
 plays each persona with the wider spread ``train.py`` trains on (``train_wide``): people
 further from the five, whose bodies the filter's hypotheses cover less well. The winner on each
-hard level is its entry of :data:`agents.belief.TUNED_BELIEF`; it is scored on the held-out personas by
+hard level is its entry of :data:`agents.caregivers.belief.TUNED_BELIEF`; it is scored on the held-out personas by
 ``python -m agents.evaluate --compare belief,...`` with the filter's default hypotheses (all the
 training personas); ``--held-out N`` plays the winner on ``N`` held-out episodes too.
 
@@ -29,9 +29,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from agents.belief import BeliefCaregiver, BeliefSettings
+from agents.caregivers.belief import BeliefCaregiver, BeliefSettings
+from agents.caregivers.tune_baselines import TUNING_SEED
 from agents.evaluate import evaluate
-from agents.tune_baselines import TUNING_SEED
 from coop_gym.envs.contract import observation_features
 from coop_gym.model.personas import TRAIN_PERSONAS, resolve_personas
 from coop_gym.registration import HARD_ENV_ID
@@ -45,7 +45,7 @@ ESTIMATORS = ("switching", "imm", "multiple_model")
 def settings_grid(
     lift_ps: Sequence[float] = (BeliefSettings.lift_p,), hold_words: bool = False
 ) -> list[BeliefSettings]:
-    """The settings ``python -m agents.tune_belief`` tries: end-of-burst gate x longest burst (x lift gate).
+    """The settings ``python -m agents.caregivers.tune_belief`` tries: end-of-burst gate x longest burst (x lift gate).
 
     ``hold_words`` plays the whole grid with the probe's words held through its window
     (``--hold-words``).
@@ -106,7 +106,7 @@ def leave_one_out(
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Score :func:`settings_grid` on the TRAINING personas, leaving each out of the filter, and print the best."""
-    parser = argparse.ArgumentParser(prog="python -m agents.tune_belief", description=main.__doc__)
+    parser = argparse.ArgumentParser(prog="python -m agents.caregivers.tune_belief", description=main.__doc__)
     parser.add_argument("--env", default=HARD_ENV_ID)
     parser.add_argument("--episodes", type=int, default=128, help="episodes per training persona")
     parser.add_argument("--wide", action="store_true", help="each persona with train.py's train_wide spread")

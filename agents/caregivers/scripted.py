@@ -1,8 +1,8 @@
 """Scripted caregivers: random, lift-at-once, push-then-lift, the handbook caregiver, the oracle, the prober.
 
-Every agent is a :class:`agents.scripted_base.ScriptedAgent`: SB3's ``predict`` over a batch,
-features found by name, per-env phase memory (:class:`agents.scripted_base.PhaseState`).
-The belief caregiver, which reads the switching particle filter, is :mod:`agents.belief`.
+Every agent is a :class:`agents.caregivers.scripted_base.ScriptedAgent`: SB3's ``predict`` over a batch,
+features found by name, per-env phase memory (:class:`agents.caregivers.scripted_base.PhaseState`).
+The belief caregiver, which reads the switching particle filter, is :mod:`agents.caregivers.belief`.
 
 Example:
     >>> import gymnasium as gym
@@ -33,10 +33,10 @@ from agents.base import (
     WAIT,
     require_features,
 )
-from agents.belief import BeliefCaregiver
-from agents.blind import TUNED_BLIND, BlindAgent, BlindSettings, CuePhase
-from agents.scripted_base import EPS_S as _EPS_S
-from agents.scripted_base import PhaseState, ScriptedAgent
+from agents.caregivers.belief import BeliefCaregiver
+from agents.caregivers.blind import TUNED_BLIND, BlindAgent, BlindSettings, CuePhase
+from agents.caregivers.scripted_base import EPS_S as _EPS_S
+from agents.caregivers.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.envs.config import LiftCriteria
 from coop_gym.model.difficulty import Difficulty
 from estimator.compiled.checks import check_number
@@ -328,8 +328,8 @@ class ProbingSettings:
             check_number(f"ProbingSettings.{name}", getattr(self, name), 0.0, 1.0)
 
 
-# Winners of `python -m agents.tune_baselines prober --level LEVEL` (its 36 settings, 300 episodes each of the
-# training personas from seed 1,000,000); the command prints every setting's success, and docs/HARD_LEVEL.md
+# Winners of `python -m agents.caregivers.tune_baselines prober --level LEVEL` (its 36 settings, 300 episodes each
+# of the training personas from seed 1,000,000); the command prints every setting's success, and docs/HARD_LEVEL.md
 # ("The prober") keeps the final table. Rerun after a model change.
 TUNED_PROBER: dict[str, ProbingSettings] = {
     # A tie on these levels: the first in grid order.
@@ -401,7 +401,7 @@ def make_scripted(
 
     ``level`` (a difficulty or its name, or None for the ``-v0`` ids) picks the blind, probing
     and belief caregivers' settings chosen for that level (:data:`TUNED_BLIND`,
-    :data:`TUNED_PROBER`, :data:`agents.belief.TUNED_BELIEF`); the other agents do not depend
+    :data:`TUNED_PROBER`, :data:`agents.caregivers.belief.TUNED_BELIEF`); the other agents do not depend
     on it. A level of your own has no chosen settings: build ``BlindAgent(settings=...)``,
     ``ProbingCaregiver(settings=...)`` or ``BeliefCaregiver(settings=...)``.
     """

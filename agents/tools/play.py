@@ -1,4 +1,4 @@
-r"""Play the caregiver: ``python -m agents.play``.
+r"""Play the caregiver: ``python -m agents.tools.play``.
 
 A pygame window shows the env's own rendered scene (the person, your push and words,
 the filter's cooperativeness gauge) with the person's true cooperativeness covered, and
@@ -22,10 +22,10 @@ clock). ``--pace turns`` advances only when you act: each B, F, L or Space is on
 After each episode the panel shows the outcome, the true mental state over time under
 your cues, and what the oracle (which sees the mental state) and the prober did with the
 same person (same seed). Every finished episode is appended to ``--csv`` (see
-:mod:`agents.play_log`); :func:`score_played` scores such a file like an agent::
+:mod:`agents.tools.play_log`); :func:`score_played` scores such a file like an agent::
 
-    python -m agents.play                              # CoopGym/SitToStandHard-v2, held-out personas
-    python -m agents.play --pace turns --seed 7 --csv runs/me.csv
+    python -m agents.tools.play                              # CoopGym/SitToStandHard-v2, held-out personas
+    python -m agents.tools.play --pace turns --seed 7 --csv runs/me.csv
 
 Without ``--seed`` play starts at one past the largest seed already in the CSV for the
 env (0 for a new file), so successive sessions walk the evaluation's episodes 0, 1, 2...
@@ -58,7 +58,7 @@ from agents.base import (
     encode_actions,
 )
 from agents.evaluate import evaluate
-from agents.play_log import PlayedEpisode, append_played, next_seed, read_played, score_played
+from agents.tools.play_log import PlayedEpisode, append_played, next_seed, read_played, score_played
 from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 from coop_gym.registration import HARD_ENV_ID
@@ -191,7 +191,7 @@ class _Session:
     fps: int
     window: bool
     on_frame: Callable[[NDArray[np.uint8]], None] | None
-    view: Any = None  # agents.play_view.PlayView, opened on the first frame (it takes the frame's size)
+    view: Any = None  # agents.tools.play_view.PlayView, opened on the first frame (it takes the frame's size)
     clock: Any = None  # pygame.time.Clock
 
     def open_view(self, frame: NDArray[np.uint8]) -> None:
@@ -199,7 +199,7 @@ class _Session:
         if self.view is None:
             import pygame
 
-            from agents.play_view import PlayView
+            from agents.tools.play_view import PlayView
 
             self.view = PlayView((frame.shape[1], frame.shape[0]), window=self.window)
             self.clock = pygame.time.Clock()
@@ -275,7 +275,7 @@ def _play_episode(session: _Session, seed: int) -> tuple[_Episode, NDArray[np.ui
 
 def _summary(session: _Session, episode: _Episode, note: str) -> Any:
     """The after-episode panel: the outcome, the mental state under the player's cues, the scripted agents' runs."""
-    from agents.play_view import Summary
+    from agents.tools.play_view import Summary
 
     timing = getattr(session.env.unwrapped, "timing", None)  # the env's clock sets the summary's time axis
     return Summary(
@@ -365,7 +365,7 @@ def play(
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agents.play",
+        prog="python -m agents.tools.play",
         description="Play the robot caregiver: push, speak and lift by keyboard; every episode is saved to a CSV.",
         epilog="Keys: " + ", ".join(f"{k} {v}" for k, v in KEYS.items()),
     )
