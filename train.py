@@ -4,12 +4,12 @@
 the policy that scores best on validation episodes (docs/agents.md, "Which policy is saved"),
 scores it and every scripted baseline on the same 1000 seeded episodes of the held-out personas,
 prints the comparison (with each agent's mind-reading score) and saves one run folder
-``runs/{env}__{algo}__{seed}__{time}/`` (its files: :mod:`agents.runs.run_folder`). Ctrl-C stops at a
-checkpoint; ``--resume RUN`` continues to the same weights (:mod:`agents.runs.training_run`).
+``runs/{env}__{algo}__{seed}__{time}/`` (its files: :mod:`agents.trainer.run_folder`). Ctrl-C stops at a
+checkpoint; ``--resume RUN`` continues to the same weights (:mod:`agents.trainer.training_run`).
 
 Read top to bottom: the typed :class:`Args` (parsed by tyro, as CleanRL does: the field docstrings
-are the ``--help``; checked by :mod:`agents.runs.train_args`), then train (:mod:`agents.rl.run`), then
-evaluate and report (:mod:`agents.runs.run_report`).
+are the ``--help``; checked by :mod:`agents.trainer.train_args`), then train (:mod:`agents.rl.run`), then
+evaluate and report (:mod:`agents.trainer.run_report`).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from agents.runs.train_args import BadArgs, RunProblem, args_problem, parse_train_args, read_training, usage_error
-from agents.runs.training_run import Stopped, StopSignals, write_failed, write_interrupted
+from agents.trainer.train_args import BadArgs, RunProblem, args_problem, parse_train_args, read_training, usage_error
+from agents.trainer.training_run import Stopped, StopSignals, write_failed, write_interrupted
 
 __all__ = ["Args", "main", "parse_args"]
 
@@ -29,14 +29,14 @@ __all__ = ["Args", "main", "parse_args"]
 class Args:
     """Command-line arguments; each field's docstring is its ``--help``."""
 
-    algo: Literal["ppo", "recurrent_ppo", "dqn"] = "ppo"  # agents.runs.hyperparams.ALGORITHMS
+    algo: Literal["ppo", "recurrent_ppo", "dqn"] = "ppo"  # agents.trainer.hyperparams.ALGORITHMS
     """ppo (belief observation), recurrent_ppo (raw observation, LSTM) or dqn (flat Discrete actions)"""
     env: str | None = None
-    """env id to train on; None: the algorithm's own (agents/runs/hyperparams.py; ppo: CoopGym/SitToStandHard-v2)"""
+    """env id to train on; None: the algorithm's own (agents/trainer/hyperparams.py; ppo: CoopGym/SitToStandHard-v2)"""
     timesteps: int | None = None
-    """training env steps; None: the algorithm's budget (agents/runs/hyperparams.py); with --resume, steps added"""
+    """training env steps; None: the algorithm's budget (agents/trainer/hyperparams.py); with --resume, steps added"""
     n_envs: int | None = None
-    """parallel training envs; None: the algorithm's (agents/runs/hyperparams.py; --framework rllib: 64 in all)"""
+    """parallel training envs; None: the algorithm's (agents/trainer/hyperparams.py; --framework rllib: 64 in all)"""
     seed: int = 0
     """seed of training (envs, network init, sampling)"""
     out: str = "runs"
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
 
         return run(args)
     from agents.rl.run import plan_run, train
-    from agents.runs.run_report import evaluate_and_report
+    from agents.trainer.run_report import evaluate_and_report
 
     stop, folder = StopSignals(), Path(args.out)
     try:

@@ -15,7 +15,7 @@ and the observation it gets (:data:`ROWS`):
   on the measurements alone / on the default observation.
 
 Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's
-settings from :mod:`agents.runs.hyperparams` with the budget ``--timesteps`` and the wider
+settings from :mod:`agents.trainer.hyperparams` with the budget ``--timesteps`` and the wider
 training personas, the best-validated policy of the last half kept
 (:class:`agents.rl.SelectionCallback`, training personas only), then ``--episodes``
 held-out episodes (test personas, seeds ``0..N-1``: the episodes of ``bench/levels.py``).
@@ -95,7 +95,7 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
 
     from agents.evaluate import evaluate
     from agents.rl import SelectionCallback, make_model, make_train_env, save_agent
-    from agents.runs.hyperparams import hyperparams_for
+    from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)  # as train.py --threads
     row = ROWS[name]

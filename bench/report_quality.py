@@ -103,7 +103,7 @@ def _row(level: dict[str, Any], name: str) -> dict[str, Any] | None:
 
 
 def train_py(results: Results) -> str:
-    from agents.runs.hyperparams import DEFAULT_ENV_IDS
+    from agents.trainer.hyperparams import DEFAULT_ENV_IDS
 
     head = "### `train.py` on the hard level\n"
     record = results.get("levels")

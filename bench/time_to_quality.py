@@ -6,7 +6,7 @@
 What a user waits for is wall-clock time from starting to train to a policy that beats
 the handbook caregiver. In one run, one after the other, this trains
 
-- ``default``: ``train.py``'s configuration for ``--env`` (``agents/runs/hyperparams.py``: its
+- ``default``: ``train.py``'s configuration for ``--env`` (``agents/trainer/hyperparams.py``: its
   env count, persona set, batched env adapter, ``VecNormalize``, tuned PPO; training is
   cut by the clock, not a step budget, so a linearly decaying learning rate stays at its
   start value);
@@ -86,7 +86,7 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.rl import make_model, make_train_env
-    from agents.runs.hyperparams import hyperparams_for
+    from agents.trainer.hyperparams import hyperparams_for
 
     if contender == "default" or contender.startswith("default@"):
         config = hyperparams_for("ppo", env_id)
@@ -283,7 +283,7 @@ def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str)
 
     if env_id not in coop_gym.ENV_IDS:
         parser.error(f"--env: unknown env id {env_id!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
-    from agents.runs.hyperparams import hyperparams_for
+    from agents.trainer.hyperparams import hyperparams_for
 
     for c in contenders:
         if c.startswith("default@"):

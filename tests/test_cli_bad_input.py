@@ -310,7 +310,7 @@ def make_artifacts(folder: Path) -> dict[str, str]:
     import torch
 
     from agents.rl import make_model, make_train_env, save_agent
-    from agents.runs.hyperparams import hyperparams_for
+    from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)
     config = hyperparams_for("ppo")

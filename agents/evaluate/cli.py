@@ -42,7 +42,7 @@ from agents.evaluate import (
 )
 from agents.evaluate.runs import RunScore, aggregate_runs, finished_run_score, is_run_folder, run_folders_in
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
-from agents.runs.run_folder import is_rllib_run
+from agents.trainer.run_folder import is_rllib_run
 from coop_gym.cli import output_path_problem, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 

@@ -31,8 +31,8 @@ from agents.base import feature_mismatch
 from agents.pretrained import PREFIX, is_pretrained, pretrained_card, pretrained_model_path
 from agents.rl.normalize import ObsNormalizer
 from agents.rl.training import algorithm_class, find_vec_normalize, observation_features
-from agents.runs.hyperparams import ALGORITHMS
-from agents.runs.run_folder import AGENT_FILE, MODEL_FILE, VECNORMALIZE_FILE
+from agents.trainer.hyperparams import ALGORITHMS
+from agents.trainer.run_folder import AGENT_FILE, MODEL_FILE, VECNORMALIZE_FILE
 from coop_gym.io import atomic_path, write_bytes, write_json
 
 __all__ = [

@@ -1,7 +1,7 @@
 """Ray RLlib PPO (new API stack) on the coop_gym envs: the way to scale training out.
 
 * :func:`ppo_config` -- an RLlib ``PPOConfig`` mirroring the SB3 PPO defaults of
-  :mod:`agents.runs.hyperparams` (batch, minibatch, epochs, gamma, lambda, clip, entropy, net,
+  :mod:`agents.trainer.hyperparams` (batch, minibatch, epochs, gamma, lambda, clip, entropy, net,
   the learning rate decaying linearly to 0, observations normalised by running mean/std,
   no KL penalty). Each env runner steps ``num_envs_per_env_runner`` envs through coop_gym's
   own batched vector env (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``).
@@ -56,8 +56,8 @@ from ray.rllib.utils.numpy import SMALL_NUMBER
 
 import coop_gym
 from agents.rl.normalize import ObsNormalizer
-from agents.runs.hyperparams import hyperparams_for
-from agents.runs.run_folder import AGENT_FILE, ARGS_FILE, RLLIB_CHECKPOINT_DIR, RLLIB_FRAMEWORK, is_rllib_run
+from agents.trainer.hyperparams import hyperparams_for
+from agents.trainer.run_folder import AGENT_FILE, ARGS_FILE, RLLIB_CHECKPOINT_DIR, RLLIB_FRAMEWORK, is_rllib_run
 from coop_gym.io import write_json
 
 __all__ = [
@@ -146,7 +146,7 @@ def ppo_config(
     env_kwargs: dict[str, Any] | None = None,
     timesteps: int | None = None,
 ) -> PPOConfig:
-    """RLlib PPO on the new API stack, with the SB3 PPO defaults of :mod:`agents.runs.hyperparams`.
+    """RLlib PPO on the new API stack, with the SB3 PPO defaults of :mod:`agents.trainer.hyperparams`.
 
     Args:
         env_id: Registered coop_gym id (bare or ``coop_gym:``-prefixed).
@@ -175,7 +175,7 @@ def ppo_config(
             # RLlib's default 60 s sampling timeout drops whole batches when the machine is busy
             # (iterations of 0 env steps, forever); wait for the samples instead.
             sample_timeout_s=None,
-            # SB3's VecNormalize (normalize=True in agents.runs.hyperparams): running mean/std of
+            # SB3's VecNormalize (normalize=True in agents.trainer.hyperparams): running mean/std of
             # the observations, clipped to +-10; the runners' statistics are merged after every
             # iteration and saved in the checkpoint, where RLlibAgent reads them.
             env_to_module_connector=(
@@ -339,7 +339,7 @@ def run(args: Any) -> int:
     """
     import ray
 
-    from agents.runs.run_report import compare_with_baselines, finish_run, new_run_folder
+    from agents.trainer.run_report import compare_with_baselines, finish_run, new_run_folder
 
     torch.set_num_threads(args.threads)
     env_id = args.env or hyperparams_for("ppo").env_id

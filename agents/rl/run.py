@@ -1,14 +1,14 @@
 """One ``train.py`` run with Stable-Baselines3: its plan and run folder, then training with checkpoints.
 
 * :func:`plan_run` -- what the run does, settled before any work: the algorithm's settings
-  (:mod:`agents.runs.hyperparams`) overridden by the flags, a saved model checked against the env,
+  (:mod:`agents.trainer.hyperparams`) overridden by the flags, a saved model checked against the env,
   and the run folder (the unfinished one being resumed, or a new one holding ``args.json``);
 * :func:`train` -- the training env, the model (restored from the last checkpoint, continued
   from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
   checkpoints), ``learn``, then the saved agent and ``training.json``.
 
 What happens after training (the evaluation against the baselines, the report) is
-:func:`agents.runs.run_report.evaluate_and_report`; the arguments are ``train.Args``.
+:func:`agents.trainer.run_report.evaluate_and_report`; the arguments are ``train.Args``.
 """
 
 from __future__ import annotations
@@ -38,11 +38,11 @@ from agents.rl import (
     save_agent,
     saved_model_problem,
 )
-from agents.runs.hyperparams import hyperparams_for
-from agents.runs.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
-from agents.runs.run_report import new_run_folder
-from agents.runs.train_args import RunProblem, personas_arg, recorded_settings
-from agents.runs.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
+from agents.trainer.hyperparams import hyperparams_for
+from agents.trainer.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
+from agents.trainer.run_report import new_run_folder
+from agents.trainer.train_args import RunProblem, personas_arg, recorded_settings
+from agents.trainer.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
 from coop_gym.io import write_json
 
 __all__ = ["plan_run", "train"]
@@ -109,7 +109,8 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     """Train to the step budget, checkpointing on the way; the training summary (also in ``training.json``).
 
     Raises:
-        agents.runs.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last rollout.
+        agents.trainer.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last
+            rollout.
         RunProblem: a damaged checkpoint or saved model (the message names it).
     """
     run_dir, config = plan.run_dir, plan.config

@@ -5,7 +5,7 @@
   (the same episodes), with episode statistics (``VecMonitor``) and optional observation
   normalisation (``VecNormalize``).
 * :func:`make_model` -- PPO, RecurrentPPO or DQN with the hyperparameters of
-  :mod:`agents.runs.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
+  :mod:`agents.trainer.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, Ve
 
 import coop_gym  # noqa: F401 -- registers the env ids
 from agents.rl.sb3_vec import make_sb3_vec_env
-from agents.runs.hyperparams import ALGORITHMS, TrainingConfig
+from agents.trainer.hyperparams import ALGORITHMS, TrainingConfig
 from coop_gym.cli import SEED_LIMIT
 from estimator.compiled.checks import check_integer
 
@@ -36,7 +36,7 @@ __all__ = [
 
 
 def algorithm_class(algo: str) -> type[BaseAlgorithm]:
-    """The SB3 class of an algorithm name (:data:`agents.runs.hyperparams.ALGORITHMS`)."""
+    """The SB3 class of an algorithm name (:data:`agents.trainer.hyperparams.ALGORITHMS`)."""
     if algo == "ppo":
         return PPO
     if algo == "dqn":

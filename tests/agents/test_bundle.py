@@ -23,7 +23,7 @@ from agents.rl import (
     make_train_env,
     save_agent,
 )
-from agents.runs.hyperparams import hyperparams_for
+from agents.trainer.hyperparams import hyperparams_for
 
 torch.set_num_threads(1)
 

@@ -16,7 +16,7 @@ from agents.rl import (
     make_train_env,
     restore_checkpoint,
 )
-from agents.runs.hyperparams import ALGORITHMS, hyperparams_for
+from agents.trainer.hyperparams import ALGORITHMS, hyperparams_for
 
 torch.set_num_threads(1)
 

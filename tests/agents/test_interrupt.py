@@ -235,7 +235,7 @@ def test_resume_reads_args_json_back_through_the_typed_args(tmp_path, settings, 
 def stopped_while_evaluating(tmp_path: Path) -> Path:
     """A run folder stopped during its final evaluation: its settings, the saved agent, training.json."""
     from agents.rl import make_model, make_train_env, save_agent
-    from agents.runs.hyperparams import hyperparams_for
+    from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)
     run = tmp_path / "runs" / "run"
@@ -262,11 +262,11 @@ def test_a_signal_whose_exception_is_swallowed_during_evaluation_still_stops_the
     stopped_while_evaluating, monkeypatch, capsys
 ):
     """As when the signal lands inside numba's ctypes callback: the handler's exception is lost, the signal is not."""
-    import agents.runs.run_report
+    import agents.trainer.run_report
     import train
-    from agents.runs.training_run import Stopped
+    from agents.trainer.training_run import Stopped
 
-    evaluate = agents.runs.run_report.evaluate
+    evaluate = agents.trainer.run_report.evaluate
 
     def evaluate_and_get_a_signal(*args, **kwargs):
         try:
@@ -276,10 +276,10 @@ def test_a_signal_whose_exception_is_swallowed_during_evaluation_still_stops_the
         return evaluate(*args, **kwargs)
 
     run = stopped_while_evaluating
-    monkeypatch.setattr(agents.runs.run_report, "evaluate", evaluate_and_get_a_signal)
+    monkeypatch.setattr(agents.trainer.run_report, "evaluate", evaluate_and_get_a_signal)
     assert train.main(["--resume", str(run)]) == 128 + signal.SIGINT
     assert "training had finished" in (run / "INTERRUPTED").read_text()
     assert not (run / "COMPLETE").exists() and not (run / "results.json").exists()
-    monkeypatch.setattr(agents.runs.run_report, "evaluate", evaluate)
+    monkeypatch.setattr(agents.trainer.run_report, "evaluate", evaluate)
     assert train.main(["--resume", str(run)]) == 0
     assert (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()

@@ -38,7 +38,7 @@ from agents.rl.rllib import (
     load_rllib_agent,
     ppo_config,
 )
-from agents.runs.hyperparams import hyperparams_for
+from agents.trainer.hyperparams import hyperparams_for
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV_ID = "CoopGym/SitToStand-v0"

@@ -186,7 +186,7 @@ def test_default_run_beats_the_handbook_on_held_out_personas(tmp_path):
 def test_the_report_warns_when_the_learned_agent_reads_no_mind(capsys):
     from types import SimpleNamespace
 
-    from agents.runs.run_report import warn_if_blind
+    from agents.trainer.run_report import warn_if_blind
 
     def room(score):
         return SimpleNamespace(score_of=lambda agent: SimpleNamespace(agent=agent, score=score))
@@ -200,10 +200,10 @@ def test_the_report_warns_when_the_learned_agent_reads_no_mind(capsys):
 
 
 def test_the_algo_choices_are_the_algorithms_with_defaults():
-    """``Args.algo``'s Literal is what tyro offers; it must name exactly agents.runs.hyperparams.ALGORITHMS."""
+    """``Args.algo``'s Literal is what tyro offers; it must name exactly agents.trainer.hyperparams.ALGORITHMS."""
     import typing
 
     import train
-    from agents.runs.hyperparams import ALGORITHMS
+    from agents.trainer.hyperparams import ALGORITHMS
 
     assert typing.get_args(typing.get_type_hints(train.Args)["algo"]) == ALGORITHMS

@@ -29,13 +29,13 @@ from agents.evaluate import (
     write_json,
 )
 from agents.evaluate.runs import aggregate_runs, run_score_of, runs_in
-from agents.runs.run_folder import COMPLETE_FILE, INTERRUPTED_FILE, MODEL_FILE
-from agents.runs.train_args import baseline_names, personas_arg
+from agents.trainer.run_folder import COMPLETE_FILE, INTERRUPTED_FILE, MODEL_FILE
+from agents.trainer.train_args import baseline_names, personas_arg
 from coop_gym.io import make_unique_folder, write_text
 from coop_gym.io import write_json as write_json_file
 
 if TYPE_CHECKING:
-    from agents.runs.training_run import Plan, StopSignals
+    from agents.trainer.training_run import Plan, StopSignals
 
 __all__ = [
     "Comparison",
@@ -93,7 +93,7 @@ def compare_with_baselines(
 
     ``settings`` is the run's ``train.Args``: ``eval_personas``, ``eval_episodes``, ``eval_seed``
     and ``baselines`` say which episodes and which scripted agents. ``after_each`` is called
-    after each agent's evaluation (``train.py``: :meth:`agents.runs.training_run.StopSignals.check`).
+    after each agent's evaluation (``train.py``: :meth:`agents.trainer.training_run.StopSignals.check`).
     """
     personas = personas_arg(settings.eval_personas)
     episodes, seed = settings.eval_episodes, settings.eval_seed
@@ -117,8 +117,8 @@ def evaluate_and_report(args: Any, plan: Plan, finished: dict[str, Any], stop: S
     ``args`` is ``train.Args``, ``finished`` the training summary (``training.json``). A signal
     stops the run after the agent being evaluated, at the latest before ``results.json`` is written.
     """
-    from agents.tools.plots import plot_learning_curve, plot_outcome_rates
     from agents.rl import load_agent
+    from agents.tools.plots import plot_learning_curve, plot_outcome_rates
 
     run_dir, env_id = plan.run_dir, plan.env_id
     model_path = args.model if args.eval_only and args.model else run_dir / MODEL_FILE

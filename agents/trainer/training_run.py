@@ -8,7 +8,7 @@
   markers and files around a stop and a resume; :func:`write_failed` -- a file that could not
   be written.
 
-The settings a ``--resume`` continues with are :func:`agents.runs.train_args.resume_settings`.
+The settings a ``--resume`` continues with are :func:`agents.trainer.train_args.resume_settings`.
 
 No torch at import: ``train.py`` parses its arguments before it loads SB3.
 """
@@ -23,12 +23,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from agents.runs.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE
-from agents.runs.train_args import PROG
+from agents.trainer.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE
+from agents.trainer.train_args import PROG
 from coop_gym.io import TEMP_MARKER, write_text
 
 if TYPE_CHECKING:
-    from agents.runs.hyperparams import TrainingConfig
+    from agents.trainer.hyperparams import TrainingConfig
 
 __all__ = [
     "Plan",

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, Literal, NoReturn, TypeVar
 import tyro
 from tyro.conf import DisallowNone
 
-from agents.runs.run_folder import ARGS_FILE, TRAINING_FILE, is_unfinished_run
+from agents.trainer.run_folder import ARGS_FILE, TRAINING_FILE, is_unfinished_run
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -130,7 +130,7 @@ def _type_name(option: Any) -> str:
 
 def _problem_with_numbers(args: Any) -> str | None:
     """The first count or seed out of range (None if all are fine)."""
-    from agents.runs.hyperparams import hyperparams_for
+    from agents.trainer.hyperparams import hyperparams_for
     from coop_gym.cli import seed_range_problem
 
     for name in ("timesteps", "n_envs"):
@@ -337,7 +337,7 @@ def recorded_settings(run_dir: Path, args_type: type[Any]) -> dict[str, Any]:
 
 def _with_defaults(settings: dict[str, Any]) -> dict[str, Any]:
     """Run settings with the algorithm's defaults filled in (older args.json files hold None)."""
-    from agents.runs.hyperparams import hyperparams_for
+    from agents.trainer.hyperparams import hyperparams_for
 
     out = dict(settings)
     algo = out.get("algo", "ppo")
