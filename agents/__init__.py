@@ -5,6 +5,10 @@ state)`` (:class:`agents.base.Agent`), so :func:`agents.evaluate.evaluate` score
 and learned agents on the same seeded episodes (``agents.evaluate`` is that module: use
 ``from agents.evaluate import evaluate``).
 
+The rooms: :mod:`agents.caregivers` (the scripted caregivers, one base class), :mod:`agents.evaluate`,
+:mod:`agents.rl` (the learners: SB3, RLlib), :mod:`agents.trainer` (``train.py``'s pieces, the learners'
+defaults), :mod:`agents.tools` (play, record, plots); docs/ARCHITECTURE.md says where a new piece goes.
+
 ``import agents`` stays light: torch and Stable-Baselines3 load only when a learned-agent
 name (``load_agent``, ``SB3Agent``, ``make_model``, ``make_sb3_vec_env`` ...) is first used.
 """
