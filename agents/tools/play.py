@@ -24,7 +24,7 @@ your cues, and what the oracle (which sees the mental state) and the prober did 
 same person (same seed). Every finished episode is appended to ``--csv`` (see
 :mod:`agents.tools.play_log`); :func:`score_played` scores such a file like an agent::
 
-    python -m agents.tools.play                              # CoopGym/SitToStandHard-v2, held-out personas
+    python -m agents.tools.play                        # CoopGym/SitToStandHard-v2, held-out personas
     python -m agents.tools.play --pace turns --seed 7 --csv runs/me.csv
 
 Without ``--seed`` play starts at one past the largest seed already in the CSV for the
