@@ -94,7 +94,7 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.evaluate import evaluate
-    from agents.rl import SelectionCallback, make_model, make_train_env, save_agent
+    from agents.rl import SelectionCallback, load_agent, make_model, make_train_env, save_agent
     from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)  # as train.py --threads
@@ -113,9 +113,7 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     selected = selection.finish(model)
     wall_s = time.perf_counter() - started
     saved = save_agent(model, folder / f"{name}__{seed}__{timesteps}", algo=row.algo, env_id=ENV_ID)
-    from agents.rl import load_agent
-
-    agent = load_agent(saved)
+    agent = load_agent(saved)  # what a user loads, not the object in memory
     result = evaluate(agent, ENV_ID, "test", episodes, 0, env_kwargs=row.env_kwargs, name=f"{name}:{seed}")
     env.close()
     return {

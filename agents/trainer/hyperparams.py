@@ -112,13 +112,13 @@ _PPO = TrainingConfig(
     normalize=True,
     algo_kwargs={
         # 8 x 512 = 4096 steps per update in minibatches of 512: half the gradient steps
-        # per sample of 256/256, which overfitted the training personas less (6 of 6 seeds
-        # 1000/1000 on held-out personas vs 991-1000) and trains faster.
+        # per sample of 256/256, which overfitted the training personas less and trains
+        # faster (held-out success over seeds: python train.py --env CoopGym/SitToStand-v0 --seed S).
         "n_steps": 512,
         "batch_size": 512,
         "n_epochs": 10,
-        # Decaying to 0 settles the final policy: with a constant rate the final policies
-        # of 2 of 3 seeds lifted 1-7 % of held-out people prematurely.
+        # Decaying to 0 settles the final policy: with a constant rate some seeds' final
+        # policies lifted held-out people prematurely.
         "learning_rate": "lin_3e-4",
         # 0.995 over 0.99: gentler pushes (mean ~10 N vs 11-14 N), fewer premature lifts
         # of the held-out frail persona, whom a firm push moves whatever they think.
@@ -138,14 +138,15 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
     "ppo": {
         # Sized for time to quality (python bench/time_to_quality.py): the same
         # 4096 samples per update from 64 envs x 64 steps -- one policy call per 64 env-steps
-        # instead of per 8 -- reached the handbook's level in a quarter of 8 x 512's wall time.
+        # instead of per 8 -- reached the handbook's level sooner than 8 x 512
+        # (bench/results/time_to_quality_CoopGym-SitToStand-v0.json).
         "CoopGym/SitToStand-v0": _PPO.replace(n_envs=64, algo_kwargs={**_PPO.algo_kwargs, "n_steps": 64}),
         # The same settings; the hard level needs more samples: the policy must learn to stop
         # pushing, ask, and read the answer -- and a wider spread of people: on the training
-        # personas' own +/-20 % one of three seeds learned their exact push compliance and
-        # lifted 9.8 % of held-out people unsafely, reading a frail person's pushed lean as
-        # cooperation (docs/agents.md, "Why the wider spread").
-        # 8 x 512 stays: on the hard level 64 x 64 learned less (77-82 % held-out against 85 %).
+        # personas' own spread a seed can learn their exact push compliance and read a frail
+        # person's pushed lean as cooperation (docs/agents.md, "Why the wider spread").
+        # 8 x 512 stays: on the hard level wider rollouts of the same size (64 x 64) learned
+        # less per step (python bench/time_to_quality.py --env ID --contenders default,default@64).
         # The hard level's -v2 (slower recruiting, steadier willingness): the same settings.
         # An entropy bonus of 0.02 (twice -v0's): with 0.01 some seeds, after lifting unsafely
         # early on, settle on never lifting (a timeout costs less than a failed lift) and never
@@ -200,7 +201,7 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
                 "batch_size": 128,
                 "gamma": 0.995,
                 # 5-step returns carry the lift's reward back through the ~20-step guiding phase;
-                # with 1-step targets DQN settled on never lifting (99 % timeouts at 300k steps).
+                # with 1-step targets DQN settled on never lifting (all timeouts).
                 "n_steps": 5,
                 "train_freq": 4,
                 "gradient_steps": 1,
