@@ -67,8 +67,8 @@ class Args:
     """torch CPU threads (these small networks gain little from more, and the envs need the cores)"""
     progress: bool = True
     """show a progress bar while training"""
-    framework: Literal["sb3", "rllib"] = "sb3"
-    """sb3 (Stable-Baselines3, in this process) or rllib (Ray RLlib PPO, new API stack; the [rllib] extra)"""
+    framework: Literal["sb3", "jax", "rllib"] = "sb3"
+    """sb3 (Stable-Baselines3), jax (SB3's PPO with a compiled JAX update; ppo only) or rllib (Ray RLlib PPO)"""
     num_env_runners: int = 0
     """--framework rllib: sampling actors (0: in the driver, no episodes between processes; cluster: 1+ per node)"""
     address: str | None = None

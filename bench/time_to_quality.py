@@ -1,17 +1,22 @@
-"""Time to a good caregiver: held-out success against training wall-clock seconds.
+"""Time to a good caregiver: held-out success against training wall-clock seconds, learner against learner.
 
     python bench/time_to_quality.py [--env ID] [--budget-s S] [--eval-every-s S] [--episodes N]
-                                    [--seed S] [--out DIR] [--contenders a,b] [--save [PATH]]
+                                    [--seeds 0,1,2] [--jobs J] [--targets prober,belief]
+                                    [--out DIR] [--contenders a,b] [--stop-at-target] [--save [PATH]]
 
-What a user waits for is wall-clock time from starting to train to a policy that beats
-the handbook caregiver. In one run, one after the other, this trains
+What a user waits for is wall-clock time from starting to train to a policy that plays as
+well as a scripted caregiver. For every training seed this trains, one contender after the
+other (or ``--jobs`` at a time, each in its own process):
 
 - ``default``: ``train.py``'s configuration for ``--env`` (``agents/trainer/hyperparams.py``: its
-  env count, persona set, batched env adapter, ``VecNormalize``, tuned PPO; training is
+  env count, persona set, batched env adapter, ``VecNormalize``, tuned SB3 PPO; training is
   cut by the clock, not a step budget, so a linearly decaying learning rate stays at its
   start value);
-- ``default@N``: the same on ``N`` envs with ``n_steps`` scaled so each update still takes
-  ``n_envs * n_steps`` samples (learner sizing: fewer, wider policy calls per sample);
+- ``jax``: the same PPO as :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --framework jax``), on
+  its own sizing (``hyperparams_for(..., framework="jax")``);
+- ``default@N`` / ``jax@N``: either on ``N`` envs with ``n_steps`` scaled so each update still
+  takes ``n_envs * n_steps`` samples (``default@N`` at the jax sizing's env count is SB3 on the
+  same configuration as ``jax``);
 - ``first_script``: what a user writes first --
   ``PPO("MlpPolicy", make_vec_env(env_id, n_envs=8))`` with SB3's default hyperparameters
   on a ``DummyVecEnv`` of 8 ``gymnasium.make`` envs (the env's default personas: the
@@ -20,15 +25,16 @@ the handbook caregiver. In one run, one after the other, this trains
 Every ``--eval-every-s`` seconds of training (checked at rollout boundaries) the clock
 stops and the policy plays the same ``--episodes`` seeded episodes on the held-out
 personas through :func:`agents.evaluate.evaluate`; the evaluation's own time is not
-counted. The handbook caregiver plays the same episodes first. A contender *reaches
-handbook level* at the first evaluation whose success rate is at least the lower end of
-the handbook's 95 % Wilson interval on those episodes -- statistically no worse than the
-handbook (on the paper's model the handbook succeeds ~100 % of the time, and demanding
-500/500 would time a lucky draw, not a caregiver). The report gives each contender's time to that point (or
-"not within the budget") and the ratio ``default / first_script`` (an upper bound when
-the first script never got there). Torch uses one thread; both contenders train on the
-same machine in the same process, so a change of load between them is the main source of
-error -- the report records the load average before and after each.
+counted. The ``--targets`` (scripted caregivers; default: the handbook on the paper's levels,
+the prober and the belief caregiver on the hard ones) play the same episodes first. A
+contender *reaches* a target at the first evaluation whose success rate is at least the
+lower end of the target's 95 % Wilson interval on those episodes -- statistically no worse
+than it. The report gives, per contender and seed, the steps/s and the training time to each
+target (or "not within the budget"); per contender, the interquartile mean over seeds of
+the success at each evaluation with a stratified bootstrap interval; and, per seed, the ratio
+of each contender's steps/s to ``default``'s. Torch and XLA use one thread; the load average
+before and after each run is recorded (contenders running side by side with ``--jobs 2``
+share the machine evenly).
 
 Writes ``time_to_quality_<env>.json`` and ``time_to_quality_<env>.png`` (the curves) into
 ``--out``; ``--save`` also writes the report to ``bench/results/time_to_quality_<env>.json``
@@ -39,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import time
 from collections.abc import Callable
@@ -50,7 +57,7 @@ from result_files import add_save_argument, save
 
 from coop_gym.cli import output_path_problem, positive_int
 
-CONTENDERS: tuple[str, ...] = ("default", "first_script")
+CONTENDERS: tuple[str, ...] = ("default", "jax", "first_script")
 
 
 def _positive_float(text: str) -> float:
@@ -74,9 +81,10 @@ def _resized(config: Any, n_envs: int) -> Any:
 def _contender(text: str) -> str:
     if text in CONTENDERS:
         return text
-    if text.startswith("default@") and text.partition("@")[2].isdigit() and int(text.partition("@")[2]) > 0:
+    kind, _, size = text.partition("@")
+    if kind in ("default", "jax") and size.isdigit() and int(size) > 0:
         return text
-    raise argparse.ArgumentTypeError(f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N")
+    raise argparse.ArgumentTypeError(f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N, jax@N")
 
 
 def _build(contender: str, env_id: str, seed: int) -> Any:
@@ -88,10 +96,11 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     from agents.rl import make_model, make_train_env
     from agents.trainer.hyperparams import hyperparams_for
 
-    if contender == "default" or contender.startswith("default@"):
-        config = hyperparams_for("ppo", env_id)
-        if contender != "default":
-            config = _resized(config, int(contender.partition("@")[2]))
+    kind, _, size = contender.partition("@")
+    if kind in ("default", "jax"):
+        config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
+        if size:
+            config = _resized(config, int(size))
         env = make_train_env(env_id, config.n_envs, seed, personas=config.personas)
         if config.normalize:
             env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -101,10 +110,10 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
 
 
 def _clock(
-    contender: str,
+    label: str,
     budget_s: float,
     every_s: float,
-    target: float,
+    targets: dict[str, float],
     score: Callable[[], dict[str, Any]],
     points: list[dict[str, Any]],
 ) -> Any:
@@ -117,7 +126,7 @@ def _clock(
             self.train_s = 0.0
             self.since = time.perf_counter()
             self.next_eval = every_s
-            self.reached: float | None = None
+            self.reached: dict[str, float | None] = dict.fromkeys(targets)
 
         def _on_step(self) -> bool:
             return True
@@ -130,12 +139,13 @@ def _clock(
                 point = {"train_s": self.train_s, "timesteps": int(self.num_timesteps), **score()}
                 points.append(point)
                 print(
-                    f"  {contender}: {point['train_s']:7.1f} s {point['timesteps']:>9} steps  "
+                    f"  {label}: {point['train_s']:7.1f} s {point['timesteps']:>9} steps  "
                     f"success {point['success_rate']:.3f} unsafe {point['unsafe_rate']:.3f}",
                     flush=True,
                 )
-                if self.reached is None and point["success_rate"] >= target:
-                    self.reached = self.train_s
+                for name, level in targets.items():
+                    if self.reached[name] is None and point["success_rate"] >= level:
+                        self.reached[name] = self.train_s
             self.since = time.perf_counter()  # evaluation time is not training time
 
         def _on_training_start(self) -> None:
@@ -152,15 +162,19 @@ def _train_with_clock(
     every_s: float,
     episodes: int,
     eval_seed: int,
-    target: float,
+    targets: dict[str, float],
     stop_at_target: bool,
 ) -> dict[str, Any]:
     """Train ``contender`` for ``budget_s`` seconds of training time, evaluating on the way."""
+    import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
     from agents.evaluate import evaluate
     from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
+    from estimator.compiled import background
 
+    torch.set_num_threads(1)
+    background.wait()  # on a fresh cache: train on compiled kernels, not their Python twins
     model = _build(contender, env_id, seed)
     points: list[dict[str, Any]] = []
 
@@ -170,12 +184,13 @@ def _train_with_clock(
         result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
         return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
 
-    clock = _clock(contender, budget_s, every_s, target, score, points)
+    clock = _clock(f"{contender} seed {seed}", budget_s, every_s, targets, score, points)
 
     class Budget(BaseCallback):
         def _on_step(self) -> bool:
             elapsed = clock.train_s + time.perf_counter() - clock.since
-            return elapsed < budget_s and not (stop_at_target and clock.reached is not None)
+            done = stop_at_target and all(t is not None for t in clock.reached.values())
+            return elapsed < budget_s and not done
 
     load_before = os.getloadavg()
     model.learn(total_timesteps=10**12, callback=[clock, Budget()])
@@ -183,8 +198,10 @@ def _train_with_clock(
         clock._on_rollout_end()  # a final point where training stopped
     return {
         "contender": contender,
+        "seed": seed,
+        "n_envs": model.n_envs,
         "curve": points,
-        "time_to_target_s": clock.reached,
+        "time_to_targets_s": clock.reached,
         "timesteps": int(model.num_timesteps),
         "train_s": clock.train_s,
         "steps_per_s": int(model.num_timesteps) / clock.train_s if clock.train_s > 0 else None,
@@ -198,21 +215,72 @@ def _plot(report: dict[str, Any], path: Path) -> None:
     from coop_gym.io import save_figure
 
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for run in report["runs"]:
-        xs = [0.0] + [p["train_s"] for p in run["curve"]]
-        ys = [0.0] + [100 * p["success_rate"] for p in run["curve"]]
-        ax.plot(xs, ys, marker="o", ms=3, label=f"{run['contender']} ({run['steps_per_s'] or 0:.0f} steps/s)")
-    ax.axhline(100 * report["handbook_success"], color="#757575", ls="--", label="handbook caregiver")
-    ax.axhline(100 * report["target_success"], color="#757575", ls=":", label="target (handbook's 95 % CI low end)")
-    ax.set_xlabel("training wall-clock time [s] (evaluations not counted)")
-    ax.set_ylabel("held-out success [%]")
-    ax.set_ylim(0, 100)
-    ax.set_title(f"{report['env_id']}: time to a good caregiver ({report['episodes']} episodes per point)")
-    ax.legend(loc="lower right", fontsize=8)
-    ax.grid(alpha=0.3)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, (contender, row) in enumerate(report["contenders"].items()):
+        for run in (r for r in report["runs"] if r["contender"] == contender):
+            for ax, x in zip(axes, ("train_s", "timesteps"), strict=True):
+                xs = [0.0] + [p[x] for p in run["curve"]]
+                ys = [0.0] + [100 * p["success_rate"] for p in run["curve"]]
+                first = run["seed"] == row["seeds"][0]
+                label = f"{contender} ({_median_rate(row):.0f} steps/s)" if first else None
+                ax.plot(xs, ys, color=colors[k % len(colors)], alpha=0.7, lw=1, label=label)
+    for ax in axes:
+        for j, (name, target) in enumerate(report["targets"].items()):
+            ax.axhline(100 * target["success"], color="#757575", ls=("--", ":", "-.")[j % 3], lw=1, label=name)
+        ax.grid(alpha=0.3)
+        ax.set_ylim(0, 100)
+    axes[0].set_xlabel("training wall-clock time [s] (evaluations not counted)")
+    axes[1].set_xlabel("env steps")
+    axes[0].set_ylabel("held-out success [%]")
+    axes[0].legend(loc="lower right", fontsize=8)
+    fig.suptitle(f"{report['env_id']}: time to a good caregiver ({report['episodes']} episodes per point)")
     save_figure(fig, path)
     plt.close(fig)
+
+
+def _median_rate(row: dict[str, Any]) -> float:
+    return float(row["steps_per_s_median"] or 0.0)
+
+
+def _summary(runs: list[dict[str, Any]], contenders: tuple[str, ...], seeds: list[int]) -> dict[str, Any]:
+    """Per contender: steps/s, time to each target per seed, the IQM success curve; steps/s ratios to ``default``."""
+    import statistics
+
+    from agents.evaluate.headroom import iqm_across_runs
+
+    out: dict[str, Any] = {}
+    for contender in contenders:
+        mine = [r for r in runs if r["contender"] == contender]
+        rates = [r["steps_per_s"] for r in mine if r["steps_per_s"]]
+        curve = []
+        for k in range(min(len(r["curve"]) for r in mine)):
+            values = [r["curve"][k]["success_rate"] for r in mine]
+            found = iqm_across_runs({"level": values}) if len(values) >= 2 else None
+            curve.append(
+                {
+                    "train_s_median": statistics.median(r["curve"][k]["train_s"] for r in mine),
+                    "timesteps_median": statistics.median(r["curve"][k]["timesteps"] for r in mine),
+                    "success_iqm": found.iqm if found else values[0],
+                    "ci95": list(found.ci95) if found else [None, None],
+                }
+            )
+        out[contender] = {
+            "seeds": [r["seed"] for r in mine],
+            "steps_per_s_median": statistics.median(rates) if rates else None,
+            "time_to_targets_s": {r["seed"]: r["time_to_targets_s"] for r in mine},
+            "iqm_curve": curve,
+        }
+    if "default" in contenders:
+        for contender in contenders:
+            ratios = []
+            for seed in seeds:
+                base = next(r for r in runs if r["contender"] == "default" and r["seed"] == seed)
+                mine_run = next(r for r in runs if r["contender"] == contender and r["seed"] == seed)
+                if base["steps_per_s"] and mine_run["steps_per_s"]:
+                    ratios.append(mine_run["steps_per_s"] / base["steps_per_s"])
+            out[contender]["steps_per_s_ratio_to_default"] = ratios
+    return out
 
 
 def run(
@@ -220,50 +288,50 @@ def run(
     budget_s: float,
     every_s: float,
     episodes: int,
-    seed: int,
+    seeds: list[int],
     contenders: tuple[str, ...] = CONTENDERS,
+    targets: tuple[str, ...] = ("handbook",),
     stop_at_target: bool = False,
+    jobs: int = 1,
 ) -> dict[str, Any]:
-    """Measure every contender; returns the report (see the module docstring)."""
-    import torch
+    """Measure every contender on every seed; returns the report (see the module docstring)."""
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
 
     from agents.evaluate import evaluate
 
-    torch.set_num_threads(1)
     eval_seed = 1_000_000
-    handbook = evaluate("handbook", env_id, "test", episodes, eval_seed)
-    from estimator.compiled import background
-
-    background.wait()  # on a fresh cache: train on compiled kernels, not their Python twins
-    target = handbook.interval("success")[0]
-    print(
-        f"{env_id}: handbook {handbook.success_rate:.3f} success on {episodes} held-out episodes; "
-        f"target {target:.3f} (its 95 % interval's lower end)",
-        flush=True,
-    )
-    runs = [
-        _train_with_clock(c, env_id, seed, budget_s, every_s, episodes, eval_seed, target, stop_at_target)
+    references = {name: evaluate(name, env_id, "test", episodes, eval_seed) for name in targets}
+    levels = {name: ref.interval("success")[0] for name, ref in references.items()}
+    for name, ref in references.items():
+        print(
+            f"{env_id}: {name} {ref.success_rate:.3f} success on {episodes} held-out episodes; "
+            f"target {levels[name]:.3f} (its 95 % interval's lower end)",
+            flush=True,
+        )
+    tasks = [
+        (c, env_id, seed, budget_s, every_s, episodes, eval_seed, levels, stop_at_target)
+        for seed in seeds
         for c in contenders
     ]
-    times = {r["contender"]: r["time_to_target_s"] for r in runs}
-    ratio: dict[str, Any] | None = None
-    if "default" in times and "first_script" in times and times["default"] is not None:
-        first = times["first_script"]
-        ratio = {
-            "value": times["default"] / (first if first is not None else budget_s),
-            "bound": "exact" if first is not None else "upper (first_script did not reach the target)",
-        }
+    if jobs == 1:
+        runs = [_train_with_clock(*task) for task in tasks]
+    else:
+        with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
+            runs = list(pool.map(_train_with_clock, *zip(*tasks, strict=True)))
     return {
         "env_id": env_id,
         "episodes": episodes,
         "eval_seed": eval_seed,
-        "seed": seed,
+        "seeds": seeds,
         "budget_s": budget_s,
-        "handbook_success": handbook.success_rate,
-        "handbook_unsafe": handbook.unsafe_rate,
-        "target_success": target,
+        "jobs": jobs,
+        "targets": {
+            name: {"success": ref.success_rate, "unsafe": ref.unsafe_rate, "level": levels[name]}
+            for name, ref in references.items()
+        },
         "runs": runs,
-        "time_ratio_default_vs_first_script": ratio,
+        "contenders": _summary(runs, contenders, seeds),
         "cpu_count": os.cpu_count(),
     }
 
@@ -286,12 +354,36 @@ def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str)
     from agents.trainer.hyperparams import hyperparams_for
 
     for c in contenders:
-        if c.startswith("default@"):
+        if "@" in c:
             try:
-                _resized(hyperparams_for("ppo", env_id), int(c.partition("@")[2]))
+                kind, _, size = c.partition("@")
+                _resized(hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax"), int(size))
             except ValueError as error:
                 parser.error(f"--contenders: {error}")
     return contenders
+
+
+def _seeds(text: str) -> list[int]:
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds are whole numbers joined by ',', got {text!r}") from None
+    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"seeds must be distinct and >= 0, got {text!r}")
+    return seeds
+
+
+def _targets(parser: argparse.ArgumentParser, env_id: str, text: str | None) -> tuple[str, ...]:
+    """``--targets``: scripted caregivers (default: the handbook; the prober and the belief caregiver on hard ids)."""
+    from agents.caregivers.scripted import SCRIPTED_AGENTS
+
+    if text is None:
+        return ("prober", "belief") if "Hard" in env_id else ("handbook",)
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in SCRIPTED_AGENTS]
+    if unknown or not names:
+        parser.error(f"--targets: unknown scripted caregiver(s) {unknown}; known: {', '.join(SCRIPTED_AGENTS)}")
+    return names
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -301,37 +393,51 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--env", default=HARD_ENV_ID, help=f"env id (default: the hard level, {HARD_ENV_ID})")
-    parser.add_argument("--budget-s", type=_positive_float, default=900.0, help="training seconds per contender")
-    parser.add_argument("--eval-every-s", type=_positive_float, default=30.0, help="training seconds between scores")
+    parser.add_argument("--budget-s", type=_positive_float, default=300.0, help="training seconds per contender")
+    parser.add_argument("--eval-every-s", type=_positive_float, default=15.0, help="training seconds between scores")
     parser.add_argument("--episodes", type=positive_int, default=500, help="held-out episodes per score")
-    parser.add_argument("--seed", type=int, default=0, help="training seed")
+    parser.add_argument("--seeds", type=_seeds, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
+    parser.add_argument("--jobs", type=positive_int, default=1, help="runs at a time, each in its own process")
+    parser.add_argument("--targets", default=None, help="scripted caregivers to reach, joined by ','")
     parser.add_argument("--out", default="bench/out", help="folder for time_to_quality.{json,png}")
     parser.add_argument(
         "--contenders",
-        default=",".join(CONTENDERS),
-        help="comma-separated contenders: default, first_script, or default@N (train.py's config on N envs, "
+        default="default,jax",
+        help="comma-separated contenders: default, jax, first_script, default@N or jax@N (the config on N envs, "
         "the same samples per update)",
     )
-    parser.add_argument("--stop-at-target", action="store_true", help="stop a contender once it reaches the target")
+    parser.add_argument("--stop-at-target", action="store_true", help="stop a run once it reaches every target")
     add_save_argument(parser, "time_to_quality_<env>.json")
     args = parser.parse_args(argv)
     contenders = _checked_contenders(parser, args.env, args.contenders)
+    targets = _targets(parser, args.env, args.targets)
     problem = output_path_problem(args.out, folder=True)
     if problem:
         parser.error(f"--out: {problem}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    report = run(args.env, args.budget_s, args.eval_every_s, args.episodes, args.seed, contenders, args.stop_at_target)
+    report = run(
+        args.env,
+        args.budget_s,
+        args.eval_every_s,
+        args.episodes,
+        args.seeds,
+        contenders,
+        targets,
+        args.stop_at_target,
+        args.jobs,
+    )
     stem = args.env.replace("/", "-")
     write_json(out / f"time_to_quality_{stem}.json", report)
     _plot(report, out / f"time_to_quality_{stem}.png")
-    for r in report["runs"]:
-        reached = "not within the budget" if r["time_to_target_s"] is None else f"{r['time_to_target_s']:.0f} s"
-        rate = f"{r['steps_per_s']:.0f} steps/s"
-        print(f"{r['contender']:>13}: handbook level after {reached} ({r['timesteps']} steps, {rate})")
-    ratio = report["time_ratio_default_vs_first_script"]
-    if ratio is not None:
-        print(f"time ratio default / first script: {ratio['value']:.3f} ({ratio['bound']})")
+    for name, row in report["contenders"].items():
+        times = {target: [t[target] for t in row["time_to_targets_s"].values()] for target in report["targets"]}
+        reached = "; ".join(
+            f"{target}: " + ", ".join("-" if t is None else f"{t:.0f} s" for t in ts) for target, ts in times.items()
+        )
+        ratio = row.get("steps_per_s_ratio_to_default")
+        ratio_text = f", x{statistics.median(ratio):.2f} default's" if ratio else ""
+        print(f"{name:>13}: {_median_rate(row):.0f} steps/s{ratio_text}; time to {reached}")
     if args.save:
         save(args.save.replace("<env>", stem), "time_to_quality", argv, report)
     return 0

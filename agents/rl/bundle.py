@@ -74,6 +74,7 @@ def save_model_bundle(
         "num_timesteps": int(model.num_timesteps),
         "coop_gym_version": coop_gym.__version__,
         "normalized": vec_normalize is not None,
+        "framework": getattr(model, "framework", "sb3"),
     }
     with atomic_path(path) as temp:
         model.save(temp)
@@ -186,6 +187,7 @@ def load_model(path: str | Path, env: VecEnv | None = None, **kwargs: Any) -> tu
     model_path, info = resolve_saved(path)
     guess = info.get("algo") or _algo_from_zip(model_path)
     algos = [guess] if guess else list(ALGORITHMS)
+    framework = "jax" if info.get("framework") == "jax" else "sb3"
     errors = []
     for algo in algos:
         try:
@@ -193,7 +195,7 @@ def load_model(path: str | Path, env: VecEnv | None = None, **kwargs: Any) -> tu
                 # A saved n-step DQN reloads its NStepReplayBuffer with n_steps and gamma in
                 # replay_buffer_kwargs; SB3 still warns that n_steps "is ignored" (it is not).
                 warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored", category=UserWarning)
-                model = algorithm_class(algo).load(model_path, env=env, device="cpu", **kwargs)
+                model = algorithm_class(algo, framework).load(model_path, env=env, device="cpu", **kwargs)
         except Exception as exc:  # a wrong class fails in many ways; try the next
             errors.append(f"{algo}: {exc}")
             continue

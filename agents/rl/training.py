@@ -35,8 +35,20 @@ __all__ = [
 ]
 
 
-def algorithm_class(algo: str) -> type[BaseAlgorithm]:
-    """The SB3 class of an algorithm name (:data:`agents.trainer.hyperparams.ALGORITHMS`)."""
+def algorithm_class(algo: str, framework: str = "sb3") -> type[BaseAlgorithm]:
+    """The class of an algorithm name (:data:`agents.trainer.hyperparams.ALGORITHMS`) in a ``framework``.
+
+    ``framework="jax"`` is :class:`agents.rl.jax_ppo.JaxPPO` (PPO only); it loads and plays
+    without JAX, which only its training needs.
+    """
+    if framework == "jax" and algo == "ppo":
+        from agents.rl.jax_ppo import JaxPPO
+
+        return JaxPPO
+    if framework not in ("sb3", "jax"):
+        raise ValueError(f"unknown framework {framework!r}; known: sb3, jax")
+    if framework == "jax":
+        raise ValueError(f"framework 'jax' trains ppo only, not {algo!r}")
     if algo == "ppo":
         return PPO
     if algo == "dqn":
@@ -149,8 +161,8 @@ def make_model(
     verbose: int = 0,
     overrides: dict[str, Any] | None = None,
 ) -> BaseAlgorithm:
-    """Build ``config.algo`` on ``env`` with the config's hyperparameters (plus ``overrides``)."""
-    cls = algorithm_class(config.algo)
+    """Build ``config.algo`` (its ``config.framework`` class) on ``env`` with its settings plus ``overrides``."""
+    cls = algorithm_class(config.algo, config.framework)
     kwargs = _schedules(config.model_kwargs() | dict(overrides or {}))
     return cls(
         config.policy,

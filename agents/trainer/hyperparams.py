@@ -28,7 +28,9 @@ from estimator.compiled.checks import check_integer
 __all__ = [
     "ALGORITHMS",
     "DEFAULT_ENV_IDS",
+    "FRAMEWORKS",
     "HYPERPARAMS",
+    "JAX_SIZING",
     "ZOO_ALGO_NAMES",
     "TrainingConfig",
     "hyperparams_for",
@@ -38,6 +40,9 @@ __all__ = [
 
 ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo", "dqn")
 """Algorithms ``train.py`` offers: SB3 PPO, sb3-contrib RecurrentPPO, SB3 DQN."""
+
+FRAMEWORKS: tuple[str, ...] = ("sb3", "jax")
+"""Learners that train in this process: SB3 itself, or :class:`agents.rl.jax_ppo.JaxPPO` (PPO only)."""
 
 DEFAULT_ENV_IDS: dict[str, str] = {
     # The hard level: where reading the mind decides the outcome (coop_gym/model/difficulty.py).
@@ -69,6 +74,8 @@ class TrainingConfig:
             wider person-to-person variation); the held-out ``"test"`` set is never trained on.
         algo_kwargs: Keyword arguments of the SB3 algorithm's constructor.
         policy_kwargs: The policy's ``policy_kwargs`` (network sizes).
+        framework: ``"sb3"`` (SB3's own class) or ``"jax"`` (:class:`agents.rl.jax_ppo.JaxPPO`,
+            the same PPO with its rollout policy and update compiled by JAX; ``ppo`` only).
     """
 
     algo: str
@@ -80,11 +87,17 @@ class TrainingConfig:
     personas: str = "train"
     algo_kwargs: Mapping[str, Any] = field(default_factory=dict)
     policy_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    framework: str = "sb3"
 
     def __post_init__(self) -> None:
         """Validate ranges."""
         if self.algo not in ALGORITHMS:
             raise ValueError(f"TrainingConfig.algo must be one of {list(ALGORITHMS)}, got {self.algo!r}")
+        if self.framework not in FRAMEWORKS or (self.framework == "jax" and self.algo != "ppo"):
+            raise ValueError(
+                f"TrainingConfig.framework must be one of {list(FRAMEWORKS)} ('jax' for ppo only), "
+                f"got {self.framework!r} for {self.algo!r}"
+            )
         check_integer("TrainingConfig.n_envs", self.n_envs, 1, SEED_LIMIT)  # envs seeded seed .. seed + n_envs - 1
         check_integer("TrainingConfig.total_timesteps", self.total_timesteps, 1, sys.maxsize)
         held_out = {p.name for p in resolve_personas(self.personas)} & set(TEST_PERSONAS)
@@ -216,22 +229,40 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
 """Default hyperparameters: ``HYPERPARAMS[algo][env_id]``."""
 
 
-def hyperparams_for(algo: str, env_id: str | None = None) -> TrainingConfig:
-    """The defaults of ``algo`` for ``env_id`` (its own env when None).
+JAX_SIZING: dict[str, Any] = {
+    "n_envs": 256,
+    "n_steps": 16,
+}
+"""How :class:`~agents.rl.jax_ppo.JaxPPO` sizes PPO (``framework="jax"``), over the settings above.
+
+The compiled update makes a sample-epoch cheap and the batched env makes an env step cheap,
+so what is left per env step is Python's work per ``VecEnv`` step: many envs per step
+spread it thin. The same samples per update, minibatches and epochs as SB3's PPO
+(``python bench/time_to_quality.py --contenders default,jax``)."""
+
+
+def hyperparams_for(algo: str, env_id: str | None = None, framework: str = "sb3") -> TrainingConfig:
+    """The defaults of ``algo`` for ``env_id`` (its own env when None), for the learner ``framework``.
 
     An env id without tuned settings gets the algorithm's default settings, pointed at
-    that env.
+    that env. ``framework="jax"`` takes :data:`JAX_SIZING` over them.
 
     Raises:
-        ValueError: unknown algorithm.
+        ValueError: unknown algorithm, or a framework that cannot train it.
     """
     if algo not in HYPERPARAMS:
         raise ValueError(f"unknown algorithm {algo!r}; known: {', '.join(ALGORITHMS)}")
     env_id = env_id or DEFAULT_ENV_IDS[algo]
     table = HYPERPARAMS[algo]
-    if env_id in table:
-        return table[env_id]
-    return table[DEFAULT_ENV_IDS[algo]].replace(env_id=env_id)
+    config = table[env_id] if env_id in table else table[DEFAULT_ENV_IDS[algo]].replace(env_id=env_id)
+    if framework == "sb3":
+        return config
+    sizing = {k: v for k, v in JAX_SIZING.items() if k != "n_envs"}
+    return config.replace(
+        framework=framework,
+        n_envs=JAX_SIZING["n_envs"],
+        algo_kwargs={**config.algo_kwargs, **sizing},
+    )
 
 
 def _yaml_value(value: Any) -> str:

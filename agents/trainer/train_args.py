@@ -68,6 +68,7 @@ RUN_FIELDS = (
     "select_points",
     "select_episodes",
     "checkpoint_every",
+    "framework",
 )
 """Settings that define a run: ``--resume`` of an unfinished run takes them from its ``args.json``."""
 RECORDED_FIELDS = ("algo", "env", "seed", "timesteps", "n_envs")
@@ -142,7 +143,8 @@ def _problem_with_numbers(args: Any) -> str | None:
     if args.seed < 0 or args.eval_seed < 0:
         return "--seed and --eval-seed must be >= 0"
     # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
-    n_envs = args.n_envs or hyperparams_for(args.algo).n_envs
+    framework = "jax" if args.framework == "jax" and args.algo == "ppo" else "sb3"
+    n_envs = args.n_envs or hyperparams_for(args.algo, None, framework).n_envs
     problem = seed_range_problem("--seed", args.seed, n_envs)
     problem = problem or seed_range_problem("--eval-seed", args.eval_seed, args.eval_episodes)
     if problem:
@@ -180,6 +182,14 @@ def _problem_with_framework(args: Any) -> str | None:
         return "--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0"
     if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
         return '--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"'
+    if args.framework == "jax" and args.algo != "ppo" and not args.eval_only:
+        return f"--framework jax trains ppo only, not --algo {args.algo}; use --framework sb3"
+    if (
+        args.framework == "jax"
+        and not args.eval_only
+        and not all(importlib.util.find_spec(name) for name in ("jax", "optax"))
+    ):
+        return '--framework jax needs JAX and optax: pip install "torch==2.13.0" -e ".[train]"'
     return None
 
 
@@ -298,7 +308,9 @@ def resume_settings(path: Path, args_type: type[Any]) -> dict[str, Any]:
             _, info = resolve_saved(path)
         except (OSError, ValueError) as exc:
             raise ValueError(f"--resume: {exc}") from None
-        return {k: v for k, v in (("algo", info.get("algo")), ("env", info.get("env_id"))) if v}
+        framework = info.get("framework") if info.get("framework") in ("sb3", "jax") else "sb3"
+        saved = (("algo", info.get("algo")), ("env", info.get("env_id")), ("framework", framework))
+        return {k: v for k, v in saved if v}
     recorded = _with_defaults(recorded_settings(path, args_type))
     read_training(path)  # a damaged summary is named now, before the resume touches the folder
     return {name: recorded[name] for name in RUN_FIELDS if name in recorded}
@@ -325,6 +337,7 @@ def recorded_settings(run_dir: Path, args_type: type[Any]) -> dict[str, Any]:
             f"--resume: {run_dir} was an --eval-only run; run it again: --eval-only --model {recorded.get('model')}"
         )
     settings = {name: recorded[name] for name in (*RUN_FIELDS, "resume") if name in recorded}
+    settings.setdefault("framework", "sb3")  # written before there was a choice: SB3's run
     try:
         args_type(**settings)
     except BadArgs as exc:
@@ -341,7 +354,8 @@ def _with_defaults(settings: dict[str, Any]) -> dict[str, Any]:
 
     out = dict(settings)
     algo = out.get("algo", "ppo")
-    config = hyperparams_for(algo, out.get("env") or hyperparams_for(algo).env_id)
+    framework = out.get("framework", "sb3")
+    config = hyperparams_for(algo, out.get("env") or hyperparams_for(algo).env_id, framework)
     out["env"] = out.get("env") or config.env_id
     out["timesteps"] = out.get("timesteps") or config.total_timesteps
     out["n_envs"] = out.get("n_envs") or config.n_envs

@@ -207,3 +207,25 @@ def test_the_algo_choices_are_the_algorithms_with_defaults():
     from agents.trainer.hyperparams import ALGORITHMS
 
     assert typing.get_args(typing.get_type_hints(train.Args)["algo"]) == ALGORITHMS
+
+
+def test_framework_jax_trains_and_reports_and_its_model_continues_with_jax(tmp_path):
+    """train.py --framework jax: the same run folder and report; the model loads as JaxPPO and --resume keeps JAX.
+
+    (That a JaxPPO checkpoint continues exactly: tests/agents/test_jax_ppo.py.)
+    """
+    import train
+    from agents.rl import load_model
+
+    tiny = [*TINY, "--timesteps", "512", "--checkpoint-every", "128", "--framework", "jax"]
+    proc = run_train(*tiny, "--out", str(tmp_path), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (run_dir,) = tmp_path.iterdir()
+    settings = json.loads((run_dir / "args.json").read_text())
+    assert settings["framework"] == "jax"
+    model, info = load_model(run_dir / "model.zip")
+    assert type(model).__name__ == "JaxPPO" and info["framework"] == "jax"
+    results = json.loads((run_dir / "results.json").read_text())
+    assert results["training"]["timesteps"] >= 512
+    assert results["evaluation"]["results"][0]["agent"] == "ppo (learned)"
+    assert train.parse_args(["--resume", str(run_dir), "--out", str(tmp_path)]).framework == "jax"

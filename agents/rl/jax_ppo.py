@@ -1,0 +1,323 @@
+r"""PPO whose rollout policy and update run as compiled JAX functions: SB3's PPO, faster.
+
+:class:`JaxPPO` is Stable-Baselines3's :class:`~stable_baselines3.PPO` with two methods
+replaced: ``collect_rollouts`` (the policy's action, value and log-probability from one
+jitted call per env step, into NumPy buffers) and ``train`` (all epochs and minibatches of
+one update in one jitted ``lax.scan``, the loss and optimiser of SB3's PPO: clipped
+surrogate, per-minibatch advantage normalisation, unclipped value loss, entropy bonus,
+global-norm gradient clipping, Adam with ``eps=1e-5``). Everything else is SB3's: the
+constructor and its hyperparameters, the torch policy that starts the weights (SB3's
+orthogonal initialisation) and receives them after every update, ``learn``, callbacks,
+``VecNormalize``, ``save``/``load``. A saved ``JaxPPO`` is a PPO ``model.zip``: it loads,
+plays and is scored (:func:`agents.evaluate.evaluate`) without JAX. The optimiser's moments
+and the random key are saved with it, so a checkpoint continues exactly.
+
+Only ``MlpPolicy`` (separate policy and value networks of ``Linear`` layers and a ``Tanh``
+or ``ReLU`` activation) on a ``Discrete`` or ``MultiDiscrete`` action space; the number of
+samples per update (``n_envs * n_steps``) must be a multiple of ``batch_size``.
+
+XLA runs on one thread (set on first use through ``XLA_FLAGS``, unless the caller set it):
+a seed gives the same run whatever the machine's core count, as torch's single thread does.
+
+Example:
+    >>> from agents.rl import make_train_env
+    >>> env = make_train_env("CoopGym/SitToStand-v0", n_envs=4, seed=0)
+    >>> model = JaxPPO("MlpPolicy", env, n_steps=16, batch_size=32, seed=0, device="cpu")
+    >>> model = model.learn(128)
+    >>> model.num_timesteps
+    128
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.utils import explained_variance
+from stable_baselines3.common.vec_env import VecEnv
+
+from agents.rl.jax_update import _jax, build
+
+__all__ = ["JaxPPO", "jax_available"]
+
+
+def jax_available() -> bool:
+    """Whether JAX and optax can be imported (the ``train`` extra installs them)."""
+    import importlib.util
+
+    return importlib.util.find_spec("jax") is not None and importlib.util.find_spec("optax") is not None
+
+
+class _RolloutPolicy:
+    """The policy's forward pass in NumPy, for the rollout.
+
+    On a few hundred envs the arithmetic costs less than a call into compiled code. Each
+    action dimension is sampled by its inverse CDF.
+    """
+
+    def __init__(self, params: dict[str, list[tuple[Any, Any]]], nvec: list[int], relu: bool) -> None:
+        self.pi = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["pi"]]
+        self.vf = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["vf"]]
+        self.bounds = np.cumsum([0, *nvec])
+        self.activation = (lambda x: np.maximum(x, 0.0)) if relu else np.tanh
+
+    def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
+        for weight, bias in layers[:-1]:
+            x = self.activation(x @ weight + bias)
+        weight, bias = layers[-1]
+        return x @ weight + bias
+
+    def value(self, obs: np.ndarray) -> np.ndarray:
+        return self._mlp(self.vf, obs)[:, 0]
+
+    def act(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(actions (n, heads), values, log_probs)`` for a batch of normalised observations."""
+        logits = self._mlp(self.pi, obs)
+        heads = len(self.bounds) - 1
+        actions = np.empty((obs.shape[0], heads), dtype=np.int32)
+        log_prob = np.zeros(obs.shape[0], dtype=np.float32)
+        uniform = rng.random((obs.shape[0], heads), dtype=np.float32)
+        rows = np.arange(obs.shape[0])
+        for head in range(heads):
+            block = logits[:, self.bounds[head] : self.bounds[head + 1]]
+            shifted = block - block.max(axis=1, keepdims=True)
+            log_p = shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+            cdf = np.cumsum(np.exp(log_p), axis=1)
+            choice = np.minimum((uniform[:, head : head + 1] > cdf).sum(axis=1), block.shape[1] - 1)
+            actions[:, head] = choice
+            log_prob += log_p[rows, choice]
+        return actions, self.value(obs), log_prob
+
+
+class JaxPPO(PPO):
+    """SB3's PPO with the rollout policy and the update compiled by JAX (see the module docstring)."""
+
+    framework = "jax"
+    """What ``agent.json`` records (:func:`agents.rl.bundle.load_model` loads this class again)."""
+
+    _jax: dict[str, Any] | None = None
+
+    def _excluded_save_params(self) -> list[str]:
+        """The compiled functions and the working state are rebuilt on use, never saved (``jax_saved_state`` is)."""
+        return [
+            *super()._excluded_save_params(),
+            "_jax",
+            "_params",
+            "_opt_state",
+            "_key",
+            "_rollout",
+            "_policy",
+            "_rng",
+        ]
+
+    # --- the networks, as JAX sees them --------------------------------------------
+
+    def _torch_layers(self) -> tuple[list[torch.nn.Linear], list[torch.nn.Linear]]:
+        """The policy's and the value function's ``Linear`` layers, input to output."""
+        extractor = self.policy.mlp_extractor  # type: ignore[union-attr]
+        pi = [m for m in extractor.policy_net if isinstance(m, torch.nn.Linear)] + [self.policy.action_net]
+        vf = [m for m in extractor.value_net if isinstance(m, torch.nn.Linear)] + [self.policy.value_net]
+        return pi, vf  # type: ignore[return-value]
+
+    def _params_from_torch(self) -> dict[str, list[tuple[Any, Any]]]:
+        """The torch policy's weights as JAX arrays: ``{"pi": [(W, b), ...], "vf": [...]}`` (``x @ W + b``)."""
+        _, jnp, _ = _jax()
+        pi, vf = self._torch_layers()
+
+        def layers(mods: list[torch.nn.Linear]) -> list[tuple[Any, Any]]:
+            return [(jnp.asarray(m.weight.detach().numpy().T), jnp.asarray(m.bias.detach().numpy())) for m in mods]
+
+        return {"pi": layers(pi), "vf": layers(vf)}
+
+    def _params_to_torch(self, params: dict[str, list[tuple[Any, Any]]]) -> None:
+        """Copy JAX weights into the torch policy (what ``predict`` and ``save`` use)."""
+        pi, vf = self._torch_layers()
+        with torch.no_grad():
+            for mods, layers in ((pi, params["pi"]), (vf, params["vf"])):
+                for module, (weight, bias) in zip(mods, layers, strict=True):
+                    module.weight.copy_(torch.from_numpy(np.array(weight).T))
+                    module.bias.copy_(torch.from_numpy(np.array(bias)))
+
+    def _check_supported(self) -> None:
+        if not isinstance(self.action_space, (spaces.Discrete, spaces.MultiDiscrete)):
+            raise ValueError(f"JaxPPO needs a Discrete or MultiDiscrete action space, got {self.action_space}")
+        activation = self.policy.activation_fn  # type: ignore[union-attr]
+        if activation not in (torch.nn.Tanh, torch.nn.ReLU):
+            raise ValueError(f"JaxPPO needs a Tanh or ReLU activation, got {activation.__name__}")
+        if self.use_sde or self.target_kl is not None or self.clip_range_vf is not None:
+            raise ValueError("JaxPPO supports neither use_sde, target_kl nor clip_range_vf")
+        samples = self.n_envs * self.n_steps
+        if samples > self.batch_size and samples % self.batch_size:
+            raise ValueError(
+                f"JaxPPO: n_envs * n_steps ({samples}) must be a multiple of batch_size ({self.batch_size})"
+            )
+
+    def _compiled(self) -> dict[str, Any]:
+        """The jitted functions and the optimiser state, built on first use (and after a load)."""
+        if self._jax is None:
+            self._check_supported()
+            nvec = (
+                [int(self.action_space.n)]
+                if isinstance(self.action_space, spaces.Discrete)
+                else [int(n) for n in self.action_space.nvec]  # type: ignore[attr-defined]
+            )
+            relu = self.policy.activation_fn is torch.nn.ReLU  # type: ignore[union-attr]
+            self._jax = build(
+                nvec=nvec,
+                relu=relu,
+                samples=self.n_envs * self.n_steps,
+                # A rollout smaller than a minibatch is one minibatch, as in SB3.
+                batch_size=min(self.batch_size, self.n_envs * self.n_steps),
+                n_epochs=self.n_epochs,
+                max_grad_norm=self.max_grad_norm,
+                ent_coef=self.ent_coef,
+                vf_coef=self.vf_coef,
+                normalize_advantage=self.normalize_advantage,
+            )
+        return self._jax
+
+    def _jax_state(self) -> tuple[Any, Any, Any]:
+        """``(params, optimiser state, key)``: the torch weights, and the saved moments and keys if any."""
+        jax, _, _ = _jax()
+        compiled = self._compiled()
+        params = self._params_from_torch()
+        saved = getattr(self, "jax_saved_state", None)
+        seed = int(self.seed or 0) % (2**31)
+        self._rng = np.random.Generator(np.random.PCG64(seed))
+        if saved is None:
+            opt_state = compiled["init"](params)
+            key = jax.random.PRNGKey(seed)
+        else:
+            opt_state = compiled["unflatten_opt"](params, saved["opt"])
+            key = jax.numpy.asarray(saved["key"])
+            self._rng.bit_generator.state = saved["rollout_rng"]
+        return params, opt_state, key
+
+    def _keep_state(self, params: Any, opt_state: Any, key: Any) -> None:
+        """Hold the state for the next call and for ``save`` (as NumPy: a zip loads without JAX)."""
+        jax, _, _ = _jax()
+        compiled = self._compiled()
+        self._params, self._opt_state, self._key = params, opt_state, key
+        self._policy = _RolloutPolicy(params, compiled["nvec"], compiled["relu"])
+        self.jax_saved_state = {
+            "opt": [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(opt_state)],
+            "key": np.asarray(key),
+            "rollout_rng": self._rng.bit_generator.state,
+        }
+
+    # --- SB3's two methods, replaced ------------------------------------------------
+
+    def _setup_learn(self, *args: Any, **kwargs: Any) -> Any:
+        """SB3's set-up, then the JAX state from the torch weights (a load or ``set_parameters`` included)."""
+        result = super()._setup_learn(*args, **kwargs)
+        self._keep_state(*self._jax_state())
+        return result
+
+    def collect_rollouts(
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        rollout_buffer: Any,
+        n_rollout_steps: int,
+    ) -> bool:
+        """SB3's rollout (callbacks, episode infos, timeout bootstrap), the policy a jitted call."""
+        assert self._last_obs is not None, "No previous observation was provided"
+        n = env.num_envs
+        obs_buf = np.zeros((n_rollout_steps, n, *self.observation_space.shape), dtype=np.float32)  # type: ignore[misc]
+        act_buf = np.zeros((n_rollout_steps, n, len(self._compiled()["nvec"])), dtype=np.int32)
+        rew_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
+        start_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
+        val_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
+        logp_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
+        policy = self._policy
+        callback.on_rollout_start()
+        for step in range(n_rollout_steps):
+            obs = np.asarray(self._last_obs, dtype=np.float32)
+            actions, values, log_probs = policy.act(obs, self._rng)
+            env_actions = actions[:, 0] if isinstance(self.action_space, spaces.Discrete) else actions
+            new_obs, rewards, dones, infos = env.step(env_actions)
+            self.num_timesteps += n
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return False
+            self._update_info_buffer(infos, dones)
+            rewards = np.asarray(rewards, dtype=np.float32).copy()
+            self._bootstrap_timeouts(policy, rewards, dones, infos)
+            obs_buf[step], act_buf[step], rew_buf[step] = obs, actions, rewards
+            start_buf[step], val_buf[step], logp_buf[step] = self._last_episode_starts, values, log_probs
+            self._last_obs = new_obs  # type: ignore[assignment]
+            self._last_episode_starts = dones
+        last_values = policy.value(np.asarray(new_obs, dtype=np.float32))
+        advantages = _gae(rew_buf, val_buf, start_buf, last_values, dones, self.gamma, self.gae_lambda)
+        self._rollout = (obs_buf, act_buf, logp_buf, advantages, advantages + val_buf, val_buf)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
+
+    def _bootstrap_timeouts(self, policy: _RolloutPolicy, rewards: Any, dones: Any, infos: Any) -> None:
+        """As SB3: a time-limit end adds ``gamma * V(final observation)`` to its reward."""
+        cut = [
+            i
+            for i in np.flatnonzero(dones).tolist()
+            if infos[i].get("terminal_observation") is not None and infos[i].get("TimeLimit.truncated", False)
+        ]
+        if not cut:
+            return
+        final = np.stack([infos[i]["terminal_observation"] for i in cut]).astype(np.float32)
+        rewards[cut] += self.gamma * policy.value(final)
+
+    def train(self) -> None:
+        """One PPO update: every epoch and minibatch in one compiled call, then the torch weights."""
+        compiled = self._compiled()
+        self._update_learning_rate(self.policy.optimizer)  # type: ignore[union-attr]
+        learning_rate = float(self.lr_schedule(self._current_progress_remaining))
+        clip_range = float(self.clip_range(self._current_progress_remaining))  # type: ignore[operator]
+        obs, actions, old_logp, advantages, returns, values = self._rollout
+        flat = (
+            obs.reshape(-1, *obs.shape[2:]),
+            actions.reshape(-1, actions.shape[-1]),
+            old_logp.reshape(-1),
+            advantages.reshape(-1),
+            returns.reshape(-1),
+        )
+        params, opt_state, key, stats = compiled["update"](
+            self._params, self._opt_state, self._key, *flat, learning_rate, clip_range
+        )
+        self._params_to_torch(params)
+        self._keep_state(params, opt_state, key)
+        self._n_updates += self.n_epochs
+        stats = {name: float(value) for name, value in stats.items()}
+        for name in ("entropy_loss", "policy_gradient_loss", "value_loss", "approx_kl", "clip_fraction", "loss"):
+            self.logger.record(f"train/{name}", stats[name])
+        self.logger.record("train/explained_variance", float(explained_variance(values.ravel(), returns.ravel())))
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/clip_range", clip_range)
+
+
+def _gae(
+    rewards: np.ndarray,
+    values: np.ndarray,
+    episode_starts: np.ndarray,
+    last_values: np.ndarray,
+    dones: np.ndarray,
+    gamma: float,
+    gae_lambda: float,
+) -> np.ndarray:
+    """Generalised advantage estimates, as SB3's ``RolloutBuffer.compute_returns_and_advantage``."""
+    advantages = np.zeros_like(rewards)
+    last_gae = np.zeros(rewards.shape[1], dtype=np.float32)
+    for step in reversed(range(rewards.shape[0])):
+        if step == rewards.shape[0] - 1:
+            next_non_terminal = 1.0 - np.asarray(dones, dtype=np.float32)
+            next_values = last_values
+        else:
+            next_non_terminal = 1.0 - episode_starts[step + 1]
+            next_values = values[step + 1]
+        delta = rewards[step] + gamma * next_values * next_non_terminal - values[step]
+        last_gae = delta + gamma * gae_lambda * next_non_terminal * last_gae
+        advantages[step] = last_gae
+    return advantages

@@ -1,0 +1,225 @@
+"""JaxPPO: SB3's PPO with a compiled rollout policy and update -- the same networks, loss and outputs as SB3's."""
+
+from __future__ import annotations
+
+import hashlib
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.buffers import RolloutBuffer
+
+from agents.rl import (
+    CheckpointCallback,
+    TrainingInterrupted,
+    latest_checkpoint,
+    load_agent,
+    load_model,
+    make_model,
+    make_train_env,
+    restore_checkpoint,
+    save_agent,
+)
+from agents.rl.jax_ppo import JaxPPO, _gae
+from agents.trainer.hyperparams import hyperparams_for
+
+torch.set_num_threads(1)
+
+ENV_ID = "CoopGym/SitToStandHard-v2"
+_TINY = {"n_steps": 32, "batch_size": 64, "n_epochs": 2}
+
+
+def _model(seed: int = 0, n_envs: int = 4, folder: Path | None = None) -> JaxPPO:
+    config = hyperparams_for("ppo", ENV_ID, "jax")
+    env = make_train_env(
+        ENV_ID, n_envs, seed, personas=config.personas, normalize=True, monitor_file=folder and folder / "monitor.csv"
+    )
+    model = make_model(config, env, seed, overrides=_TINY)
+    assert isinstance(model, JaxPPO)
+    return model
+
+
+def _weights(model: JaxPPO) -> bytes:
+    return b"".join(t.numpy().tobytes() for t in model.policy.state_dict().values())
+
+
+def test_the_rollout_policy_is_the_torch_policy():
+    """Actions sampled by the rollout's NumPy policy get the torch policy's log-probabilities and values."""
+    model = _model()
+    model.learn(640)  # weights moved away from their initial values; the rate decayed part of the way
+    obs = np.asarray(model._last_obs, dtype=np.float32)
+    actions, values, log_probs = model._policy.act(obs, np.random.default_rng(0))
+    with torch.no_grad():
+        t_values, t_log_probs, _ = model.policy.evaluate_actions(
+            torch.from_numpy(obs), torch.from_numpy(np.asarray(actions).astype(np.int64))
+        )
+    np.testing.assert_allclose(values, t_values.numpy().ravel(), rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(log_probs, t_log_probs.numpy(), rtol=1e-4, atol=1e-5)
+    # Sampling follows the probabilities: 20000 draws of one row against its softmax.
+    row = np.repeat(obs[:1], 20000, axis=0)
+    draws, _, _ = model._policy.act(row, np.random.default_rng(1))
+    with torch.no_grad():
+        dist = model.policy.get_distribution(torch.from_numpy(obs[:1]))
+    for head, categorical in enumerate(dist.distribution):
+        expected = categorical.probs.numpy()[0]
+        observed = np.bincount(draws[:, head], minlength=expected.size) / len(draws)
+        np.testing.assert_allclose(observed, expected, atol=0.015)
+    # The update ran at the schedule's learning rate (SB3's lin_ schedule, injected into Adam).
+    assert float(model._opt_state.hyperparams["learning_rate"]) == pytest.approx(
+        model.lr_schedule(model._current_progress_remaining)
+    )
+    # Greedy play is the torch policy's (the saved model needs no JAX).
+    greedy, _ = model.predict(obs, deterministic=True)
+    assert greedy.shape == (obs.shape[0], 3)
+
+
+def test_advantages_are_sb3s():
+    rng = np.random.default_rng(0)
+    steps, envs = 7, 3
+    rewards = rng.normal(size=(steps, envs)).astype(np.float32)
+    values = rng.normal(size=(steps, envs)).astype(np.float32)
+    starts = (rng.random((steps, envs)) < 0.3).astype(np.float32)
+    last_values = rng.normal(size=envs).astype(np.float32)
+    dones = np.array([True, False, True])
+    from gymnasium import spaces
+
+    buffer = RolloutBuffer(
+        steps, spaces.Box(-1, 1, (1,)), spaces.Discrete(2), "cpu", gamma=0.99, gae_lambda=0.9, n_envs=envs
+    )
+    for t in range(steps):
+        buffer.add(
+            np.zeros((envs, 1)), np.zeros((envs, 1)), rewards[t], starts[t], torch.tensor(values[t]), torch.zeros(envs)
+        )
+    buffer.compute_returns_and_advantage(torch.tensor(last_values), dones)
+    ours = _gae(rewards, values, starts, last_values, dones, 0.99, 0.9)
+    np.testing.assert_allclose(ours, buffer.advantages, rtol=1e-5, atol=1e-6)
+
+
+def test_a_saved_model_loads_plays_and_continues(tmp_path):
+    model = _model()
+    model.learn(256)
+    path = save_agent(model, tmp_path / "run", algo="ppo", env_id=ENV_ID)
+    agent = load_agent(path)  # what evaluation loads
+    from agents.evaluate import evaluate
+
+    result = evaluate(agent, ENV_ID, "test", 4, 0)
+    assert result.summary()["episodes"] == 4
+    loaded, info = load_model(path)
+    assert isinstance(loaded, JaxPPO) and info["framework"] == "jax"
+    np.testing.assert_array_equal(loaded.jax_saved_state["key"], model.jax_saved_state["key"])
+    assert _weights(loaded) == _weights(model)
+
+
+def test_checkpoint_and_resume_give_the_unbroken_run(tmp_path):
+    """Stopped at a rollout boundary, restored onto fresh envs, finished: the weights of the run that never stopped."""
+    total = 768
+
+    def run(folder: Path, stop_at: int | None) -> bytes:
+        model = _model(folder=folder)
+        stop = lambda: stop_at is not None and model.num_timesteps >= stop_at  # noqa: E731
+        callback = CheckpointCallback(folder, 256, algo="ppo", env_id=ENV_ID, stop_requested=stop)
+        try:
+            model.learn(total, callback=callback)
+        except TrainingInterrupted:
+            config = hyperparams_for("ppo", ENV_ID, "jax")
+            fresh = make_train_env(
+                ENV_ID, 4, 0, personas=config.personas, monitor_file=folder / "monitor.csv", monitor_append=True
+            )
+            model, _ = restore_checkpoint(latest_checkpoint(folder), fresh)
+            assert isinstance(model, JaxPPO) and model.num_timesteps < total
+            model.learn(total - model.num_timesteps, reset_num_timesteps=False)
+        return _weights(model)
+
+    assert run(tmp_path / "stopped", stop_at=300) == run(tmp_path / "unbroken", stop_at=None)
+
+
+_SAME_SEED = """
+import hashlib, sys, torch
+torch.set_num_threads(1)
+sys.path.insert(0, "tests/agents")
+from test_jax_ppo import _model, _weights
+model = _model()
+model.learn(512)
+print(hashlib.sha256(_weights(model)).hexdigest())
+"""
+
+
+def test_a_seed_trains_the_same_weights_in_two_fresh_processes():
+    root = Path(__file__).resolve().parents[2]
+    digests = {
+        subprocess.run(
+            [sys.executable, "-c", _SAME_SEED], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        for _ in range(2)
+    }
+    assert len(digests) == 1 and len(next(iter(digests))) == 64, digests
+    another_seed = _model(seed=1)
+    another_seed.learn(512)
+    assert hashlib.sha256(_weights(another_seed)).hexdigest() not in digests
+
+
+def test_what_it_cannot_train_is_named():
+    with pytest.raises(ValueError, match="ppo only"):
+        hyperparams_for("dqn", None, "jax")
+    config = hyperparams_for("ppo", ENV_ID, "jax")
+    env = make_train_env(ENV_ID, 4, 0)
+    with pytest.raises(ValueError, match="multiple of batch_size"):
+        make_model(config, env, 0, overrides={"n_steps": 10, "batch_size": 64}).learn(64)
+    with pytest.raises(ValueError, match="target_kl"):
+        make_model(config, env, 0, overrides={**_TINY, "target_kl": 0.01}).learn(64)
+
+
+def test_one_update_is_sb3s_update():
+    """On the same rollout and weights, a compiled update moves the weights as SB3's ``PPO.train`` does.
+
+    Three epochs of one minibatch (the whole rollout), so the minibatch order cannot differ; after the
+    first Adam step (about the gradient's sign) the steps depend on the gradients' sizes too.
+    """
+    from stable_baselines3 import PPO
+
+    steps, envs = 16, 4
+    overrides = {"n_steps": steps, "batch_size": steps * envs, "n_epochs": 3}
+    config = hyperparams_for("ppo", ENV_ID, "jax")
+    ours = make_model(config, make_train_env(ENV_ID, envs, 0, normalize=True), 0, overrides=overrides)
+    sb3 = make_model(
+        config.replace(framework="sb3"), make_train_env(ENV_ID, envs, 0, normalize=True), 0, overrides=overrides
+    )
+    assert type(sb3) is PPO and _weights(ours) == _weights(sb3)  # the same initial weights
+    ours.learn(steps * envs)  # one rollout and one update, from which the rollout is reused
+    rollout = ours._rollout
+    sb3.policy.load_state_dict(_initial_state(config, envs, overrides))
+    ours.policy.load_state_dict(_initial_state(config, envs, overrides))
+    ours.jax_saved_state = None  # a fresh optimiser, as SB3's
+    ours._keep_state(*ours._jax_state())
+    obs, actions, old_log_probs, advantages, returns, values = rollout
+    buffer = sb3.rollout_buffer
+    buffer.reset()
+    for t in range(steps):
+        buffer.add(
+            obs[t], actions[t], np.zeros(envs), np.zeros(envs), torch.tensor(values[t]), torch.tensor(old_log_probs[t])
+        )
+    buffer.advantages[:], buffer.returns[:] = advantages, returns
+    buffer.generator_ready = False
+    ours._rollout = rollout
+    sb3._current_progress_remaining = ours._current_progress_remaining = 1.0
+    from stable_baselines3.common.logger import configure
+
+    sb3.set_logger(configure(None, []))
+    sb3.train()
+    ours.train()
+    for (name, a), b in zip(sb3.policy.state_dict().items(), ours.policy.state_dict().values(), strict=True):
+        np.testing.assert_allclose(b.numpy(), a.numpy(), rtol=1e-4, atol=2e-6, err_msg=name)
+    assert not np.allclose(
+        _initial_state(config, envs, overrides)["action_net.weight"], sb3.policy.action_net.weight.detach()
+    )
+
+
+def _initial_state(config, envs: int, overrides: dict) -> dict:
+    """The torch weights a seed-0 model starts from."""
+    model = make_model(
+        config.replace(framework="sb3"), make_train_env(ENV_ID, envs, 0, normalize=True), 0, overrides=overrides
+    )
+    return {k: v.clone() for k, v in model.policy.state_dict().items()}
