@@ -12,7 +12,11 @@ and the observation it gets (:data:`ROWS`):
   (``estimator="switching"``);
 - ``ppo-raw``: the same PPO on the measurements alone (no estimate, no memory);
 - ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
-  on the measurements alone / on the default observation.
+  on the measurements alone / on the default observation;
+- ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO as ``ppo-*`` trained by
+  :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --framework jax``) on its sizing; ``ROW@N``
+  (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
+  samples) compares sizings.
 
 Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's
 settings from :mod:`agents.trainer.hyperparams` with the budget ``--timesteps`` and the wider
@@ -59,6 +63,7 @@ class Row:
     algo: str
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     what: str = ""
+    framework: str = "sb3"
 
 
 ROWS: dict[str, Row] = {
@@ -67,14 +72,30 @@ ROWS: dict[str, Row] = {
     "ppo-raw": Row("ppo", {"observation_mode": "raw"}, "PPO (MLP), measurements only"),
     "recurrent-raw": Row("recurrent_ppo", {"observation_mode": "raw"}, "RecurrentPPO (LSTM), measurements only"),
     "recurrent-kalman": Row("recurrent_ppo", {}, "RecurrentPPO (LSTM), Kalman estimate + measurements"),
+    "jax-kalman": Row("ppo", {}, "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements", "jax"),
+    "jax-switching": Row("ppo", {"estimator": "switching"}, "JaxPPO, + switching filter's P(xi)", "jax"),
+    "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
 }
+
+
+def _row(name: str) -> tuple[Row, int | None]:
+    """The row of a name, and the env count of a ``jax-*@N`` name (None: the row's own)."""
+    base, _, size = name.partition("@")
+    if base not in ROWS or (size and not (size.isdigit() and int(size) > 0 and ROWS[base].framework == "jax")):
+        raise KeyError(name)
+    return ROWS[base], int(size) if size else None
 
 
 def _rows(text: str) -> list[str]:
     names = [n.strip() for n in text.split(",") if n.strip()]
-    unknown = [n for n in names if n not in ROWS]
+    unknown = []
+    for n in names:
+        try:
+            _row(n)
+        except KeyError:
+            unknown.append(n)
     if unknown or not names:
-        raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {', '.join(ROWS)}")
+        raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {', '.join(ROWS)} (jax-* rows: ROW@N)")
     return names
 
 
@@ -98,8 +119,13 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)  # as train.py --threads
-    row = ROWS[name]
-    config = hyperparams_for(row.algo, ENV_ID).replace(total_timesteps=timesteps, personas="train_wide")
+    row, n_envs = _row(name)
+    config = hyperparams_for(row.algo, ENV_ID, row.framework).replace(total_timesteps=timesteps, personas="train_wide")
+    if n_envs is not None:  # the same samples per update on n_envs envs
+        samples = config.n_envs * config.algo_kwargs["n_steps"]
+        if samples % n_envs:
+            raise ValueError(f"{name}: N must divide the {samples} samples of an update")
+        config = config.replace(n_envs=n_envs, algo_kwargs={**config.algo_kwargs, "n_steps": samples // n_envs})
     env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
     if config.normalize:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -194,7 +220,8 @@ def main(argv: list[str] | None = None) -> int:
                 parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
             runs.append(run)
             print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
-        table[name] = {"what": ROWS[name].what, **aggregate(runs, blind, oracle), "per_seed": runs}
+        what = _row(name)[0].what + (f", {name.partition('@')[2]} envs" if "@" in name else "")
+        table[name] = {"what": what, **aggregate(runs, blind, oracle), "per_seed": runs}
     for name, row in table.items():
         s, c = row["success"], row["score"]
         print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']} {c['ci95']}")

@@ -1,20 +1,21 @@
-r"""PPO whose rollout policy and update run as compiled JAX functions: SB3's PPO, faster.
+r"""PPO with its update compiled by JAX and its rollout policy in NumPy: SB3's PPO, faster.
 
 :class:`JaxPPO` is Stable-Baselines3's :class:`~stable_baselines3.PPO` with two methods
-replaced: ``collect_rollouts`` (the policy's action, value and log-probability from one
-jitted call per env step, into NumPy buffers) and ``train`` (all epochs and minibatches of
-one update in one jitted ``lax.scan``, the loss and optimiser of SB3's PPO: clipped
-surrogate, per-minibatch advantage normalisation, unclipped value loss, entropy bonus,
-global-norm gradient clipping, Adam with ``eps=1e-5``). Everything else is SB3's: the
-constructor and its hyperparameters, the torch policy that starts the weights (SB3's
-orthogonal initialisation) and receives them after every update, ``learn``, callbacks,
-``VecNormalize``, ``save``/``load``. A saved ``JaxPPO`` is a PPO ``model.zip``: it loads,
-plays and is scored (:func:`agents.evaluate.evaluate`) without JAX. The optimiser's moments
-and the random key are saved with it, so a checkpoint continues exactly.
+replaced: ``collect_rollouts`` (the policy's action, value and log-probability computed in
+NumPy, into NumPy buffers) and ``train`` (all epochs and minibatches of one update in one
+jitted ``lax.scan``, with the loss and optimiser of SB3's PPO: clipped surrogate,
+per-minibatch advantage normalisation, unclipped value loss, entropy bonus, global-norm
+gradient clipping, Adam with ``eps=1e-5``; :mod:`agents.rl.jax_update`). Everything else is
+SB3's: the constructor and its hyperparameters, the torch policy that starts the weights
+(SB3's orthogonal initialisation) and receives them after every update, ``learn``,
+callbacks, ``VecNormalize``, ``save``/``load``. A saved ``JaxPPO`` is a PPO ``model.zip``: it
+loads, plays and is scored (:func:`agents.evaluate.evaluate`) without JAX. The optimiser's
+moments and the random streams are saved with it, so a checkpoint continues exactly.
 
 Only ``MlpPolicy`` (separate policy and value networks of ``Linear`` layers and a ``Tanh``
 or ``ReLU`` activation) on a ``Discrete`` or ``MultiDiscrete`` action space; the number of
-samples per update (``n_envs * n_steps``) must be a multiple of ``batch_size``.
+samples per update (``n_envs * n_steps``) must be a multiple of ``batch_size`` (or at most one
+minibatch: then the whole rollout is one, as in SB3).
 
 XLA runs on one thread (set on first use through ``XLA_FLAGS``, unless the caller set it):
 a seed gives the same run whatever the machine's core count, as torch's single thread does.
@@ -94,7 +95,7 @@ class _RolloutPolicy:
 
 
 class JaxPPO(PPO):
-    """SB3's PPO with the rollout policy and the update compiled by JAX (see the module docstring)."""
+    """SB3's PPO with the update compiled by JAX and the rollout policy in NumPy (see the module docstring)."""
 
     framework = "jax"
     """What ``agent.json`` records (:func:`agents.rl.bundle.load_model` loads this class again)."""

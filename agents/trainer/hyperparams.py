@@ -230,15 +230,16 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
 
 
 JAX_SIZING: dict[str, Any] = {
-    "n_envs": 256,
-    "n_steps": 16,
+    "n_envs": 16,
+    "n_steps": 256,
 }
 """How :class:`~agents.rl.jax_ppo.JaxPPO` sizes PPO (``framework="jax"``), over the settings above.
 
-The compiled update makes a sample-epoch cheap and the batched env makes an env step cheap,
-so what is left per env step is Python's work per ``VecEnv`` step: many envs per step
-spread it thin. The same samples per update, minibatches and epochs as SB3's PPO
-(``python bench/time_to_quality.py --contenders default,jax``)."""
+With the update compiled, what is left per env step is Python's work per ``VecEnv`` step,
+which more envs per step spread thinner; but shorter rollouts per env learn less per step.
+16 envs x 256 steps keeps the 4096 samples per update, the minibatches and the epochs of
+the SB3 settings, and scored as 8 x 512 on the training personas' validation episodes,
+where 64 x 64 and 256 x 16 scored lower (docs/agents.md, "The JAX learner")."""
 
 
 def hyperparams_for(algo: str, env_id: str | None = None, framework: str = "sb3") -> TrainingConfig:
