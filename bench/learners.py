@@ -233,8 +233,11 @@ def main(argv: list[str] | None = None) -> int:
         "scripted": {k: {m: v[m] for m in ("success_rate", "unsafe_rate")} for k, v in reference.items()},
     }
     if args.save:
-        import stable_baselines3  # noqa: F401 -- the runs' torch and SB3 versions go into the results file
+        import stable_baselines3  # noqa: F401 -- the runs' torch, SB3 and JAX versions go into the results file
         import torch  # noqa: F401
+
+        if any(_row(name)[0].framework == "jax" for name in args.rows):
+            import jax  # noqa: F401
 
         save(args.save, "learners", argv, report)
     return 0

@@ -63,6 +63,7 @@ def _provenance(record: dict[str, Any]) -> str:
             ("numba", "numba"),
             ("torch", "torch"),
             ("SB3", "stable_baselines3"),
+            ("JAX", "jax"),
         )
         if m.get(key)
     )

@@ -8,7 +8,7 @@ script also writes its report to ``PATH`` (default ``bench/results/<name>.json``
 - ``command``: the command line that produced it, to rerun it;
 - ``date``: when it finished (UTC);
 - ``machine``: core count, load average at the end, and the versions of Python, NumPy, numba,
-  Gymnasium, coop_gym (and of torch and SB3 when the run used them);
+  Gymnasium, coop_gym (and of torch, SB3 and JAX when the run used them);
 - ``results``: the script's own report.
 
 The figures quoted in ``docs/BENCHMARKS.md`` come only from these files.
@@ -70,8 +70,8 @@ def machine() -> dict[str, Any]:
     }
     for package in ("numpy", "numba", "gymnasium", "coop_gym"):
         info[package] = _version(package)
-    # torch and SB3 only where the run imported them (their version changes learning speed).
-    for module, package in (("torch", "torch"), ("stable_baselines3", "stable_baselines3")):
+    # torch, SB3 and JAX only where the run imported them (their version changes learning speed).
+    for module, package in (("torch", "torch"), ("stable_baselines3", "stable_baselines3"), ("jax", "jax")):
         if module in sys.modules:
             info[package] = _version(package)
     return info

@@ -439,6 +439,12 @@ def main(argv: list[str] | None = None) -> int:
         ratio_text = f", x{statistics.median(ratio):.2f} default's" if ratio else ""
         print(f"{name:>13}: {_median_rate(row):.0f} steps/s{ratio_text}; time to {reached}")
     if args.save:
+        # The runs' torch, SB3 and JAX (in worker processes with --jobs) go into the results file.
+        import stable_baselines3  # noqa: F401
+        import torch  # noqa: F401
+
+        if any(c.startswith("jax") for c in contenders):
+            import jax  # noqa: F401
         save(args.save.replace("<env>", stem), "time_to_quality", argv, report)
     return 0
 

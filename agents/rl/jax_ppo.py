@@ -17,8 +17,9 @@ or ``ReLU`` activation) on a ``Discrete`` or ``MultiDiscrete`` action space; the
 samples per update (``n_envs * n_steps``) must be a multiple of ``batch_size`` (or at most one
 minibatch: then the whole rollout is one, as in SB3).
 
-XLA runs on one thread (set on first use through ``XLA_FLAGS``, unless the caller set it):
-a seed gives the same run whatever the machine's core count, as torch's single thread does.
+XLA runs on one thread (set on first use through ``XLA_FLAGS``, unless the caller set it)
+and the initial weights are drawn on one torch thread: a seed trains the same weights
+whatever ``torch.set_num_threads`` and the machine's core count.
 
 Example:
     >>> from agents.rl import make_train_env
@@ -114,6 +115,20 @@ class JaxPPO(PPO):
             "_policy",
             "_rng",
         ]
+
+    def _setup_model(self) -> None:
+        """SB3's set-up, with the initial weights drawn on one torch thread.
+
+        Torch's orthogonal initialisation (a QR decomposition) rounds differently on another
+        thread count; training itself never runs torch, so with this the weights a seed trains
+        do not depend on ``torch.set_num_threads`` at all.
+        """
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            super()._setup_model()
+        finally:
+            torch.set_num_threads(threads)
 
     # --- the networks, as JAX sees them --------------------------------------------
 
