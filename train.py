@@ -67,8 +67,8 @@ class Args:
     """torch CPU threads (these small networks gain little from more, and the envs need the cores)"""
     progress: bool = True
     """show a progress bar while training"""
-    framework: Literal["sb3", "jax", "rllib"] = "sb3"
-    """sb3 (Stable-Baselines3), jax (SB3's PPO with a compiled JAX update; ppo only) or rllib (Ray RLlib PPO)"""
+    framework: Literal["jax", "sb3", "rllib"] | None = None
+    """jax (SB3's PPO with its update compiled by JAX; ppo only), sb3 or rllib (Ray RLlib PPO); None: jax for ppo"""
     num_env_runners: int = 0
     """--framework rllib: sampling actors (0: in the driver, no episodes between processes; cluster: 1+ per node)"""
     address: str | None = None

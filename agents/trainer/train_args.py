@@ -42,6 +42,7 @@ __all__ = [
     "RunProblem",
     "args_problem",
     "baseline_names",
+    "learner_framework",
     "parse_train_args",
     "personas_arg",
     "read_training",
@@ -86,6 +87,13 @@ class BadArgs(Exception):
 
 class RunProblem(ValueError):
     """A saved file that cannot be used (a damaged model, checkpoint or summary): exit status 2, one line."""
+
+
+def learner_framework(args: Any) -> str:
+    """``--framework``, or the algorithm's own when not given: ``jax`` for PPO, ``sb3`` for the others."""
+    if args.framework is not None:
+        return str(args.framework)
+    return "jax" if args.algo == "ppo" else "sb3"
 
 
 # --- the checks -------------------------------------------------------------------
@@ -143,8 +151,8 @@ def _problem_with_numbers(args: Any) -> str | None:
     if args.seed < 0 or args.eval_seed < 0:
         return "--seed and --eval-seed must be >= 0"
     # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
-    framework = "jax" if args.framework == "jax" and args.algo == "ppo" else "sb3"
-    n_envs = args.n_envs or hyperparams_for(args.algo, None, framework).n_envs
+    framework = learner_framework(args) if args.algo == "ppo" else "sb3"
+    n_envs = args.n_envs or hyperparams_for(args.algo, None, "sb3" if framework == "rllib" else framework).n_envs
     problem = seed_range_problem("--seed", args.seed, n_envs)
     problem = problem or seed_range_problem("--eval-seed", args.eval_seed, args.eval_episodes)
     if problem:
@@ -182,10 +190,10 @@ def _problem_with_framework(args: Any) -> str | None:
         return "--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0"
     if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
         return '--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"'
-    if args.framework == "jax" and args.algo != "ppo" and not args.eval_only:
+    if args.framework == "jax" and args.algo != "ppo" and not args.eval_only:  # asked for by name
         return f"--framework jax trains ppo only, not --algo {args.algo}; use --framework sb3"
     if (
-        args.framework == "jax"
+        learner_framework(args) == "jax"
         and not args.eval_only
         and not all(importlib.util.find_spec(name) for name in ("jax", "optax"))
     ):
@@ -354,7 +362,8 @@ def _with_defaults(settings: dict[str, Any]) -> dict[str, Any]:
 
     out = dict(settings)
     algo = out.get("algo", "ppo")
-    framework = out.get("framework", "sb3")
+    framework = out.get("framework") or ("jax" if algo == "ppo" else "sb3")
+    framework = framework if framework in ("sb3", "jax") else "sb3"  # rllib: the SB3 settings' env and budget
     config = hyperparams_for(algo, out.get("env") or hyperparams_for(algo).env_id, framework)
     out["env"] = out.get("env") or config.env_id
     out["timesteps"] = out.get("timesteps") or config.total_timesteps

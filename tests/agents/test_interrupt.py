@@ -154,7 +154,10 @@ def test_resume_without_a_checkpoint_starts_over_and_after_training_only_evaluat
     assert train.main(["--resume", str(run)]) == 0
     assert [p.name for p in run.parent.iterdir()] == [run.name] and (run / "COMPLETE").exists()
     trained = json.loads((run / "results.json").read_text())["training"]
-    assert trained["total_timesteps"] == 512  # one rollout of the default n_steps
+    from agents.trainer.hyperparams import hyperparams_for
+
+    # One rollout of the default learner's n_steps (PPO's default framework: jax).
+    assert trained["total_timesteps"] == hyperparams_for("ppo", None, "jax").algo_kwargs["n_steps"]
 
     for name in ("COMPLETE", "results.json", "eval.json"):  # as if killed during the evaluation
         (run / name).unlink()
