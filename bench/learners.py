@@ -6,15 +6,15 @@
 Does the paper's estimator help a learner, and can memory replace it? Each row is a learner
 and the observation it gets (:data:`ROWS`):
 
-- ``ppo-kalman``: PPO (MLP) on the default observation, the paper's Kalman estimate of
-  ``xi`` beside the measurements -- what ``python train.py`` trains;
+- ``ppo-kalman``: SB3's PPO (MLP) on the default observation, the paper's Kalman estimate
+  of ``xi`` beside the measurements -- what ``python train.py --framework sb3`` trains;
 - ``ppo-switching``: the same PPO with the switching particle filter's ``P(xi)`` added
   (``estimator="switching"``);
 - ``ppo-raw``: the same PPO on the measurements alone (no estimate, no memory);
 - ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
   on the measurements alone / on the default observation;
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO as ``ppo-*`` trained by
-  :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --framework jax``) on its sizing; ``ROW@N``
+  :class:`agents.rl.jax_ppo.JaxPPO` on its sizing (``jax-kalman`` is what ``python train.py`` trains); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) compares sizings.
 
@@ -67,12 +67,14 @@ class Row:
 
 
 ROWS: dict[str, Row] = {
-    "ppo-kalman": Row("ppo", {}, "PPO (MLP), Kalman estimate + measurements (train.py's default)"),
+    "ppo-kalman": Row("ppo", {}, "SB3's PPO (MLP), Kalman estimate + measurements (train.py --framework sb3)"),
     "ppo-switching": Row("ppo", {"estimator": "switching"}, "PPO (MLP), + switching filter's P(xi)"),
     "ppo-raw": Row("ppo", {"observation_mode": "raw"}, "PPO (MLP), measurements only"),
     "recurrent-raw": Row("recurrent_ppo", {"observation_mode": "raw"}, "RecurrentPPO (LSTM), measurements only"),
     "recurrent-kalman": Row("recurrent_ppo", {}, "RecurrentPPO (LSTM), Kalman estimate + measurements"),
-    "jax-kalman": Row("ppo", {}, "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements", "jax"),
+    "jax-kalman": Row(
+        "ppo", {}, "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements (train.py's default)", "jax"
+    ),
     "jax-switching": Row("ppo", {"estimator": "switching"}, "JaxPPO, + switching filter's P(xi)", "jax"),
     "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
 }
