@@ -49,7 +49,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from result_files import add_save_argument, save
 
-from coop_gym.cli import positive_int
+from coop_gym.cli import positive_int, seed_list
 
 ENV_ID = "CoopGym/SitToStandHard-v2"
 SCRIPTED = ("oracle", "blind", "prober", "belief")
@@ -99,16 +99,6 @@ def _rows(text: str) -> list[str]:
     if unknown or not names:
         raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {', '.join(ROWS)} (jax-* rows: ROW@N)")
     return names
-
-
-def _seeds(text: str) -> list[int]:
-    try:
-        seeds = [int(s) for s in text.split(",") if s.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds are whole numbers joined by ',', got {text!r}") from None
-    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
-        raise argparse.ArgumentTypeError(f"seeds must be distinct and >= 0, got {text!r}")
-    return seeds
 
 
 def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int) -> dict[str, Any]:
@@ -189,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     """Train and score every (row, seed) not yet in ``--runs``; print the table (and save it)."""
     parser = argparse.ArgumentParser(prog="python bench/learners.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--rows", type=_rows, default=list(ROWS), help=f"comma-separated, of {', '.join(ROWS)}")
-    parser.add_argument("--seeds", type=_seeds, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
+    parser.add_argument("--seeds", type=seed_list, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
     parser.add_argument("--timesteps", type=positive_int, default=1_000_000, help="training budget per run")
     parser.add_argument("--episodes", type=positive_int, default=2000, help="held-out episodes per agent")
     parser.add_argument("--validation-episodes", type=positive_int, default=1000, help="per selection score")

@@ -55,7 +55,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from result_files import add_save_argument, save
 
-from coop_gym.cli import output_path_problem, positive_int
+from coop_gym.cli import output_path_problem, positive_int, seed_list
 
 CONTENDERS: tuple[str, ...] = ("default", "jax", "first_script")
 
@@ -74,7 +74,7 @@ def _resized(config: Any, n_envs: int) -> Any:
     """``config`` on ``n_envs`` envs with the same samples per update (``n_envs * n_steps``)."""
     batch = config.n_envs * config.algo_kwargs["n_steps"]
     if n_envs < 1 or batch % n_envs:
-        raise ValueError(f"default@N: N must divide the {batch}-step rollout of train.py's config, got {n_envs}")
+        raise ValueError(f"CONTENDER@N: N must divide the {batch}-step rollout of its config, got {n_envs}")
     return config.replace(n_envs=n_envs, algo_kwargs={**config.algo_kwargs, "n_steps": batch // n_envs})
 
 
@@ -363,16 +363,6 @@ def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str)
     return contenders
 
 
-def _seeds(text: str) -> list[int]:
-    try:
-        seeds = [int(s) for s in text.split(",") if s.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds are whole numbers joined by ',', got {text!r}") from None
-    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
-        raise argparse.ArgumentTypeError(f"seeds must be distinct and >= 0, got {text!r}")
-    return seeds
-
-
 def _targets(parser: argparse.ArgumentParser, env_id: str, text: str | None) -> tuple[str, ...]:
     """``--targets``: scripted caregivers (default: the handbook; the prober and the belief caregiver on hard ids)."""
     from agents.caregivers.scripted import SCRIPTED_AGENTS
@@ -396,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--budget-s", type=_positive_float, default=300.0, help="training seconds per contender")
     parser.add_argument("--eval-every-s", type=_positive_float, default=15.0, help="training seconds between scores")
     parser.add_argument("--episodes", type=positive_int, default=500, help="held-out episodes per score")
-    parser.add_argument("--seeds", type=_seeds, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
+    parser.add_argument("--seeds", type=seed_list, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
     parser.add_argument("--jobs", type=positive_int, default=1, help="runs at a time, each in its own process")
     parser.add_argument("--targets", default=None, help="scripted caregivers to reach, joined by ','")
     parser.add_argument("--out", default="bench/out", help="folder for time_to_quality.{json,png}")

@@ -9,7 +9,7 @@ import argparse
 import os
 from pathlib import Path
 
-__all__ = ["SEED_LIMIT", "output_path_problem", "positive_int", "seed", "seed_range_problem"]
+__all__ = ["SEED_LIMIT", "output_path_problem", "positive_int", "seed", "seed_list", "seed_range_problem"]
 
 SEED_LIMIT = 2**32
 """Every seed a command uses (seed, seed + 1, ... for its episodes or envs) must be below this.
@@ -41,6 +41,17 @@ def seed(text: str) -> int:
     if value >= SEED_LIMIT:
         raise argparse.ArgumentTypeError(f"seeds must be below 2**32, got {value}")
     return value
+
+
+def seed_list(text: str) -> list[int]:
+    """An argparse type: distinct seeds >= 0 joined by ``,`` (``"0,1,2"``)."""
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds are whole numbers joined by ',', got {text!r}") from None
+    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"seeds must be distinct and >= 0, got {text!r}")
+    return seeds
 
 
 def seed_range_problem(name: str, seed: int, count: int = 1) -> str | None:
