@@ -168,7 +168,9 @@ def test_what_it_cannot_train_is_named():
     config = hyperparams_for("ppo", ENV_ID, "jax")
     env = make_train_env(ENV_ID, 4, 0)
     with pytest.raises(ValueError, match="multiple of batch_size"):
-        make_model(config, env, 0, overrides={"n_steps": 10, "batch_size": 64}).learn(64)
+        make_model(config, env, 0, overrides={"n_steps": 24, "batch_size": 64}).learn(96)
+    # A rollout smaller than one minibatch is one minibatch, as in SB3.
+    assert make_model(config, env, 0, overrides={"n_steps": 10, "batch_size": 64}).learn(40).num_timesteps == 40
     with pytest.raises(ValueError, match="target_kl"):
         make_model(config, env, 0, overrides={**_TINY, "target_kl": 0.01}).learn(64)
 
