@@ -238,8 +238,9 @@ JAX_SIZING: dict[str, Any] = {
 With the update compiled, what is left per env step is Python's work per ``VecEnv`` step,
 which more envs per step spread thinner; but shorter rollouts per env learn less per step.
 16 envs x 256 steps keeps the 4096 samples per update, the minibatches and the epochs of
-the SB3 settings, and scored as 8 x 512 on the training personas' validation episodes,
-where 64 x 64 and 256 x 16 scored lower (docs/agents.md, "The JAX learner")."""
+the SB3 settings, and scored highest of 8 x 512, 16 x 256 and 64 x 64 on the training
+personas' validation episodes (python bench/learners.py --rows jax-kalman@8,jax-kalman,jax-kalman@64;
+docs/agents.md, "The JAX learner")."""
 
 
 def hyperparams_for(algo: str, env_id: str | None = None, framework: str = "sb3") -> TrainingConfig:

@@ -124,7 +124,8 @@ def evaluate_and_report(args: Any, plan: Plan, finished: dict[str, Any], stop: S
     model_path = args.model if args.eval_only and args.model else run_dir / MODEL_FILE
     # The saved agent (what a user loads) and the baselines, on the same episodes.
     label = f"{plan.algo} (learned)"
-    comparison = compare_with_baselines(load_agent(model_path), label, env_id, args, run_dir, after_each=stop.check)
+    agent = load_agent(model_path)
+    comparison = compare_with_baselines(agent, label, env_id, args, run_dir, after_each=stop.check)
     results = comparison.results
     plot_outcome_rates(results, run_dir / "outcome_rates.png")
     curve_points = finished["learning_curve"]
@@ -142,6 +143,8 @@ def evaluate_and_report(args: Any, plan: Plan, finished: dict[str, Any], stop: S
     summary = {
         "run": run_dir.name,
         "algo": plan.algo,
+        # Which learner trained it (runs of one framework are compared across seeds).
+        "framework": getattr(agent.model, "framework", "sb3"),
         "env_id": env_id,
         "seed": args.seed,
         "model": str(model_path),

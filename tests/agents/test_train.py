@@ -227,5 +227,5 @@ def test_framework_jax_trains_and_reports_and_its_model_continues_with_jax(tmp_p
     assert type(model).__name__ == "JaxPPO" and info["framework"] == "jax"
     results = json.loads((run_dir / "results.json").read_text())
     assert results["training"]["timesteps"] >= 512
-    assert results["evaluation"]["results"][0]["agent"] == "ppo (learned)"
+    assert results["evaluation"]["results"][0]["agent"] == "ppo (learned)" and results["framework"] == "jax"
     assert train.parse_args(["--resume", str(run_dir), "--out", str(tmp_path)]).framework == "jax"
