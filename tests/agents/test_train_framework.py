@@ -15,12 +15,21 @@ import train
         ["--framework", "tf"],
         ["--framework", "rllib", "--algo", "dqn"],
         ["--framework", "rllib", "--num-env-runners", "-1"],
+        ["--framework", "jax", "--algo", "dqn"],
     ],
 )
 def test_bad_framework_arguments_exit_2(argv):
     with pytest.raises(SystemExit) as info:
         train.parse_args(argv)
     assert info.value.code == 2
+
+
+def test_ppo_trains_with_jax_unless_told_and_other_algorithms_with_sb3():
+    from agents.trainer.train_args import learner_framework
+
+    assert learner_framework(train.parse_args([])) == "jax"
+    assert learner_framework(train.parse_args(["--framework", "sb3"])) == "sb3"
+    assert learner_framework(train.parse_args(["--algo", "dqn"])) == "sb3"
 
 
 def test_rllib_flags_parse():
