@@ -2,15 +2,16 @@ r"""PPO with its update compiled by JAX and its rollout policy in NumPy: SB3's P
 
 :class:`JaxPPO` is Stable-Baselines3's :class:`~stable_baselines3.PPO` with two methods
 replaced: ``collect_rollouts`` (the policy's action, value and log-probability computed in
-NumPy, into NumPy buffers) and ``train`` (all epochs and minibatches of one update in one
-jitted ``lax.scan``, with the loss and optimiser of SB3's PPO: clipped surrogate,
-per-minibatch advantage normalisation, unclipped value loss, entropy bonus, global-norm
-gradient clipping, Adam with ``eps=1e-5``; :mod:`agents.rl.jax_update`). Everything else is
-SB3's: the constructor and its hyperparameters, the torch policy that starts the weights
-(SB3's orthogonal initialisation) and receives them after every update, ``learn``,
-callbacks, ``VecNormalize``, ``save``/``load``. A saved ``JaxPPO`` is a PPO ``model.zip``: it
-loads, plays and is scored (:func:`agents.evaluate.evaluate`) without JAX. The optimiser's
-moments and the random streams are saved with it, so a checkpoint continues exactly.
+NumPy, into SB3's rollout buffer, whose GAE computes the advantages) and ``train`` (all
+epochs and minibatches of one update in one jitted ``lax.scan``, with the loss and optimiser
+of SB3's PPO: clipped surrogate, per-minibatch advantage normalisation, unclipped value
+loss, entropy bonus, global-norm gradient clipping, Adam with ``eps=1e-5``;
+:mod:`agents.rl.jax_update`). Everything else is SB3's: the constructor and its
+hyperparameters, the torch policy that starts the weights (SB3's orthogonal initialisation)
+and receives them after every update, ``learn``, callbacks, ``VecNormalize``,
+``save``/``load``. A saved ``JaxPPO`` is a PPO ``model.zip``: it loads, plays and is scored
+(:func:`agents.evaluate.evaluate`) without JAX. The optimiser's moments and the random
+streams are saved with it, so a checkpoint continues exactly.
 
 Only ``MlpPolicy`` (separate policy and value networks of ``Linear`` layers and a ``Tanh``
 or ``ReLU`` activation) on a ``Discrete`` or ``MultiDiscrete`` action space; the number of
@@ -111,7 +112,6 @@ class JaxPPO(PPO):
             "_params",
             "_opt_state",
             "_key",
-            "_rollout",
             "_policy",
             "_rng",
         ]
@@ -173,7 +173,7 @@ class JaxPPO(PPO):
             )
 
     def _compiled(self) -> dict[str, Any]:
-        """The jitted functions and the optimiser state, built on first use (and after a load)."""
+        """The compiled update and what goes with it (:func:`agents.rl.jax_update.build`), built on first use."""
         if self._jax is None:
             self._check_supported()
             nvec = (
@@ -240,15 +240,10 @@ class JaxPPO(PPO):
         rollout_buffer: Any,
         n_rollout_steps: int,
     ) -> bool:
-        """SB3's rollout (callbacks, episode infos, timeout bootstrap), the policy a jitted call."""
+        """SB3's rollout (callbacks, episode infos, timeout bootstrap, its buffer and GAE), the policy in NumPy."""
         assert self._last_obs is not None, "No previous observation was provided"
-        n = env.num_envs
-        obs_buf = np.zeros((n_rollout_steps, n, *self.observation_space.shape), dtype=np.float32)  # type: ignore[misc]
-        act_buf = np.zeros((n_rollout_steps, n, len(self._compiled()["nvec"])), dtype=np.int32)
-        rew_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
-        start_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
-        val_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
-        logp_buf = np.zeros((n_rollout_steps, n), dtype=np.float32)
+        buffer = rollout_buffer
+        buffer.reset()
         policy = self._policy
         callback.on_rollout_start()
         for step in range(n_rollout_steps):
@@ -256,20 +251,21 @@ class JaxPPO(PPO):
             actions, values, log_probs = policy.act(obs, self._rng)
             env_actions = actions[:, 0] if isinstance(self.action_space, spaces.Discrete) else actions
             new_obs, rewards, dones, infos = env.step(env_actions)
-            self.num_timesteps += n
+            self.num_timesteps += env.num_envs
             callback.update_locals(locals())
             if not callback.on_step():
                 return False
             self._update_info_buffer(infos, dones)
             rewards = np.asarray(rewards, dtype=np.float32).copy()
             self._bootstrap_timeouts(policy, rewards, dones, infos)
-            obs_buf[step], act_buf[step], rew_buf[step] = obs, actions, rewards
-            start_buf[step], val_buf[step], logp_buf[step] = self._last_episode_starts, values, log_probs
+            buffer.observations[step], buffer.actions[step], buffer.rewards[step] = obs, actions, rewards
+            buffer.episode_starts[step] = self._last_episode_starts
+            buffer.values[step], buffer.log_probs[step] = values, log_probs
             self._last_obs = new_obs  # type: ignore[assignment]
             self._last_episode_starts = dones
+        buffer.pos, buffer.full = n_rollout_steps, True
         last_values = policy.value(np.asarray(new_obs, dtype=np.float32))
-        advantages = _gae(rew_buf, val_buf, start_buf, last_values, dones, self.gamma, self.gae_lambda)
-        self._rollout = (obs_buf, act_buf, logp_buf, advantages, advantages + val_buf, val_buf)
+        buffer.compute_returns_and_advantage(last_values=torch.from_numpy(last_values), dones=dones)
         callback.update_locals(locals())
         callback.on_rollout_end()
         return True
@@ -292,13 +288,13 @@ class JaxPPO(PPO):
         self._update_learning_rate(self.policy.optimizer)  # type: ignore[union-attr]
         learning_rate = float(self.lr_schedule(self._current_progress_remaining))
         clip_range = float(self.clip_range(self._current_progress_remaining))  # type: ignore[operator]
-        obs, actions, old_logp, advantages, returns, values = self._rollout
+        buffer = self.rollout_buffer
         flat = (
-            obs.reshape(-1, *obs.shape[2:]),
-            actions.reshape(-1, actions.shape[-1]),
-            old_logp.reshape(-1),
-            advantages.reshape(-1),
-            returns.reshape(-1),
+            buffer.observations.reshape(-1, *buffer.observations.shape[2:]),
+            buffer.actions.reshape(-1, buffer.actions.shape[-1]).astype(np.int32),
+            buffer.log_probs.reshape(-1),
+            buffer.advantages.reshape(-1),
+            buffer.returns.reshape(-1),
         )
         params, opt_state, key, stats = compiled["update"](
             self._params, self._opt_state, self._key, *flat, learning_rate, clip_range
@@ -309,31 +305,7 @@ class JaxPPO(PPO):
         stats = {name: float(value) for name, value in stats.items()}
         for name in ("entropy_loss", "policy_gradient_loss", "value_loss", "approx_kl", "clip_fraction", "loss"):
             self.logger.record(f"train/{name}", stats[name])
-        self.logger.record("train/explained_variance", float(explained_variance(values.ravel(), returns.ravel())))
+        explained = explained_variance(buffer.values.ravel(), buffer.returns.ravel())
+        self.logger.record("train/explained_variance", float(explained))
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/clip_range", clip_range)
-
-
-def _gae(
-    rewards: np.ndarray,
-    values: np.ndarray,
-    episode_starts: np.ndarray,
-    last_values: np.ndarray,
-    dones: np.ndarray,
-    gamma: float,
-    gae_lambda: float,
-) -> np.ndarray:
-    """Generalised advantage estimates, as SB3's ``RolloutBuffer.compute_returns_and_advantage``."""
-    advantages = np.zeros_like(rewards)
-    last_gae = np.zeros(rewards.shape[1], dtype=np.float32)
-    for step in reversed(range(rewards.shape[0])):
-        if step == rewards.shape[0] - 1:
-            next_non_terminal = 1.0 - np.asarray(dones, dtype=np.float32)
-            next_values = last_values
-        else:
-            next_non_terminal = 1.0 - episode_starts[step + 1]
-            next_values = values[step + 1]
-        delta = rewards[step] + gamma * next_values * next_non_terminal - values[step]
-        last_gae = delta + gamma * gae_lambda * next_non_terminal * last_gae
-        advantages[step] = last_gae
-    return advantages
