@@ -41,7 +41,7 @@ from agents.rl import (
 from agents.trainer.hyperparams import hyperparams_for
 from agents.trainer.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
 from agents.trainer.run_report import new_run_folder
-from agents.trainer.train_args import RunProblem, learner_framework, personas_arg, recorded_settings
+from agents.trainer.train_args import RunProblem, personas_arg, recorded_settings, settings_framework
 from agents.trainer.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
 from coop_gym.io import write_json
 
@@ -65,7 +65,7 @@ def plan_run(args: Any) -> Plan:
             raise RunProblem(f"--model: {exc}") from None
     algo = saved_agent.algo if saved_agent is not None else args.algo
     env_id = args.env or (saved_agent.env_id if saved_agent else None) or hyperparams_for(algo).env_id
-    config = hyperparams_for(algo, env_id, "jax" if learner_framework(args) == "jax" and algo == "ppo" else "sb3")
+    config = hyperparams_for(algo, env_id, settings_framework(args, algo))
     timesteps = args.timesteps or config.total_timesteps
     checkpoint_every = args.checkpoint_every if args.checkpoint_every is not None else max(1, timesteps // 10)
     # A model must meet the observation it was trained on: checked before any folder is made.

@@ -48,6 +48,7 @@ __all__ = [
     "read_training",
     "recorded_settings",
     "resume_settings",
+    "settings_framework",
     "usage_error",
 ]
 
@@ -94,6 +95,11 @@ def learner_framework(args: Any) -> str:
     if args.framework is not None:
         return str(args.framework)
     return "jax" if args.algo == "ppo" else "sb3"
+
+
+def settings_framework(args: Any, algo: str) -> str:
+    """Whose settings (``hyperparams_for``) a run of ``algo`` takes: ``jax`` for JaxPPO, else SB3's (RLlib's too)."""
+    return "jax" if learner_framework(args) == "jax" and algo == "ppo" else "sb3"
 
 
 # --- the checks -------------------------------------------------------------------
@@ -151,8 +157,7 @@ def _problem_with_numbers(args: Any) -> str | None:
     if args.seed < 0 or args.eval_seed < 0:
         return "--seed and --eval-seed must be >= 0"
     # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
-    framework = learner_framework(args) if args.algo == "ppo" else "sb3"
-    n_envs = args.n_envs or hyperparams_for(args.algo, None, "sb3" if framework == "rllib" else framework).n_envs
+    n_envs = args.n_envs or hyperparams_for(args.algo, None, settings_framework(args, args.algo)).n_envs
     problem = seed_range_problem("--seed", args.seed, n_envs)
     problem = problem or seed_range_problem("--eval-seed", args.eval_seed, args.eval_episodes)
     if problem:
