@@ -9,14 +9,16 @@ and the observation it gets (:data:`ROWS`):
 - ``ppo-kalman``: SB3's PPO (MLP) on the default observation, the paper's Kalman estimate
   of ``xi`` beside the measurements -- what ``python train.py --framework sb3`` trains;
 - ``ppo-switching``: the same PPO with the switching particle filter's ``P(xi)`` added
-  (``estimator="switching"``);
+  (``estimator="switching"``, the light filter of :data:`SWITCHING`);
 - ``ppo-raw``: the same PPO on the measurements alone (no estimate, no memory);
 - ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
   on the measurements alone / on the default observation;
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO as ``ppo-*`` trained by
   :class:`agents.rl.jax_ppo.JaxPPO` on its sizing (``jax-kalman`` is what ``python train.py`` trains); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
-  samples) compares sizings.
+  samples) compares sizings;
+- ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
+  into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
 Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's
 settings from :mod:`agents.trainer.hyperparams` with the budget ``--timesteps`` and the wider
@@ -38,7 +40,9 @@ to ``bench/results/learners.json`` (``bench/result_files.py``).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import re
 import statistics
 import sys
 import time
@@ -64,28 +68,42 @@ class Row:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     what: str = ""
     framework: str = "sb3"
+    frame_stack: int = 1
 
+
+SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
+"""The switching rows' filter: the light one ``hard-ppo-switching`` trains and plays with. A filter step
+costs about one person step per particle, so the default filter (1024 particles, 128 hypotheses, what
+the belief caregiver reads) would make each run about four times longer."""
 
 ROWS: dict[str, Row] = {
     "ppo-kalman": Row("ppo", {}, "SB3's PPO (MLP), Kalman estimate + measurements (train.py --framework sb3)"),
-    "ppo-switching": Row("ppo", {"estimator": "switching"}, "PPO (MLP), + switching filter's P(xi)"),
+    "ppo-switching": Row("ppo", SWITCHING, "PPO (MLP), + switching filter's P(xi) (256 particles, 32 hypotheses)"),
     "ppo-raw": Row("ppo", {"observation_mode": "raw"}, "PPO (MLP), measurements only"),
     "recurrent-raw": Row("recurrent_ppo", {"observation_mode": "raw"}, "RecurrentPPO (LSTM), measurements only"),
     "recurrent-kalman": Row("recurrent_ppo", {}, "RecurrentPPO (LSTM), Kalman estimate + measurements"),
     "jax-kalman": Row(
         "ppo", {}, "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements (train.py's default)", "jax"
     ),
-    "jax-switching": Row("ppo", {"estimator": "switching"}, "JaxPPO, + switching filter's P(xi)", "jax"),
+    "jax-switching": Row("ppo", SWITCHING, "JaxPPO, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"),
     "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
 }
+"""The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
+memory of a fixed window, 0.1 s per frame); ``ROW@N`` is a ``jax-*`` row on ``N`` envs."""
 
 
 def _row(name: str) -> tuple[Row, int | None]:
-    """The row of a name, and the env count of a ``jax-*@N`` name (None: the row's own)."""
+    """The row of a name (``ROW``, ``ROW-stackK``, ``ROW@N``), and the env count of ``@N`` (None: the row's own)."""
     base, _, size = name.partition("@")
-    if base not in ROWS or (size and not (size.isdigit() and int(size) > 0 and ROWS[base].framework == "jax")):
+    stacked = re.fullmatch(r"(.+)-stack([1-9][0-9]*)", base)
+    key = stacked.group(1) if stacked else base
+    if key not in ROWS or (size and not (size.isdigit() and int(size) > 0 and ROWS[key].framework == "jax")):
         raise KeyError(name)
-    return ROWS[base], int(size) if size else None
+    row = ROWS[key]
+    if stacked:
+        k = int(stacked.group(2))
+        row = dataclasses.replace(row, frame_stack=k, what=f"{row.what}, last {k} observations stacked")
+    return row, int(size) if size else None
 
 
 def _rows(text: str) -> list[str]:
@@ -97,14 +115,15 @@ def _rows(text: str) -> list[str]:
         except KeyError:
             unknown.append(n)
     if unknown or not names:
-        raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {', '.join(ROWS)} (jax-* rows: ROW@N)")
+        known = f"{', '.join(ROWS)} (also ROW-stackK; jax-* rows: ROW@N)"
+        raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {known}")
     return names
 
 
 def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int) -> dict[str, Any]:
     """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out."""
     import torch
-    from stable_baselines3.common.vec_env import VecNormalize
+    from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
     from agents.evaluate import evaluate
     from agents.rl import SelectionCallback, load_agent, make_model, make_train_env, save_agent
@@ -121,6 +140,8 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
     if config.normalize:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
+    if row.frame_stack > 1:  # normalised frames stacked (what the saved agent rebuilds when it plays)
+        env = VecFrameStack(env, row.frame_stack)
     model = make_model(config, env, seed)
     half = timesteps // 2
     every = max(1, (timesteps - half) // 8)

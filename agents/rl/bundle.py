@@ -22,15 +22,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 from numpy.typing import NDArray
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 
 import coop_gym
 from agents.base import feature_mismatch
 from agents.pretrained import PREFIX, is_pretrained, pretrained_card, pretrained_model_path
 from agents.rl.normalize import ObsNormalizer
-from agents.rl.training import algorithm_class, find_vec_normalize, observation_features
+from agents.rl.training import algorithm_class, find_frame_stack, find_vec_normalize, observation_features
 from agents.trainer.hyperparams import ALGORITHMS
 from agents.trainer.run_folder import AGENT_FILE, MODEL_FILE, VECNORMALIZE_FILE
 from coop_gym.io import atomic_path, write_bytes, write_json
@@ -75,6 +76,7 @@ def save_model_bundle(
         "coop_gym_version": coop_gym.__version__,
         "normalized": vec_normalize is not None,
         "framework": getattr(model, "framework", "sb3"),
+        "frame_stack": find_frame_stack(model.get_env()),
     }
     with atomic_path(path) as temp:
         model.save(temp)
@@ -215,6 +217,10 @@ class SB3Agent:
         env_kwargs: Env kwargs beyond the env id's own that it plays with (a pretrained
             model's card says, e.g. the switching filter's estimate in the observation).
         name: Its name in an evaluation (default: ``algo``).
+        frame_stack: Observations stacked into one policy input, as SB3's ``VecFrameStack``
+            stacked them in training (the newest last; zeros before an episode's first). The
+            stack travels in ``state`` and restarts where ``episode_start`` is set (or, for a
+            caller that passes ``state=None``, where ``elapsed_s`` is 0).
     """
 
     def __init__(
@@ -226,16 +232,27 @@ class SB3Agent:
         features: tuple[str, ...] | None = None,
         env_kwargs: dict[str, Any] | None = None,
         name: str | None = None,
+        frame_stack: int = 1,
     ) -> None:
         """Wrap the model."""
+        if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
+            raise ValueError(f"frame_stack must be an int >= 1, got {frame_stack!r}")
         self.model = model
+        self.frame_stack = frame_stack
+        self._stack: NDArray[np.float32] | None = None  # the stack of a caller passing state=None
         self.features = features
         self.algo = algo
         self.env_id = env_id
         self.env_kwargs = dict(env_kwargs or {})
         self.name = name or algo
         self.obs_normalizer = obs_normalizer
-        self.observation_space = model.observation_space
+        self.observation_space = model.observation_space  # what one env step gives (one frame of a stack)
+        if frame_stack > 1:
+            space = model.observation_space
+            if not isinstance(space, spaces.Box) or space.shape is None or space.shape[-1] % frame_stack:
+                raise ValueError(f"frame_stack {frame_stack} does not divide the model's observation space {space}")
+            d = space.shape[-1] // frame_stack
+            self.observation_space = spaces.Box(space.low[..., -d:], space.high[..., -d:], dtype=space.dtype)
         self.action_space = model.action_space
 
     def normalize(self, observation: NDArray[Any]) -> NDArray[np.float32]:
@@ -251,11 +268,41 @@ class SB3Agent:
         episode_start: Any = None,
         deterministic: bool = True,
     ) -> tuple[NDArray[Any], Any]:
-        """SB3's ``predict`` on normalised observations; ``state`` is the LSTM state (recurrent only)."""
+        """SB3's ``predict`` on normalised observations; ``state`` is the LSTM state or the frame stack."""
         obs = self.normalize(observation)
         if episode_start is not None:
             episode_start = np.asarray(episode_start, dtype=bool).reshape(-1)
-        return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        if self.frame_stack == 1:
+            return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        single = obs.ndim == 1
+        stack = self._push(obs.reshape(1, -1) if single else obs, np.asarray(observation), state, episode_start)
+        actions, _ = self.model.predict(stack[0] if single else stack, deterministic=deterministic)
+        return actions, stack
+
+    def _push(
+        self,
+        obs: NDArray[np.float32],
+        observation: NDArray[Any],
+        state: Any,
+        episode_start: NDArray[np.bool_] | None,
+    ) -> NDArray[np.float32]:
+        """The (N, frame_stack * D) stack with ``obs`` (N, D) pushed in, as ``VecFrameStack`` builds it."""
+        n, d = obs.shape
+        previous = self._stack if state is None else np.asarray(state, dtype=np.float32)
+        if previous is None or previous.shape != (n, self.frame_stack * d):
+            if state is not None:
+                raise ValueError(f"state must be the ({n}, {self.frame_stack * d}) frame stack predict returned")
+            stack = np.zeros((n, self.frame_stack * d), dtype=np.float32)
+        else:
+            stack = np.roll(previous, -d, axis=1)  # a new array: the caller's state is not changed
+            fresh = np.zeros(n, dtype=bool) if episode_start is None else episode_start.copy()
+            if state is None and self.features and "elapsed_s" in self.features:
+                fresh |= observation.reshape(n, -1)[:, self.features.index("elapsed_s")] == 0
+            stack[fresh] = 0.0
+        stack[:, -d:] = obs
+        if state is None:
+            self._stack = stack
+        return stack
 
 
 def load_agent(path: str | Path) -> SB3Agent:
@@ -296,7 +343,11 @@ def load_agent(path: str | Path) -> SB3Agent:
                 normalizer = ObsNormalizer.from_vec_normalize(_load_vec_normalize(candidate))
                 break
     features = info.get("features")
-    return SB3Agent(model, info["algo"], info.get("env_id"), normalizer, tuple(features) if features else None)
+    frame_stack = info.get("frame_stack", 1)
+    return SB3Agent(
+        model, info["algo"], info.get("env_id"), normalizer, tuple(features) if features else None,
+        frame_stack=frame_stack,
+    )  # fmt: skip
 
 
 def _load_vec_normalize(path: Path) -> VecNormalize:
@@ -315,11 +366,12 @@ def load_to_continue(path: str | Path, env: VecEnv) -> tuple[BaseAlgorithm, VecE
     """A saved model (a folder or its zip) on a training ``env``, to train further; ``(model, env)``.
 
     The model's own observation statistics come along (from inside the zip, else the
-    ``vecnormalize.pkl`` beside it) and keep updating: ``env`` comes back wrapped in them.
+    ``vecnormalize.pkl`` beside it) and keep updating: ``env`` comes back wrapped in them
+    (and in a ``VecFrameStack`` of the model's ``frame_stack``, if it stacked frames).
     """
     model_path = Path(path)
     model_path = model_path / MODEL_FILE if model_path.is_dir() else model_path
-    _, stats = read_bundle(model_path)
+    info, stats = read_bundle(model_path)
     beside = model_path.parent / VECNORMALIZE_FILE
     if stats is None and beside.exists():
         stats = VecNormalize.load(str(beside), env)
@@ -327,6 +379,8 @@ def load_to_continue(path: str | Path, env: VecEnv) -> tuple[BaseAlgorithm, VecE
         stats.set_venv(env)
         stats.training = True
         env = stats
+    if info.get("frame_stack", 1) > 1:
+        env = VecFrameStack(env, int(info["frame_stack"]))
     model, _ = load_model(model_path, env=env)
     return model, env
 

@@ -20,7 +20,7 @@ from stable_baselines3.common.logger import KVWriter, Logger, TensorBoardOutputF
 
 from agents.rl.bundle import SB3Agent, read_bundle, save_model_bundle
 from agents.rl.normalize import ObsNormalizer
-from agents.rl.training import find_vec_normalize
+from agents.rl.training import find_frame_stack, find_vec_normalize
 from coop_gym.envs.config import Outcome
 
 __all__ = [
@@ -278,7 +278,9 @@ class SelectionCallback(BaseCallback):
 
 def _current_policy(model: Any, algo: str, env_id: str) -> SB3Agent:
     """The model's policy as it is now, with the training env's current observation statistics."""
-    return SB3Agent(model, algo, env_id, ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env())))
+    env = model.get_env()
+    normalizer = ObsNormalizer.from_vec_normalize(find_vec_normalize(env))
+    return SB3Agent(model, algo, env_id, normalizer, frame_stack=find_frame_stack(env))
 
 
 def _load_policy(model: Any, path: Path) -> None:

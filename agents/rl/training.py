@@ -17,7 +17,7 @@ from typing import Any
 import gymnasium as gym
 from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecFrameStack, VecMonitor, VecNormalize
 
 import coop_gym  # noqa: F401 -- registers the env ids
 from agents.rl.sb3_vec import make_sb3_vec_env
@@ -28,6 +28,7 @@ from estimator.compiled.checks import check_integer
 __all__ = [
     "LinearDecay",
     "algorithm_class",
+    "find_frame_stack",
     "find_vec_normalize",
     "make_model",
     "make_train_env",
@@ -182,6 +183,15 @@ def find_vec_normalize(env: VecEnv | None) -> VecNormalize | None:
             return env
         env = getattr(env, "venv", None)
     return None
+
+
+def find_frame_stack(env: VecEnv | None) -> int:
+    """The frames a wrapped ``VecEnv`` stacks into one observation (its ``VecFrameStack``'s ``n_stack``; 1 if none)."""
+    while env is not None:
+        if isinstance(env, VecFrameStack):
+            return int(env.stacked_obs.n_stack)
+        env = getattr(env, "venv", None)
+    return 1
 
 
 def observation_features(env_id: str, env: VecEnv | None = None, env_kwargs: dict[str, Any] | None = None) -> list[str]:
