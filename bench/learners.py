@@ -14,7 +14,10 @@ and the observation it gets (:data:`ROWS`):
 - ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
   on the measurements alone / on the default observation;
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO as ``ppo-*`` trained by
-  :class:`agents.rl.jax_ppo.JaxPPO` on its sizing (``jax-kalman`` is what ``python train.py`` trains); ``ROW@N``
+  :class:`agents.rl.jax_ppo.JaxPPO` on its sizing (``jax-kalman`` is what ``python train.py`` trains);
+  ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by
+  :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (the hard level's RecurrentPPO settings: PPO's,
+  with an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) compares sizings;
 - ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
@@ -87,6 +90,10 @@ ROWS: dict[str, Row] = {
     ),
     "jax-switching": Row("ppo", SWITCHING, "JaxPPO, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"),
     "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
+    "jax-lstm-raw": Row(
+        "recurrent_ppo", {"observation_mode": "raw"}, "JaxRecurrentPPO (LSTM: memory), measurements only", "jax"
+    ),
+    "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
 memory of a fixed window, 0.1 s per frame); ``ROW@N`` is a ``jax-*`` row on ``N`` envs."""

@@ -45,7 +45,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from agents.rl.jax_update import _jax, build
 
-__all__ = ["JaxPPO", "jax_available"]
+__all__ = ["JaxPPO", "JaxTraining", "jax_available"]
 
 
 def jax_available() -> bool:
@@ -79,12 +79,16 @@ class _RolloutPolicy:
 
     def act(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(actions (n, heads), values, log_probs)`` for a batch of normalised observations."""
-        logits = self._mlp(self.pi, obs)
+        actions, log_prob = self.sample(self._mlp(self.pi, obs), rng)
+        return actions, self.value(obs), log_prob
+
+    def sample(self, logits: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """``(actions (n, heads), log_probs)`` drawn from the action logits, each head by its inverse CDF."""
         heads = len(self.bounds) - 1
-        actions = np.empty((obs.shape[0], heads), dtype=np.int32)
-        log_prob = np.zeros(obs.shape[0], dtype=np.float32)
-        uniform = rng.random((obs.shape[0], heads), dtype=np.float32)
-        rows = np.arange(obs.shape[0])
+        actions = np.empty((logits.shape[0], heads), dtype=np.int32)
+        log_prob = np.zeros(logits.shape[0], dtype=np.float32)
+        uniform = rng.random((logits.shape[0], heads), dtype=np.float32)
+        rows = np.arange(logits.shape[0])
         for head in range(heads):
             block = logits[:, self.bounds[head] : self.bounds[head + 1]]
             shifted = block - block.max(axis=1, keepdims=True)
@@ -93,21 +97,49 @@ class _RolloutPolicy:
             choice = np.minimum((uniform[:, head : head + 1] > cdf).sum(axis=1), block.shape[1] - 1)
             actions[:, head] = choice
             log_prob += log_p[rows, choice]
-        return actions, self.value(obs), log_prob
+        return actions, log_prob
 
 
-class JaxPPO(PPO):
-    """SB3's PPO with the update compiled by JAX and the rollout policy in NumPy (see the module docstring)."""
+class JaxTraining:
+    """What :class:`JaxPPO` and :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` share over their SB3 class.
+
+    The weights move between the torch policy and JAX, the compiled update
+    (:func:`agents.rl.jax_update.build`), the optimiser state and random streams that ``save``
+    keeps, and ``train``. A subclass gives its rollout (``collect_rollouts``), its rollout policy
+    (:meth:`_rollout_policy`) and what the update reads (:meth:`_update_inputs`).
+    """
 
     framework = "jax"
     """What ``agent.json`` records (:func:`agents.rl.bundle.load_model` loads this class again)."""
+
+    # Given by the SB3 class the mixin sits on.
+    policy: Any
+    action_space: spaces.Space[Any]
+    n_envs: int
+    n_steps: int
+    batch_size: Any
+    n_epochs: int
+    max_grad_norm: float
+    ent_coef: float
+    vf_coef: float
+    normalize_advantage: bool
+    use_sde: bool
+    target_kl: float | None
+    clip_range_vf: Any
+    seed: int | None
+    logger: Any
+    lr_schedule: Any
+    clip_range: Any
+    rollout_buffer: Any
+    _current_progress_remaining: float
+    _n_updates: int
 
     _jax: dict[str, Any] | None = None
 
     def _excluded_save_params(self) -> list[str]:
         """The compiled functions and the working state are rebuilt on use, never saved (``jax_saved_state`` is)."""
         return [
-            *super()._excluded_save_params(),
+            *super()._excluded_save_params(),  # type: ignore[misc]
             "_jax",
             "_params",
             "_opt_state",
@@ -126,7 +158,7 @@ class JaxPPO(PPO):
         threads = torch.get_num_threads()
         torch.set_num_threads(1)
         try:
-            super()._setup_model()
+            super()._setup_model()  # type: ignore[misc]
         finally:
             torch.set_num_threads(threads)
 
@@ -160,17 +192,40 @@ class JaxPPO(PPO):
 
     def _check_supported(self) -> None:
         if not isinstance(self.action_space, (spaces.Discrete, spaces.MultiDiscrete)):
-            raise ValueError(f"JaxPPO needs a Discrete or MultiDiscrete action space, got {self.action_space}")
+            raise ValueError(
+                f"{type(self).__name__} needs a Discrete or MultiDiscrete action space, got {self.action_space}"
+            )
         activation = self.policy.activation_fn  # type: ignore[union-attr]
         if activation not in (torch.nn.Tanh, torch.nn.ReLU):
-            raise ValueError(f"JaxPPO needs a Tanh or ReLU activation, got {activation.__name__}")
+            raise ValueError(f"{type(self).__name__} needs a Tanh or ReLU activation, got {activation.__name__}")
         if self.use_sde or self.target_kl is not None or self.clip_range_vf is not None:
-            raise ValueError("JaxPPO supports neither use_sde, target_kl nor clip_range_vf")
+            raise ValueError(f"{type(self).__name__} supports neither use_sde, target_kl nor clip_range_vf")
         samples = self.n_envs * self.n_steps
         if samples > self.batch_size and samples % self.batch_size:
             raise ValueError(
-                f"JaxPPO: n_envs * n_steps ({samples}) must be a multiple of batch_size ({self.batch_size})"
+                f"{type(self).__name__}: n_envs * n_steps ({samples}) must be a multiple of "
+                f"batch_size ({self.batch_size})"
             )
+
+    def _build_options(self) -> dict[str, Any]:
+        """Options of :func:`agents.rl.jax_update.build` beyond PPO's own (none for the MLP)."""
+        return {}
+
+    def _rollout_policy(self, params: dict[str, Any]) -> Any:
+        """The rollout's NumPy policy over ``params``."""
+        compiled = self._compiled()
+        return _RolloutPolicy(params, compiled["nvec"], compiled["relu"])
+
+    def _update_inputs(self) -> tuple[np.ndarray, ...]:
+        """The rollout columns the compiled update reads: one row per sample."""
+        buffer = self.rollout_buffer
+        return (
+            buffer.observations.reshape(-1, *buffer.observations.shape[2:]),
+            buffer.actions.reshape(-1, buffer.actions.shape[-1]).astype(np.int32),
+            buffer.log_probs.reshape(-1),
+            buffer.advantages.reshape(-1),
+            buffer.returns.reshape(-1),
+        )
 
     def _compiled(self) -> dict[str, Any]:
         """The compiled update and what goes with it (:func:`agents.rl.jax_update.build`), built on first use."""
@@ -193,6 +248,7 @@ class JaxPPO(PPO):
                 ent_coef=self.ent_coef,
                 vf_coef=self.vf_coef,
                 normalize_advantage=self.normalize_advantage,
+                **self._build_options(),
             )
         return self._jax
 
@@ -204,7 +260,7 @@ class JaxPPO(PPO):
         saved = getattr(self, "jax_saved_state", None)
         seed = int(self.seed or 0) % (2**31)
         self._rng = np.random.Generator(np.random.PCG64(seed))
-        if saved is None:
+        if saved is None or "opt" not in saved:  # fresh: no optimiser state saved
             opt_state = compiled["init"](params)
             key = jax.random.PRNGKey(seed)
         else:
@@ -216,22 +272,47 @@ class JaxPPO(PPO):
     def _keep_state(self, params: Any, opt_state: Any, key: Any) -> None:
         """Hold the state for the next call and for ``save`` (as NumPy: a zip loads without JAX)."""
         jax, _, _ = _jax()
-        compiled = self._compiled()
         self._params, self._opt_state, self._key = params, opt_state, key
-        self._policy = _RolloutPolicy(params, compiled["nvec"], compiled["relu"])
+        self._policy = self._rollout_policy(params)
         self.jax_saved_state = {
+            **(getattr(self, "jax_saved_state", None) or {}),
             "opt": [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(opt_state)],
             "key": np.asarray(key),
             "rollout_rng": self._rng.bit_generator.state,
         }
 
-    # --- SB3's two methods, replaced ------------------------------------------------
-
     def _setup_learn(self, *args: Any, **kwargs: Any) -> Any:
         """SB3's set-up, then the JAX state from the torch weights (a load or ``set_parameters`` included)."""
-        result = super()._setup_learn(*args, **kwargs)
+        result = super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
         self._keep_state(*self._jax_state())
         return result
+
+    def train(self) -> None:
+        """One PPO update: every epoch and minibatch in one compiled call, then the torch weights."""
+        compiled = self._compiled()
+        self._update_learning_rate(self.policy.optimizer)  # type: ignore[attr-defined]
+        learning_rate = float(self.lr_schedule(self._current_progress_remaining))
+        clip_range = float(self.clip_range(self._current_progress_remaining))
+        buffer = self.rollout_buffer
+        params, opt_state, key, stats = compiled["update"](
+            self._params, self._opt_state, self._key, *self._update_inputs(), learning_rate, clip_range
+        )
+        self._params_to_torch(params)
+        self._keep_state(params, opt_state, key)
+        self._n_updates += self.n_epochs
+        stats = {name: float(value) for name, value in stats.items()}
+        for name in ("entropy_loss", "policy_gradient_loss", "value_loss", "approx_kl", "clip_fraction", "loss"):
+            self.logger.record(f"train/{name}", stats[name])
+        explained = explained_variance(buffer.values.ravel(), buffer.returns.ravel())
+        self.logger.record("train/explained_variance", float(explained))
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/clip_range", clip_range)
+
+
+class JaxPPO(JaxTraining, PPO):
+    """SB3's PPO with the update compiled by JAX and the rollout policy in NumPy (see the module docstring)."""
+
+    # --- SB3's two methods, replaced (``train``: :class:`JaxTraining`) ------------------
 
     def collect_rollouts(
         self,
@@ -281,31 +362,3 @@ class JaxPPO(PPO):
             return
         final = np.stack([infos[i]["terminal_observation"] for i in cut]).astype(np.float32)
         rewards[cut] += self.gamma * policy.value(final)
-
-    def train(self) -> None:
-        """One PPO update: every epoch and minibatch in one compiled call, then the torch weights."""
-        compiled = self._compiled()
-        self._update_learning_rate(self.policy.optimizer)  # type: ignore[union-attr]
-        learning_rate = float(self.lr_schedule(self._current_progress_remaining))
-        clip_range = float(self.clip_range(self._current_progress_remaining))  # type: ignore[operator]
-        buffer = self.rollout_buffer
-        flat = (
-            buffer.observations.reshape(-1, *buffer.observations.shape[2:]),
-            buffer.actions.reshape(-1, buffer.actions.shape[-1]).astype(np.int32),
-            buffer.log_probs.reshape(-1),
-            buffer.advantages.reshape(-1),
-            buffer.returns.reshape(-1),
-        )
-        params, opt_state, key, stats = compiled["update"](
-            self._params, self._opt_state, self._key, *flat, learning_rate, clip_range
-        )
-        self._params_to_torch(params)
-        self._keep_state(params, opt_state, key)
-        self._n_updates += self.n_epochs
-        stats = {name: float(value) for name, value in stats.items()}
-        for name in ("entropy_loss", "policy_gradient_loss", "value_loss", "approx_kl", "clip_fraction", "loss"):
-            self.logger.record(f"train/{name}", stats[name])
-        explained = explained_variance(buffer.values.ravel(), buffer.returns.ravel())
-        self.logger.record("train/explained_variance", float(explained))
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self.logger.record("train/clip_range", clip_range)

@@ -13,6 +13,18 @@ the activation between layers. The update is SB3's ``PPO.train`` written as form
 
 for ``n_epochs`` passes, each over a fresh random permutation of the rollout cut into
 minibatches of ``batch_size``.
+
+With ``lstm=True`` (:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`) the networks are
+sb3-contrib's ``MlpLstmPolicy``: an LSTM for the policy and another for the value, each
+followed by its MLP. A torch ``nn.LSTM`` step, gates in torch's order ``i, f, g, o``::
+
+    (i, f, g, o) = x W_ih^T + b_ih + h W_hh^T + b_hh
+    c'           = sigmoid(f) c + sigmoid(i) tanh(g)
+    h'           = sigmoid(o) tanh(c')
+
+with ``(h, c)`` zeroed where an episode starts. A minibatch is whole env rollouts
+(``batch_size / n_steps`` envs of ``n_steps`` steps), run through the LSTMs from the states
+they had when the rollout began; the loss is the one above over its samples.
 """
 
 from __future__ import annotations
@@ -48,13 +60,17 @@ def build(
     ent_coef: float,
     vf_coef: float,
     normalize_advantage: bool,
+    lstm: bool = False,
+    n_steps: int = 0,
 ) -> dict[str, Any]:
     """The jitted functions for a policy over ``len(nvec)`` categorical action dimensions.
 
     Returns:
         ``{"update", "init", "unflatten_opt", "nvec", "relu"}``: ``update(params, opt_state, key,
         obs, actions, old_log_probs, advantages, returns, learning_rate, clip_range) -> (params,
-        opt_state, key, stats)``;
+        opt_state, key, stats)``; with ``lstm=True`` the rollout columns are ``(n_steps, n_envs,
+        ...)`` and ``episode_starts`` and the four ``(n_envs, hidden)`` LSTM states the rollout
+        began with (policy ``h, c``, value ``h, c``) follow ``returns``;
         ``init(params)`` the optimiser state; ``unflatten_opt(params, leaves)`` it from saved leaves.
     """
     jax, jnp, optax = _jax()
@@ -68,16 +84,44 @@ def build(
         weight, bias = layers[-1]
         return x @ weight + bias
 
-    def log_softmaxes(params: Any, obs: Any) -> list[Any]:
-        logits = mlp(params["pi"], obs)
+    def log_softmaxes(logits: Any) -> list[Any]:
         return [jax.nn.log_softmax(logits[:, lo:hi]) for lo, hi in itertools.pairwise(bounds)]
 
-    def value(params: Any, obs: Any) -> Any:
-        return mlp(params["vf"], obs)[:, 0]
+    def forward(params: Any, batch: tuple[Any, ...]) -> tuple[Any, Any, tuple[Any, ...]]:
+        """``(logits, values, (actions, old_log_prob, advantages, returns))`` of a minibatch, one row per sample."""
+        if not lstm:
+            obs, *rest = batch
+            return mlp(params["pi"], obs), mlp(params["vf"], obs)[:, 0], tuple(rest)
+        obs, actions, old_log_prob, advantages, returns, starts, *state = batch
+        latent_pi, latent_vf = sequences((params["lstm_pi"], params["lstm_vf"]), obs, starts, state)
+        flat = (actions, old_log_prob, advantages, returns)
+        rows = latent_pi.shape[0] * latent_pi.shape[1]
+        flat = tuple(column.reshape(rows, *column.shape[2:]) for column in flat)
+        values = mlp(params["vf"], latent_vf.reshape(rows, -1))[:, 0]
+        return mlp(params["pi"], latent_pi.reshape(rows, -1)), values, flat
+
+    def cell(weights: Any, x: Any, h: Any, c: Any) -> tuple[Any, Any]:
+        """One LSTM step (torch's gate order)."""
+        w_ih, w_hh, b_ih, b_hh = weights
+        i, f, g, o = jnp.split(x @ w_ih.T + b_ih + h @ w_hh.T + b_hh, 4, axis=1)
+        c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
+        return jax.nn.sigmoid(o) * jnp.tanh(c), c
+
+    def sequences(weights: tuple[Any, Any], obs: Any, starts: Any, state: list[Any]) -> tuple[Any, Any]:
+        """Both LSTMs' outputs (T, E, hidden) over (T, E, features) from ``state``, zeroed where an episode starts."""
+
+        def step(carry: Any, inputs: Any) -> Any:
+            x, start = inputs
+            keep = (1.0 - start)[:, None]
+            h_pi, c_pi = cell(weights[0], x, carry[0] * keep, carry[1] * keep)
+            h_vf, c_vf = cell(weights[1], x, carry[2] * keep, carry[3] * keep)
+            return (h_pi, c_pi, h_vf, c_vf), (h_pi, h_vf)
+
+        return jax.lax.scan(step, tuple(state), (obs, starts))[1]
 
     def loss(params: Any, batch: tuple[Any, ...], clip_range: Any) -> tuple[Any, dict[str, Any]]:
-        obs, actions, old_log_prob, advantages, returns = batch
-        heads = log_softmaxes(params, obs)
+        logits, values, (actions, old_log_prob, advantages, returns) = forward(params, batch)
+        heads = log_softmaxes(logits)
         log_prob = sum(jnp.take_along_axis(h, actions[:, i : i + 1], 1)[:, 0] for i, h in enumerate(heads))
         entropy = sum(-(jnp.exp(h) * h).sum(axis=1) for h in heads)
         if normalize_advantage:
@@ -87,7 +131,7 @@ def build(
         policy_loss = -jnp.minimum(
             advantages * ratio, advantages * jnp.clip(ratio, 1 - clip_range, 1 + clip_range)
         ).mean()
-        value_loss = ((returns - value(params, obs)) ** 2).mean()
+        value_loss = ((returns - values) ** 2).mean()
         entropy_loss = -entropy.mean()
         total = policy_loss + ent_coef * entropy_loss + vf_coef * value_loss
         stats = {
@@ -104,6 +148,8 @@ def build(
         lambda learning_rate: optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate, eps=1e-5))
     )(learning_rate=3e-4)
     minibatches = samples // batch_size
+    # What a minibatch draws from: samples; with an LSTM, whole env rollouts.
+    units, per_minibatch = (samples, batch_size) if not lstm else (samples // n_steps, batch_size // n_steps)
 
     def update(params: Any, opt_state: Any, key: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any, Any]:
         *rollout, learning_rate, clip_range = rollout_and_rates
@@ -112,13 +158,16 @@ def build(
 
         def minibatch(carry: Any, index: Any) -> Any:
             params, opt_state = carry
-            batch = tuple(column[index] for column in rollout)
+            if lstm:  # six (T, N, ...) columns, then the four (N, hidden) starting states
+                batch = tuple(column[:, index] for column in rollout[:6]) + tuple(s[index] for s in rollout[6:])
+            else:
+                batch = tuple(column[index] for column in rollout)
             (_, stats), grads = grad(params, batch, clip_range)
             updates, opt_state = optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), stats
 
         def epoch(carry: Any, epoch_key: Any) -> Any:
-            order = jax.random.permutation(epoch_key, samples).reshape(minibatches, batch_size)
+            order = jax.random.permutation(epoch_key, units).reshape(minibatches, per_minibatch)
             return jax.lax.scan(minibatch, carry, order)
 
         key, sub = jax.random.split(key)

@@ -39,17 +39,22 @@ __all__ = [
 def algorithm_class(algo: str, framework: str = "sb3") -> type[BaseAlgorithm]:
     """The class of an algorithm name (:data:`agents.trainer.hyperparams.ALGORITHMS`) in a ``framework``.
 
-    ``framework="jax"`` is :class:`agents.rl.jax_ppo.JaxPPO` (PPO only); it loads and plays
-    without JAX, which only its training needs.
+    ``framework="jax"`` is :class:`agents.rl.jax_ppo.JaxPPO` or
+    :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO and RecurrentPPO); they load and
+    play without JAX, which only their training needs.
     """
     if framework == "jax" and algo == "ppo":
         from agents.rl.jax_ppo import JaxPPO
 
         return JaxPPO
+    if framework == "jax" and algo == "recurrent_ppo":
+        from agents.rl.jax_recurrent import JaxRecurrentPPO
+
+        return JaxRecurrentPPO
     if framework not in ("sb3", "jax"):
         raise ValueError(f"unknown framework {framework!r}; known: sb3, jax")
     if framework == "jax":
-        raise ValueError(f"framework 'jax' trains ppo only, not {algo!r}")
+        raise ValueError(f"framework 'jax' trains ppo and recurrent_ppo only, not {algo!r}")
     if algo == "ppo":
         return PPO
     if algo == "dqn":

@@ -30,6 +30,7 @@ __all__ = [
     "DEFAULT_ENV_IDS",
     "FRAMEWORKS",
     "HYPERPARAMS",
+    "JAX_ALGORITHMS",
     "JAX_SIZING",
     "ZOO_ALGO_NAMES",
     "TrainingConfig",
@@ -42,7 +43,11 @@ ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo", "dqn")
 """Algorithms ``train.py`` offers: SB3 PPO, sb3-contrib RecurrentPPO, SB3 DQN."""
 
 FRAMEWORKS: tuple[str, ...] = ("sb3", "jax")
-"""Learners that train in this process: SB3 itself, or :class:`agents.rl.jax_ppo.JaxPPO` (PPO only)."""
+"""Learners that train in this process: SB3 itself, or JAX (:class:`agents.rl.jax_ppo.JaxPPO`,
+:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`: PPO and RecurrentPPO)."""
+
+JAX_ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo")
+"""Algorithms ``framework="jax"`` trains."""
 
 DEFAULT_ENV_IDS: dict[str, str] = {
     # The hard level: where reading the mind decides the outcome (coop_gym/model/difficulty.py).
@@ -74,8 +79,9 @@ class TrainingConfig:
             wider person-to-person variation); the held-out ``"test"`` set is never trained on.
         algo_kwargs: Keyword arguments of the SB3 algorithm's constructor.
         policy_kwargs: The policy's ``policy_kwargs`` (network sizes).
-        framework: ``"sb3"`` (SB3's own class) or ``"jax"`` (:class:`agents.rl.jax_ppo.JaxPPO`,
-            the same PPO with its rollout policy and update compiled by JAX; ``ppo`` only).
+        framework: ``"sb3"`` (SB3's own class) or ``"jax"`` (:class:`agents.rl.jax_ppo.JaxPPO` /
+            :class:`agents.rl.jax_recurrent.JaxRecurrentPPO`, the same algorithm with its rollout
+            policy and update compiled by JAX; ``ppo`` and ``recurrent_ppo``).
     """
 
     algo: str
@@ -93,9 +99,9 @@ class TrainingConfig:
         """Validate ranges."""
         if self.algo not in ALGORITHMS:
             raise ValueError(f"TrainingConfig.algo must be one of {list(ALGORITHMS)}, got {self.algo!r}")
-        if self.framework not in FRAMEWORKS or (self.framework == "jax" and self.algo != "ppo"):
+        if self.framework not in FRAMEWORKS or (self.framework == "jax" and self.algo not in JAX_ALGORITHMS):
             raise ValueError(
-                f"TrainingConfig.framework must be one of {list(FRAMEWORKS)} ('jax' for ppo only), "
+                f"TrainingConfig.framework must be one of {list(FRAMEWORKS)} ('jax' for {', '.join(JAX_ALGORITHMS)}), "
                 f"got {self.framework!r} for {self.algo!r}"
             )
         check_integer("TrainingConfig.n_envs", self.n_envs, 1, SEED_LIMIT)  # envs seeded seed .. seed + n_envs - 1
@@ -147,6 +153,15 @@ _PPO = TrainingConfig(
 """PPO's settings (tuned on the ``-v0`` ids)."""
 
 
+_HARD_IDS = ("CoopGym/SitToStandHard-v1", "CoopGym/SitToStandHard-v2")
+_PPO_HARD = _PPO.replace(
+    env_id=HARD_ENV_ID,
+    total_timesteps=1_000_000,
+    personas="train_wide",
+    algo_kwargs={**_PPO.algo_kwargs, "ent_coef": 0.02},
+)
+"""PPO's settings on the hard level (see the comment in :data:`HYPERPARAMS`)."""
+
 HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
     "ppo": {
         # Sized for time to quality (python bench/time_to_quality.py): the same
@@ -165,15 +180,7 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
         # early on, settle on never lifting (a timeout costs less than a failed lift) and never
         # learn to read the person; chosen on the training personas' validation episodes
         # (python bench/learners.py --rows ppo-kalman; bench/results/learners.json).
-        **{
-            env_id: _PPO.replace(
-                env_id=env_id,
-                total_timesteps=1_000_000,
-                personas="train_wide",
-                algo_kwargs={**_PPO.algo_kwargs, "ent_coef": 0.02},
-            )
-            for env_id in ("CoopGym/SitToStandHard-v1", "CoopGym/SitToStandHard-v2")
-        },
+        **{env_id: _PPO_HARD.replace(env_id=env_id) for env_id in _HARD_IDS},
     },
     "recurrent_ppo": {
         "CoopGym/SitToStandRaw-v0": TrainingConfig(
@@ -197,6 +204,17 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
             },
             policy_kwargs={"lstm_hidden_size": 64, "net_arch": [64]},
         ),
+        # The hard level: PPO's hard-level settings, an LSTM of 64 before the heads of 64: the
+        # memory rows of python bench/learners.py differ from the MLP rows in the network alone.
+        **{
+            env_id: _PPO_HARD.replace(
+                algo="recurrent_ppo",
+                env_id=env_id,
+                policy="MlpLstmPolicy",
+                policy_kwargs={"lstm_hidden_size": 64, "net_arch": [64]},
+            )
+            for env_id in _HARD_IDS
+        },
     },
     "dqn": {
         "CoopGym/SitToStandDiscrete-v0": TrainingConfig(

@@ -98,8 +98,10 @@ def learner_framework(args: Any) -> str:
 
 
 def settings_framework(args: Any, algo: str) -> str:
-    """Whose settings (``hyperparams_for``) a run of ``algo`` takes: ``jax`` for JaxPPO, else SB3's (RLlib's too)."""
-    return "jax" if learner_framework(args) == "jax" and algo == "ppo" else "sb3"
+    """Whose settings (``hyperparams_for``) a run of ``algo`` takes: ``jax`` for a JAX learner, else SB3's."""
+    from agents.trainer.hyperparams import JAX_ALGORITHMS
+
+    return "jax" if learner_framework(args) == "jax" and algo in JAX_ALGORITHMS else "sb3"
 
 
 # --- the checks -------------------------------------------------------------------
@@ -195,8 +197,11 @@ def _problem_with_framework(args: Any) -> str | None:
         return "--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0"
     if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
         return '--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"'
-    if args.framework == "jax" and args.algo != "ppo" and not args.eval_only:  # asked for by name
-        return f"--framework jax trains ppo only, not --algo {args.algo}; use --framework sb3"
+    from agents.trainer.hyperparams import JAX_ALGORITHMS
+
+    if args.framework == "jax" and args.algo not in JAX_ALGORITHMS and not args.eval_only:  # asked for by name
+        trains = " and ".join(JAX_ALGORITHMS)
+        return f"--framework jax trains {trains} only, not --algo {args.algo}; use --framework sb3"
     if (
         learner_framework(args) == "jax"
         and not args.eval_only

@@ -140,7 +140,7 @@ def test_a_seed_trains_the_same_weights_in_fresh_processes_whatever_the_torch_th
 
 
 def test_what_it_cannot_train_is_named():
-    with pytest.raises(ValueError, match="ppo only"):
+    with pytest.raises(ValueError, match="'jax' for ppo, recurrent_ppo"):
         hyperparams_for("dqn", None, "jax")
     config = hyperparams_for("ppo", ENV_ID, "jax")
     env = make_train_env(ENV_ID, 4, 0)

@@ -1,0 +1,214 @@
+r"""Recurrent PPO (an LSTM policy) with its update compiled by JAX: sb3-contrib's RecurrentPPO, faster.
+
+:class:`JaxRecurrentPPO` is sb3-contrib's :class:`~sb3_contrib.RecurrentPPO` with the rollout
+and the update replaced, as :class:`agents.rl.jax_ppo.JaxPPO` is SB3's PPO: the networks are
+sb3-contrib's ``MlpLstmPolicy`` (an LSTM for the policy and one for the value, each followed by
+its MLP), the loss and optimiser SB3's PPO's. The rollout steps both LSTMs in NumPy, their
+state zeroed where an episode starts, and bootstraps a time-limit end from the value LSTM's
+state, as sb3-contrib's rollout does. The update (:func:`agents.rl.jax_update.build` with
+``lstm=True``) cuts the rollout into minibatches of whole env rollouts (``batch_size /
+n_steps`` envs each; CleanRL's ``ppo_atari_lstm`` scheme), each run through the LSTMs from
+the states they had when the rollout began -- sb3-contrib instead cuts padded sequences at
+episode starts, so the two make different minibatches of the same rollout. A saved
+``JaxRecurrentPPO`` is a RecurrentPPO ``model.zip``: it loads, plays and is scored without JAX.
+
+Only ``MlpLstmPolicy`` with one LSTM layer each for the policy and the value
+(``enable_critic_lstm=True``, ``shared_lstm=False``, the default); ``batch_size`` a multiple
+of ``n_steps`` that divides ``n_envs * n_steps``.
+
+Example:
+    >>> from agents.rl import make_train_env
+    >>> env = make_train_env("CoopGym/SitToStandRaw-v0", n_envs=4, seed=0)
+    >>> model = JaxRecurrentPPO("MlpLstmPolicy", env, n_steps=16, batch_size=32, seed=0, device="cpu")
+    >>> model = model.learn(128)
+    >>> model.num_timesteps
+    128
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from sb3_contrib import RecurrentPPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.torch_layers import FlattenExtractor
+from stable_baselines3.common.vec_env import VecEnv
+
+from agents.rl.jax_ppo import JaxTraining, _RolloutPolicy
+from agents.rl.jax_update import _jax
+
+__all__ = ["JaxRecurrentPPO"]
+
+_LSTMS = ("lstm_pi", "lstm_vf")
+_LSTM_WEIGHTS = ("weight_ih", "weight_hh", "bias_ih", "bias_hh")
+"""A torch ``nn.LSTM``'s parameters of its one layer (``<name>_l0``), in the order JAX holds them."""
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-x))
+
+
+class _LstmRolloutPolicy(_RolloutPolicy):
+    """The recurrent policy's step in NumPy: each LSTM, then its MLP (formulas: :mod:`agents.rl.jax_update`)."""
+
+    def __init__(self, params: dict[str, Any], nvec: list[int], relu: bool) -> None:
+        super().__init__(params, nvec, relu)
+        # (W_ih^T, W_hh^T, b_ih + b_hh) of each LSTM
+        self.lstm = {
+            name: (
+                np.asarray(params[name][0], dtype=np.float32).T.copy(),
+                np.asarray(params[name][1], dtype=np.float32).T.copy(),
+                np.asarray(params[name][2], dtype=np.float32) + np.asarray(params[name][3], dtype=np.float32),
+            )
+            for name in _LSTMS
+        }
+
+    def _step(self, name: str, obs: np.ndarray, h: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        w_ih, w_hh, bias = self.lstm[name]
+        i, f, g, o = np.split(obs @ w_ih + h @ w_hh + bias, 4, axis=1)
+        c = _sigmoid(f) * c + _sigmoid(i) * np.tanh(g)
+        return _sigmoid(o) * np.tanh(c), c
+
+    def act_recurrent(
+        self, obs: np.ndarray, starts: np.ndarray, state: tuple[np.ndarray, ...], rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+        """``(actions, values, log_probs, state)``: one step of both LSTMs from ``state`` (zeroed where ``starts``)."""
+        keep = (1.0 - starts)[:, None].astype(np.float32)
+        h_pi, c_pi = self._step("lstm_pi", obs, state[0] * keep, state[1] * keep)
+        h_vf, c_vf = self._step("lstm_vf", obs, state[2] * keep, state[3] * keep)
+        actions, log_prob = self.sample(self._mlp(self.pi, h_pi), rng)
+        return actions, self._mlp(self.vf, h_vf)[:, 0], log_prob, (h_pi, c_pi, h_vf, c_vf)
+
+    def value_recurrent(self, obs: np.ndarray, starts: np.ndarray, h_vf: np.ndarray, c_vf: np.ndarray) -> np.ndarray:
+        """The value of ``obs`` after the value LSTM's state ``(h_vf, c_vf)`` (zeroed where ``starts``)."""
+        keep = (1.0 - starts)[:, None].astype(np.float32)
+        h, _ = self._step("lstm_vf", obs, h_vf * keep, c_vf * keep)
+        return self._mlp(self.vf, h)[:, 0]
+
+
+class JaxRecurrentPPO(JaxTraining, RecurrentPPO):
+    """sb3-contrib's RecurrentPPO, its update compiled by JAX and its rollout in NumPy (see the module docstring)."""
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "_lstm_state", "_rollout_start"]
+
+    def _lstm_modules(self) -> dict[str, torch.nn.LSTM]:
+        return {"lstm_pi": self.policy.lstm_actor, "lstm_vf": self.policy.lstm_critic}
+
+    def _params_from_torch(self) -> dict[str, Any]:
+        """:class:`JaxTraining`'s MLP weights, and each LSTM's ``(W_ih, W_hh, b_ih, b_hh)`` as torch holds them."""
+        _, jnp, _ = _jax()
+        params: dict[str, Any] = super()._params_from_torch()
+        for name, lstm in self._lstm_modules().items():
+            params[name] = tuple(jnp.asarray(getattr(lstm, f"{w}_l0").detach().numpy()) for w in _LSTM_WEIGHTS)
+        return params
+
+    def _params_to_torch(self, params: dict[str, Any]) -> None:
+        super()._params_to_torch(params)
+        with torch.no_grad():
+            for name, lstm in self._lstm_modules().items():
+                for w, value in zip(_LSTM_WEIGHTS, params[name], strict=True):
+                    getattr(lstm, f"{w}_l0").copy_(torch.from_numpy(np.array(value)))
+
+    def _check_supported(self) -> None:
+        super()._check_supported()
+        policy = self.policy
+        if policy.lstm_critic is None or policy.shared_lstm or policy.lstm_actor.num_layers != 1:
+            raise ValueError("JaxRecurrentPPO needs one LSTM layer each for the policy and the value (the default)")
+        if not isinstance(policy.features_extractor, FlattenExtractor):
+            raise ValueError("JaxRecurrentPPO needs the default FlattenExtractor")
+        if self.batch_size % self.n_steps or (self.n_envs * self.n_steps) % self.batch_size:
+            raise ValueError(
+                f"JaxRecurrentPPO: batch_size ({self.batch_size}) must be a multiple of n_steps ({self.n_steps}) "
+                f"dividing n_envs * n_steps ({self.n_envs * self.n_steps}): minibatches are whole env rollouts"
+            )
+
+    def _build_options(self) -> dict[str, Any]:
+        return {"lstm": True, "n_steps": self.n_steps}
+
+    def _rollout_policy(self, params: dict[str, Any]) -> _LstmRolloutPolicy:
+        compiled = self._compiled()
+        return _LstmRolloutPolicy(params, compiled["nvec"], compiled["relu"])
+
+    def _update_inputs(self) -> tuple[np.ndarray, ...]:
+        """The (T, N, ...) rollout, its episode starts, and the LSTM states the rollout began with."""
+        buffer = self.rollout_buffer
+        return (
+            buffer.observations,
+            buffer.actions.astype(np.int32),
+            buffer.log_probs,
+            buffer.advantages,
+            buffer.returns,
+            buffer.episode_starts.astype(np.float32),
+            *self._rollout_start,
+        )
+
+    def _jax_state(self) -> tuple[Any, Any, Any]:
+        """:class:`JaxTraining`'s state, and the LSTM states the envs are in (zeros, or saved with the model)."""
+        found = super()._jax_state()
+        saved = getattr(self, "jax_saved_state", None) or {}
+        hidden = self.policy.lstm_actor.hidden_size
+        states = saved.get("lstm_state")
+        if states is None or states[0].shape != (self.n_envs, hidden):
+            states = [np.zeros((self.n_envs, hidden), dtype=np.float32) for _ in range(4)]
+        self._lstm_state = tuple(np.asarray(s, dtype=np.float32) for s in states)
+        return found
+
+    def collect_rollouts(
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        rollout_buffer: Any,
+        n_rollout_steps: int,
+    ) -> bool:
+        """sb3-contrib's rollout (callbacks, episode infos, timeout bootstrap, GAE), both LSTMs in NumPy."""
+        assert self._last_obs is not None, "No previous observation was provided"
+        buffer = rollout_buffer
+        buffer.reset()
+        policy = self._policy
+        callback.on_rollout_start()
+        state = self._lstm_state
+        self._rollout_start = state
+        hidden = (buffer.hidden_states_pi, buffer.cell_states_pi, buffer.hidden_states_vf, buffer.cell_states_vf)
+        for step in range(n_rollout_steps):
+            obs = np.asarray(self._last_obs, dtype=np.float32)
+            starts = np.asarray(self._last_episode_starts, dtype=np.float32)
+            for column, value in zip(hidden, state, strict=True):  # the state before the step, as sb3-contrib keeps
+                column[step, 0] = value
+            actions, values, log_probs, state = policy.act_recurrent(obs, starts, state, self._rng)
+            env_actions = actions[:, 0] if isinstance(self.action_space, spaces.Discrete) else actions
+            new_obs, rewards, dones, infos = env.step(env_actions)
+            self.num_timesteps += env.num_envs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return False
+            self._update_info_buffer(infos, dones)
+            rewards = np.asarray(rewards, dtype=np.float32).copy()
+            cut = [
+                i
+                for i in np.flatnonzero(dones).tolist()
+                if infos[i].get("terminal_observation") is not None and infos[i].get("TimeLimit.truncated", False)
+            ]
+            if cut:  # as sb3-contrib: the final observation's value after the value LSTM's state
+                final = np.stack([infos[i]["terminal_observation"] for i in cut]).astype(np.float32)
+                rewards[cut] += self.gamma * policy.value_recurrent(
+                    final, np.zeros(len(cut), dtype=np.float32), state[2][cut], state[3][cut]
+                )
+            buffer.observations[step], buffer.actions[step], buffer.rewards[step] = obs, actions, rewards
+            buffer.episode_starts[step] = starts
+            buffer.values[step], buffer.log_probs[step] = values, log_probs
+            self._last_obs = new_obs  # type: ignore[assignment]
+            self._last_episode_starts = dones
+        self._lstm_state = state
+        self.jax_saved_state = {**self.jax_saved_state, "lstm_state": [np.array(s) for s in state]}
+        buffer.pos, buffer.full = n_rollout_steps, True
+        last_values = policy.value_recurrent(
+            np.asarray(new_obs, dtype=np.float32), np.asarray(dones, dtype=np.float32), state[2], state[3]
+        )
+        buffer.compute_returns_and_advantage(last_values=torch.from_numpy(last_values), dones=dones)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
