@@ -36,7 +36,8 @@ the training wall time.
 
 Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with the kept
 model beside it) as soon as it is done; a rerun with the same ``--runs`` skips what is
-there, so an interrupted sweep loses only the run in progress. ``--save`` writes the report
+there, so an interrupted sweep loses only the run in progress; ``--no-train`` reports the runs
+there and trains none (rows may then have different seeds). ``--save`` writes the report
 to ``bench/results/learners.json`` (``bench/result_files.py``).
 """
 
@@ -212,6 +213,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=positive_int, default=2000, help="held-out episodes per agent")
     parser.add_argument("--validation-episodes", type=positive_int, default=1000, help="per selection score")
     parser.add_argument("--runs", type=Path, default=Path("runs/learners"), help="folder of finished runs")
+    parser.add_argument(
+        "--no-train", action="store_true", help="report the (row, seed) runs already in --runs; train none"
+    )
     add_save_argument(parser, "learners.json")
     args = parser.parse_args(argv)
     from coop_gym.cli import output_path_problem
@@ -232,6 +236,8 @@ def main(argv: list[str] | None = None) -> int:
         runs = []
         for seed in args.seeds:
             path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
+            if not path.exists() and args.no_train:
+                continue
             if not path.exists():
                 run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes)
                 write_json(path, run)
@@ -240,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
                 parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
             runs.append(run)
             print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
+        if not runs:
+            parser.error(f"--no-train: no run of {name} in {args.runs} for --seeds {args.seeds}")
         what = _row(name)[0].what + (f", {name.partition('@')[2]} envs" if "@" in name else "")
         table[name] = {"what": what, **aggregate(runs, blind, oracle), "per_seed": runs}
     for name, row in table.items():

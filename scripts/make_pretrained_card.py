@@ -89,14 +89,19 @@ def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, An
     A card's own training section is a summary too: carding a model again keeps its
     ``defaults`` line (the settings in words), which no training summary writes.
     """
+    from agents.rl.bundle import read_bundle
+
+    framework = read_bundle(args.model)[0].get("framework", "sb3")
+    sizing = " with JAX_SIZING" if framework == "jax" else ""
     section = {
         "command": args.command,
+        "framework": framework,
         "seed": training.get("seed", 0),
         "timesteps": training["timesteps"],
         "n_envs": training.get("n_envs"),
         "personas": training.get("personas"),
         "wall_time_s": round(float(training["wall_time_s"]), 1),
-        "hyperparams": f"agents/trainer/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']",
+        "hyperparams": f"agents/trainer/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']{sizing}",
     }
     if "selected" in training:  # train.py kept the best-validated policy, not the final one
         selected = training["selected"]
