@@ -133,6 +133,11 @@ class JaxTraining:
     rollout_buffer: Any
     _current_progress_remaining: float
     _n_updates: int
+    gamma: float
+    num_timesteps: int
+    _last_obs: Any
+    _last_episode_starts: Any
+    _update_info_buffer: Any
 
     _jax: dict[str, Any] | None = None
 
@@ -287,6 +292,76 @@ class JaxTraining:
         self._keep_state(*self._jax_state())
         return result
 
+    # --- SB3's two methods, replaced -------------------------------------------------
+
+    def collect_rollouts(
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        rollout_buffer: Any,
+        n_rollout_steps: int,
+    ) -> bool:
+        """SB3's rollout (callbacks, episode infos, timeout bootstrap, its buffer and GAE), the policy in NumPy.
+
+        The policy's step is the subclass's :meth:`_act`; :meth:`_final_values` values the final
+        observation of a time-limit end, :meth:`_next_values` the observations after the rollout.
+        """
+        assert self._last_obs is not None, "No previous observation was provided"
+        buffer = rollout_buffer
+        buffer.reset()
+        callback.on_rollout_start()
+        self._rollout_begins()
+        for step in range(n_rollout_steps):
+            obs = np.asarray(self._last_obs, dtype=np.float32)
+            actions, values, log_probs = self._act(obs, buffer, step)
+            env_actions = actions[:, 0] if isinstance(self.action_space, spaces.Discrete) else actions
+            new_obs, rewards, dones, infos = env.step(env_actions)
+            self.num_timesteps += env.num_envs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return False
+            self._update_info_buffer(infos, dones)
+            rewards = np.asarray(rewards, dtype=np.float32).copy()
+            # As SB3: a time-limit end adds gamma * V(final observation) to its reward.
+            cut = [
+                i
+                for i in np.flatnonzero(dones).tolist()
+                if infos[i].get("terminal_observation") is not None and infos[i].get("TimeLimit.truncated", False)
+            ]
+            if cut:
+                final = np.stack([infos[i]["terminal_observation"] for i in cut]).astype(np.float32)
+                rewards[cut] += self.gamma * self._final_values(final, cut)
+            buffer.observations[step], buffer.actions[step], buffer.rewards[step] = obs, actions, rewards
+            buffer.episode_starts[step] = self._last_episode_starts
+            buffer.values[step], buffer.log_probs[step] = values, log_probs
+            self._last_obs = new_obs
+            self._last_episode_starts = dones
+        buffer.pos, buffer.full = n_rollout_steps, True
+        last_values = self._next_values(np.asarray(new_obs, dtype=np.float32), np.asarray(dones))
+        self._rollout_ends()
+        buffer.compute_returns_and_advantage(last_values=torch.from_numpy(last_values), dones=dones)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
+
+    def _act(self, obs: np.ndarray, buffer: Any, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(actions, values, log_probs)`` of the rollout's ``step`` (``buffer``: what it fills)."""
+        raise NotImplementedError
+
+    def _final_values(self, final: np.ndarray, envs: list[int]) -> np.ndarray:
+        """The values of the final observations of envs ``envs``, which just hit their time limit."""
+        raise NotImplementedError
+
+    def _next_values(self, obs: np.ndarray, dones: np.ndarray) -> np.ndarray:
+        """The values of the observations after the rollout (``dones``: each begins an episode)."""
+        raise NotImplementedError
+
+    def _rollout_begins(self) -> None:
+        """Called before a rollout's first step."""
+
+    def _rollout_ends(self) -> None:
+        """Called after a rollout's last step."""
+
     def train(self) -> None:
         """One PPO update: every epoch and minibatch in one compiled call, then the torch weights."""
         compiled = self._compiled()
@@ -312,53 +387,11 @@ class JaxTraining:
 class JaxPPO(JaxTraining, PPO):
     """SB3's PPO with the update compiled by JAX and the rollout policy in NumPy (see the module docstring)."""
 
-    # --- SB3's two methods, replaced (``train``: :class:`JaxTraining`) ------------------
+    def _act(self, obs: np.ndarray, buffer: Any, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._policy.act(obs, self._rng)  # type: ignore[no-any-return]
 
-    def collect_rollouts(
-        self,
-        env: VecEnv,
-        callback: BaseCallback,
-        rollout_buffer: Any,
-        n_rollout_steps: int,
-    ) -> bool:
-        """SB3's rollout (callbacks, episode infos, timeout bootstrap, its buffer and GAE), the policy in NumPy."""
-        assert self._last_obs is not None, "No previous observation was provided"
-        buffer = rollout_buffer
-        buffer.reset()
-        policy = self._policy
-        callback.on_rollout_start()
-        for step in range(n_rollout_steps):
-            obs = np.asarray(self._last_obs, dtype=np.float32)
-            actions, values, log_probs = policy.act(obs, self._rng)
-            env_actions = actions[:, 0] if isinstance(self.action_space, spaces.Discrete) else actions
-            new_obs, rewards, dones, infos = env.step(env_actions)
-            self.num_timesteps += env.num_envs
-            callback.update_locals(locals())
-            if not callback.on_step():
-                return False
-            self._update_info_buffer(infos, dones)
-            rewards = np.asarray(rewards, dtype=np.float32).copy()
-            self._bootstrap_timeouts(policy, rewards, dones, infos)
-            buffer.observations[step], buffer.actions[step], buffer.rewards[step] = obs, actions, rewards
-            buffer.episode_starts[step] = self._last_episode_starts
-            buffer.values[step], buffer.log_probs[step] = values, log_probs
-            self._last_obs = new_obs  # type: ignore[assignment]
-            self._last_episode_starts = dones
-        buffer.pos, buffer.full = n_rollout_steps, True
-        last_values = policy.value(np.asarray(new_obs, dtype=np.float32))
-        buffer.compute_returns_and_advantage(last_values=torch.from_numpy(last_values), dones=dones)
-        callback.update_locals(locals())
-        callback.on_rollout_end()
-        return True
+    def _final_values(self, final: np.ndarray, envs: list[int]) -> np.ndarray:
+        return self._policy.value(final)  # type: ignore[no-any-return]
 
-    def _bootstrap_timeouts(self, policy: _RolloutPolicy, rewards: Any, dones: Any, infos: Any) -> None:
-        """As SB3: a time-limit end adds ``gamma * V(final observation)`` to its reward."""
-        cut = [
-            i
-            for i in np.flatnonzero(dones).tolist()
-            if infos[i].get("terminal_observation") is not None and infos[i].get("TimeLimit.truncated", False)
-        ]
-        if not cut:
-            return
-        final = np.stack([infos[i]["terminal_observation"] for i in cut]).astype(np.float32)
-        rewards[cut] += self.gamma * policy.value(final)
+    def _next_values(self, obs: np.ndarray, dones: np.ndarray) -> np.ndarray:
+        return self._policy.value(obs)  # type: ignore[no-any-return]

@@ -31,11 +31,8 @@ from typing import Any
 
 import numpy as np
 import torch
-from gymnasium import spaces
 from sb3_contrib import RecurrentPPO
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.torch_layers import FlattenExtractor
-from stable_baselines3.common.vec_env import VecEnv
 
 from agents.rl.jax_ppo import JaxTraining, _RolloutPolicy
 from agents.rl.jax_update import _jax
@@ -157,58 +154,28 @@ class JaxRecurrentPPO(JaxTraining, RecurrentPPO):
         self._lstm_state = tuple(np.asarray(s, dtype=np.float32) for s in states)
         return found
 
-    def collect_rollouts(
-        self,
-        env: VecEnv,
-        callback: BaseCallback,
-        rollout_buffer: Any,
-        n_rollout_steps: int,
-    ) -> bool:
-        """sb3-contrib's rollout (callbacks, episode infos, timeout bootstrap, GAE), both LSTMs in NumPy."""
-        assert self._last_obs is not None, "No previous observation was provided"
-        buffer = rollout_buffer
-        buffer.reset()
-        policy = self._policy
-        callback.on_rollout_start()
-        state = self._lstm_state
-        self._rollout_start = state
+    def _rollout_begins(self) -> None:
+        self._rollout_start = self._lstm_state
+
+    def _act(self, obs: np.ndarray, buffer: Any, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Both LSTMs' step from the envs' states (kept in ``buffer`` before the step, as sb3-contrib keeps them)."""
         hidden = (buffer.hidden_states_pi, buffer.cell_states_pi, buffer.hidden_states_vf, buffer.cell_states_vf)
-        for step in range(n_rollout_steps):
-            obs = np.asarray(self._last_obs, dtype=np.float32)
-            starts = np.asarray(self._last_episode_starts, dtype=np.float32)
-            for column, value in zip(hidden, state, strict=True):  # the state before the step, as sb3-contrib keeps
-                column[step, 0] = value
-            actions, values, log_probs, state = policy.act_recurrent(obs, starts, state, self._rng)
-            env_actions = actions[:, 0] if isinstance(self.action_space, spaces.Discrete) else actions
-            new_obs, rewards, dones, infos = env.step(env_actions)
-            self.num_timesteps += env.num_envs
-            callback.update_locals(locals())
-            if not callback.on_step():
-                return False
-            self._update_info_buffer(infos, dones)
-            rewards = np.asarray(rewards, dtype=np.float32).copy()
-            cut = [
-                i
-                for i in np.flatnonzero(dones).tolist()
-                if infos[i].get("terminal_observation") is not None and infos[i].get("TimeLimit.truncated", False)
-            ]
-            if cut:  # as sb3-contrib: the final observation's value after the value LSTM's state
-                final = np.stack([infos[i]["terminal_observation"] for i in cut]).astype(np.float32)
-                rewards[cut] += self.gamma * policy.value_recurrent(
-                    final, np.zeros(len(cut), dtype=np.float32), state[2][cut], state[3][cut]
-                )
-            buffer.observations[step], buffer.actions[step], buffer.rewards[step] = obs, actions, rewards
-            buffer.episode_starts[step] = starts
-            buffer.values[step], buffer.log_probs[step] = values, log_probs
-            self._last_obs = new_obs  # type: ignore[assignment]
-            self._last_episode_starts = dones
-        self._lstm_state = state
-        self.jax_saved_state = {**self.jax_saved_state, "lstm_state": [np.array(s) for s in state]}
-        buffer.pos, buffer.full = n_rollout_steps, True
-        last_values = policy.value_recurrent(
-            np.asarray(new_obs, dtype=np.float32), np.asarray(dones, dtype=np.float32), state[2], state[3]
+        for column, value in zip(hidden, self._lstm_state, strict=True):
+            column[step, 0] = value
+        starts = np.asarray(self._last_episode_starts, dtype=np.float32)
+        actions, values, log_probs, self._lstm_state = self._policy.act_recurrent(
+            obs, starts, self._lstm_state, self._rng
         )
-        buffer.compute_returns_and_advantage(last_values=torch.from_numpy(last_values), dones=dones)
-        callback.update_locals(locals())
-        callback.on_rollout_end()
-        return True
+        return actions, values, log_probs
+
+    def _final_values(self, final: np.ndarray, envs: list[int]) -> np.ndarray:
+        """As sb3-contrib: the final observation's value after the value LSTM's state (not reset)."""
+        h_vf, c_vf = self._lstm_state[2][envs], self._lstm_state[3][envs]
+        return self._policy.value_recurrent(final, np.zeros(len(envs), dtype=np.float32), h_vf, c_vf)  # type: ignore[no-any-return]
+
+    def _next_values(self, obs: np.ndarray, dones: np.ndarray) -> np.ndarray:
+        starts = dones.astype(np.float32)
+        return self._policy.value_recurrent(obs, starts, self._lstm_state[2], self._lstm_state[3])  # type: ignore[no-any-return]
+
+    def _rollout_ends(self) -> None:
+        self.jax_saved_state = {**self.jax_saved_state, "lstm_state": [np.array(s) for s in self._lstm_state]}
