@@ -14,7 +14,8 @@ episode starts, so the two make different minibatches of the same rollout. A sav
 
 Only ``MlpLstmPolicy`` with one LSTM layer each for the policy and the value
 (``enable_critic_lstm=True``, ``shared_lstm=False``, the default); ``batch_size`` a multiple
-of ``n_steps`` that divides ``n_envs * n_steps``.
+of ``n_steps`` that divides ``n_envs * n_steps`` (or at least ``n_envs * n_steps``: then the
+whole rollout is one minibatch, as in SB3).
 
 Example:
     >>> from agents.rl import make_train_env
@@ -117,7 +118,8 @@ class JaxRecurrentPPO(JaxTraining, RecurrentPPO):
             raise ValueError("JaxRecurrentPPO needs one LSTM layer each for the policy and the value (the default)")
         if not isinstance(policy.features_extractor, FlattenExtractor):
             raise ValueError("JaxRecurrentPPO needs the default FlattenExtractor")
-        if self.batch_size % self.n_steps or (self.n_envs * self.n_steps) % self.batch_size:
+        batch = min(self.batch_size, self.n_envs * self.n_steps)  # a smaller rollout is one minibatch, as in SB3
+        if batch % self.n_steps or (self.n_envs * self.n_steps) % batch:
             raise ValueError(
                 f"JaxRecurrentPPO: batch_size ({self.batch_size}) must be a multiple of n_steps ({self.n_steps}) "
                 f"dividing n_envs * n_steps ({self.n_envs * self.n_steps}): minibatches are whole env rollouts"
