@@ -105,8 +105,10 @@ class JaxTraining:
 
     The weights move between the torch policy and JAX, the compiled update
     (:func:`agents.rl.jax_update.build`), the optimiser state and random streams that ``save``
-    keeps, and ``train``. A subclass gives its rollout (``collect_rollouts``), its rollout policy
-    (:meth:`_rollout_policy`) and what the update reads (:meth:`_update_inputs`).
+    keeps, the rollout (``collect_rollouts``) and ``train``, all for SB3's MLP policy. A recurrent
+    subclass replaces its rollout policy (:meth:`_rollout_policy`), the policy's step and values
+    (:meth:`_act`, :meth:`_final_values`, :meth:`_next_values`, :meth:`_rollout_begins`,
+    :meth:`_rollout_ends`) and what the update reads (:meth:`_update_inputs`).
     """
 
     framework = "jax"
@@ -344,17 +346,19 @@ class JaxTraining:
         callback.on_rollout_end()
         return True
 
+    # The MLP policy's step and values; a recurrent subclass carries its LSTM state through them.
+
     def _act(self, obs: np.ndarray, buffer: Any, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(actions, values, log_probs)`` of the rollout's ``step`` (``buffer``: what it fills)."""
-        raise NotImplementedError
+        return self._policy.act(obs, self._rng)  # type: ignore[no-any-return]
 
     def _final_values(self, final: np.ndarray, envs: list[int]) -> np.ndarray:
         """The values of the final observations of envs ``envs``, which just hit their time limit."""
-        raise NotImplementedError
+        return self._policy.value(final)  # type: ignore[no-any-return]
 
     def _next_values(self, obs: np.ndarray, dones: np.ndarray) -> np.ndarray:
         """The values of the observations after the rollout (``dones``: each begins an episode)."""
-        raise NotImplementedError
+        return self._policy.value(obs)  # type: ignore[no-any-return]
 
     def _rollout_begins(self) -> None:
         """Called before a rollout's first step."""
@@ -386,12 +390,3 @@ class JaxTraining:
 
 class JaxPPO(JaxTraining, PPO):
     """SB3's PPO with the update compiled by JAX and the rollout policy in NumPy (see the module docstring)."""
-
-    def _act(self, obs: np.ndarray, buffer: Any, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self._policy.act(obs, self._rng)  # type: ignore[no-any-return]
-
-    def _final_values(self, final: np.ndarray, envs: list[int]) -> np.ndarray:
-        return self._policy.value(final)  # type: ignore[no-any-return]
-
-    def _next_values(self, obs: np.ndarray, dones: np.ndarray) -> np.ndarray:
-        return self._policy.value(obs)  # type: ignore[no-any-return]
