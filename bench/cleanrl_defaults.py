@@ -60,6 +60,30 @@ class ScriptAgent:
         return actions.numpy().astype(np.int64), state
 
 
+def run_script(script: Path, env_id: str, total_timesteps: int, seed: int) -> tuple[ScriptAgent, dict[str, Any]]:
+    """Run ``script`` as ``python SCRIPT --env-id coop_gym:ID --total-timesteps N --seed S``; its agent and the run."""
+    torch.set_num_threads(1)
+    command = [
+        str(script), "--env-id", f"coop_gym:{env_id}", "--total-timesteps", str(total_timesteps),
+        "--seed", str(seed),
+    ]  # fmt: skip
+    saved_argv = sys.argv
+    sys.argv = command
+    started = time.perf_counter()
+    try:
+        namespace = runpy.run_path(str(script), run_name="__main__")
+    finally:
+        sys.argv = saved_argv
+    wall = time.perf_counter() - started
+    if "agent" not in namespace:
+        raise SystemExit(f"{script} defined no `agent` to evaluate")
+    agent = ScriptAgent(namespace["agent"].cpu().eval(), f"cleanrl_{script.stem}_{total_timesteps}")
+    run = {"script_command": ["python", *command], "timesteps": total_timesteps, "seed": seed}
+    run["script_sha256"] = hashlib.sha256(script.read_bytes()).hexdigest()  # which version of the script
+    run["wall_time_s"] = wall
+    return agent, run
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--script", required=True, help="path of CleanRL's ppo.py (or another script defining `agent`)")
@@ -78,26 +102,8 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    torch.set_num_threads(1)
-    command = [
-        str(script), "--env-id", f"coop_gym:{args.env_id}", "--total-timesteps", str(args.total_timesteps),
-        "--seed", str(args.seed),
-    ]  # fmt: skip
-    saved_argv = sys.argv
-    sys.argv = command
-    started = time.perf_counter()
-    try:
-        namespace = runpy.run_path(str(script), run_name="__main__")
-    finally:
-        sys.argv = saved_argv
-    wall = time.perf_counter() - started
-    if "agent" not in namespace:
-        raise SystemExit(f"{script} defined no `agent` to evaluate")
-    name = f"cleanrl_{script.stem}_{args.total_timesteps}"
-    agent = ScriptAgent(namespace["agent"].cpu().eval(), name)
-    run = {"script_command": ["python", *command], "timesteps": args.total_timesteps, "seed": args.seed}
-    run["script_sha256"] = hashlib.sha256(script.read_bytes()).hexdigest()  # which version of the script
-    run["wall_time_s"] = wall
+    agent, run = run_script(script, args.env_id, args.total_timesteps, args.seed)
+    name = agent.name
     # Greedy (argmax, SB3's deterministic=True) and sampled (how the script acts while it trains).
     agents = {"greedy": (agent, True), "sampled": (agent, False)}
     report = held_out_report(run, agents, args.env_id, args.episodes)

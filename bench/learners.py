@@ -20,6 +20,10 @@ and the observation it gets (:data:`ROWS`):
   with an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) compares sizings;
+- ``cleanrl-ppo``: CleanRL's public ``ppo.py``, unmodified, on its defaults (4 envs x 128
+  steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
+  :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
+  is not part of coop_gym, see ``bench/cleanrl_defaults.py``): the library-defaults row;
 - ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
@@ -60,6 +64,8 @@ from result_files import add_save_argument, save
 from coop_gym.cli import positive_int, seed_list
 
 ENV_ID = "CoopGym/SitToStandHard-v2"
+CLEANRL_ENV_ID = "CoopGym/SitToStandHardDiscreteUnit-v2"
+"""The id CleanRL's ``ppo.py`` gets: hard-v2 with Discrete actions and unit-scaled observations (the same episodes)."""
 SCRIPTED = ("oracle", "blind", "prober", "belief")
 """The reference caregivers played on the same episodes (``blind`` is the widened blind family's best)."""
 
@@ -73,6 +79,7 @@ class Row:
     what: str = ""
     framework: str = "sb3"
     frame_stack: int = 1
+    env_id: str = ENV_ID
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -95,6 +102,13 @@ ROWS: dict[str, Row] = {
         "recurrent_ppo", {"observation_mode": "raw"}, "JaxRecurrentPPO (LSTM: memory), measurements only", "jax"
     ),
     "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
+    "cleanrl-ppo": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py unmodified on its defaults (its personas, no selection), SitToStandHardDiscreteUnit-v2",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+    ),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
 memory of a fixed window, 0.1 s per frame); ``ROW@N`` is a ``jax-*`` row on ``N`` envs."""
@@ -105,7 +119,9 @@ def _row(name: str) -> tuple[Row, int | None]:
     base, _, size = name.partition("@")
     stacked = re.fullmatch(r"(.+)-stack([1-9][0-9]*)", base)
     key = stacked.group(1) if stacked else base
-    if key not in ROWS or (size and not (size.isdigit() and int(size) > 0 and ROWS[key].framework == "jax")):
+    if key not in ROWS or ((size or stacked) and ROWS[key].framework == "cleanrl"):
+        raise KeyError(name)
+    if size and not (size.isdigit() and int(size) > 0 and ROWS[key].framework == "jax"):
         raise KeyError(name)
     row = ROWS[key]
     if stacked:
@@ -126,6 +142,36 @@ def _rows(text: str) -> list[str]:
         known = f"{', '.join(ROWS)} (also ROW-stackK; jax-* rows: ROW@N)"
         raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {known}")
     return names
+
+
+def train_cleanrl(
+    name: str, script: Path, seed: int, timesteps: int, episodes: int, folder: Path, validation: int
+) -> dict[str, Any]:
+    """Run CleanRL's script on its defaults with ``seed``, save its agent, score it (greedy) held-out."""
+    import torch
+    from cleanrl_defaults import run_script
+
+    from agents.evaluate import evaluate
+    from agents.rl.callbacks import VALIDATION_PERSONAS, VALIDATION_SEED
+    from coop_gym.io import save_with
+
+    row, _ = _row(name)
+    agent, run = run_script(script, row.env_id, timesteps, seed)
+    state = agent.module.state_dict()
+    save_with(folder / f"{name}__{seed}__{timesteps}.pt", lambda temp: torch.save(state, temp))
+    checked = evaluate(agent, row.env_id, VALIDATION_PERSONAS, validation, VALIDATION_SEED)
+    result = evaluate(agent, row.env_id, "test", episodes, 0, name=f"{name}:{seed}")
+    return {
+        **result.summary(),
+        "row": name,
+        "training_seed": seed,
+        "timesteps": timesteps,
+        "train_wall_s": run["wall_time_s"],
+        "kept_step": timesteps,
+        "validation_success_rate": checked.success_rate,
+        "script_command": run["script_command"],
+        "script_sha256": run["script_sha256"],
+    }
 
 
 def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int) -> dict[str, Any]:
@@ -216,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--no-train", action="store_true", help="report the (row, seed) runs already in --runs; train none"
     )
+    parser.add_argument(
+        "--cleanrl-script", type=Path, default=None, help="CleanRL's ppo.py, to train the cleanrl-ppo row"
+    )
     add_save_argument(parser, "learners.json")
     args = parser.parse_args(argv)
     from coop_gym.cli import output_path_problem
@@ -238,6 +287,13 @@ def main(argv: list[str] | None = None) -> int:
             path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
             if not path.exists() and args.no_train:
                 continue
+            if not path.exists() and _row(name)[0].framework == "cleanrl":
+                if args.cleanrl_script is None or not args.cleanrl_script.is_file():
+                    parser.error(f"{name}: --cleanrl-script must name CleanRL's ppo.py (got {args.cleanrl_script})")
+                run = train_cleanrl(
+                    name, args.cleanrl_script, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes
+                )
+                write_json(path, run)
             if not path.exists():
                 run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes)
                 write_json(path, run)

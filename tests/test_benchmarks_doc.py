@@ -98,7 +98,9 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "learners",
             [
                 "--rows",
-                "ppo-kalman",
+                "ppo-kalman,cleanrl-ppo",
+                "--cleanrl-script",
+                str(tmp / "standin.py"),
                 "--seeds",
                 "0",
                 "--timesteps",
