@@ -15,22 +15,17 @@ No torch at import: a usage error comes back in a second.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import importlib.util
-import io
 import json
-import re
 import sys
 import types
 import typing
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, NoReturn, TypeVar
-
-import tyro
-from tyro.conf import DisallowNone
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 from agents.trainer.run_folder import ARGS_FILE, TRAINING_FILE, is_unfinished_run
+from coop_gym.cli import BadArgs, fail, parse
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -76,14 +71,6 @@ RUN_FIELDS = (
 RECORDED_FIELDS = ("algo", "env", "seed", "timesteps", "n_envs")
 """What every ``args.json`` written by ``train.py`` records (``env``, ``timesteps`` and ``n_envs``
 may be null: the algorithm's own); a file without them is not a run's settings."""
-
-
-class BadArgs(Exception):
-    """An ``Args`` value no run can use; the message names the flag.
-
-    Not a ``ValueError``: tyro turns those into a boxed message of its own, while this one
-    reaches :func:`parse_train_args`, which prints the one-line usage error.
-    """
 
 
 class RunProblem(ValueError):
@@ -251,51 +238,24 @@ def parse_train_args(args_type: type[ArgsT], argv: list[str] | None, description
     the flags not given take them; a given flag that contradicts the run is an error naming it.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
-
-    def parse(default: Any = tyro.MISSING_NONPROP) -> ArgsT:
-        shown = io.StringIO()  # what tyro prints: its errors come out in one line
-        try:
-            with contextlib.redirect_stderr(shown):
-                parsed = tyro.cli(
-                    args_type, args=argv, default=default, prog=PROG, description=description, config=(DisallowNone,)
-                )
-        except SystemExit as exc:
-            if exc.code:  # tyro's own error (an unknown flag, a value of the wrong type or choice)
-                _fail(_one_line(shown.getvalue()))
-            raise
-        sys.stderr.write(shown.getvalue())  # a warning, if any
-        return parsed
-
+    args = parse(args_type, argv, PROG, description)
+    resume = getattr(args, "resume", None)
+    if resume is None:
+        return args
     try:
-        args = parse()
-        resume = getattr(args, "resume", None)
-        if resume is None:
-            return args
         saved = resume_settings(Path(resume), args_type)
-        resumed = parse(dataclasses.replace(args_type(), **saved))
+        defaults = dataclasses.replace(args_type(), **saved)
     except (BadArgs, ValueError) as exc:
-        _fail(str(exc))
+        fail(PROG, str(exc))
+    resumed = parse(args_type, argv, PROG, description, default=defaults)
     conflicts = [
         f"--{name.replace('_', '-')} {getattr(resumed, name)!r} (the run has {value!r})"
         for name, value in saved.items()
         if getattr(resumed, name) != value
     ]
     if conflicts:
-        _fail(f"--resume {resume}: {'; '.join(conflicts)} contradict the saved run; leave them out")
+        fail(PROG, f"--resume {resume}: {'; '.join(conflicts)} contradict the saved run; leave them out")
     return resumed
-
-
-def _fail(message: str) -> NoReturn:
-    """A usage error found while parsing: the usage line and one error line on stderr, exit status 2."""
-    print(f"usage: {PROG} [-h] [OPTIONS]\n{PROG}: error: {message}", file=sys.stderr)
-    raise SystemExit(2)
-
-
-def _one_line(box: str) -> str:
-    """The message of tyro's error box in one line, as argparse (and the package's other commands) print it."""
-    lines = [re.sub(r"\x1b\[[0-9;]*m", "", line).strip(" │") for line in box.splitlines()[1:]]
-    rule = next((k for k, line in enumerate(lines) if line and set(line) <= set("─╰╯")), len(lines))
-    return " ".join(line for line in lines[:rule] if line) or box.strip()
 
 
 def usage_error(message: str) -> int:
