@@ -20,12 +20,15 @@ named by their paths. Importing this module does not import torch; ``--model`` l
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections import Counter
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
 
 import coop_gym  # registers the env ids
 from agents.base import Agent, feature_mismatch
@@ -43,72 +46,86 @@ from agents.evaluate import (
 from agents.evaluate.runs import RunScore, aggregate_runs, finished_run_score, is_run_folder, run_folders_in
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
 from agents.trainer.run_folder import is_rllib_run
-from coop_gym.cli import output_path_problem, seed_range_problem
+from coop_gym.cli import BadArgs, fail, output_path_problem, parse, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 
-__all__ = ["main"]
+__all__ = ["PROG", "Args", "args_problem", "main"]
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python -m agents.evaluate",
-        description="Score agents on the same seeded sit-to-stand episodes (episode k uses seed + k).",
-    )
-    who = parser.add_argument_group("agent (one of --agent, --model, --compare, --human; or --runs)")
-    who.add_argument("--agent", help=f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}")
-    who.add_argument(
-        "--model",
-        help="a saved SB3 model (.zip, loaded with agents.rl.load_agent), an RLlib run folder (agents.rl.rllib) "
-        f"or a model shipped with the package ({', '.join(PREFIX + n for n in pretrained_names())})",
-    )
-    who.add_argument(
-        "--compare",
-        help="comma-separated agents to evaluate into one table: scripted names and/or model paths "
-        "(--agent/--model, if given, are added first; each agent once). A model's row is named algo:FOLDER, "
-        "or algo:PATH where two models' folders share a name",
-    )
-    who.add_argument(
-        "--human",
-        metavar="CSV",
-        help="add the episodes played with python -m agents.tools.play as the 'human' row "
-        "(replayed on their own seeds; "
-        "scored against blind and oracle on those seeds, never the best non-oracle). A CSV of several env ids "
-        "needs --env: its episodes of that env are scored",
-    )
-    who.add_argument(
-        "--runs",
-        nargs="+",
-        metavar="RUN",
-        help="train.py run folders (or folders of them): the IQM of the learned agents' mind-reading scores "
-        "across the runs (training seeds), stratified bootstrap 95%% CI, per algorithm; nothing is played. "
-        "A run that did not finish with a score, or one given twice, is an error naming it",
-    )
-    parser.add_argument(
-        "--env", default=None, help=f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
-    )
-    parser.add_argument(
-        "--personas", default="test", help="train, train_wide, test, all, a persona name or names joined by ','"
-    )
-    parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (default 1000)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of episode 0 (default 0)")
-    parser.add_argument("--n-envs", type=int, default=64, help="episodes played side by side (default 64)")
-    parser.add_argument(
-        "--threads",
-        type=int,
-        default=1,
-        help="torch CPU threads of a --model's policy (default 1, as train.py: these small networks gain nothing "
-        "from more, and two evaluations at once on 2 cores ran 8x slower on torch's default)",
-    )
-    parser.add_argument(
-        "--backend", choices=("auto", "vector", "single"), default="auto", help="batched vector env or single envs"
-    )
-    parser.add_argument("--stochastic", action="store_true", help="sample actions instead of deterministic ones")
-    parser.add_argument("--by-persona", action="store_true", help="also show one row per agent and persona")
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
-    parser.add_argument("--csv", help="write the summary rows to this CSV file")
-    parser.add_argument("--json-out", help="write the summaries and episode records to this JSON file")
-    parser.add_argument("--plot", help="write a bar chart of outcome rates per agent to this PNG file")
-    return parser
+PROG = "python -m agents.evaluate"
+DESCRIPTION = "Score agents on the same seeded sit-to-stand episodes (episode k uses seed + k)."
+# The help of the flags that name the package's agents and models (read from where they are
+# defined) or take a paragraph to explain.
+_AGENT_HELP = f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}"
+_MODEL_HELP = (
+    "a saved SB3 model (.zip, loaded with agents.rl.load_agent), an RLlib run folder (agents.rl.rllib) "
+    f"or a model shipped with the package ({', '.join(PREFIX + n for n in pretrained_names())})"
+)
+_ENV_HELP = f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
+_COMPARE_HELP = (
+    "comma-separated agents to evaluate into one table: scripted names and/or model paths "
+    "(--agent/--model, if given, are added first; each agent once). A model's row is named algo:FOLDER, "
+    "or algo:PATH where two models' folders share a name"
+)
+_HUMAN_HELP = (
+    "add the episodes played with python -m agents.tools.play as the 'human' row (replayed on their own seeds; "
+    "scored against blind and oracle on those seeds, never the best non-oracle). A CSV of several env ids "
+    "needs --env: its episodes of that env are scored"
+)
+_RUNS_HELP = (
+    "train.py run folders (or folders of them): the IQM of the learned agents' mind-reading scores "
+    "across the runs (training seeds), stratified bootstrap 95% CI, per algorithm; nothing is played. "
+    "A run that did not finish with a score, or one given twice, is an error naming it"
+)
+_THREADS_HELP = (
+    "torch CPU threads of a --model's policy (as train.py: these small networks gain nothing from more, "
+    "and two evaluations at once on 2 cores ran 8x slower on torch's default)"
+)
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring (or ``help``) is its ``--help``.
+
+    The agent is one of ``--agent``, ``--model``, ``--compare``, ``--human``; or ``--runs``.
+    """
+
+    agent: Annotated[str | None, tyro.conf.arg(help=_AGENT_HELP)] = None
+    model: Annotated[str | None, tyro.conf.arg(help=_MODEL_HELP)] = None
+    compare: Annotated[str | None, tyro.conf.arg(help=_COMPARE_HELP)] = None
+    human: Annotated[str | None, tyro.conf.arg(metavar="CSV", help=_HUMAN_HELP)] = None
+    runs: Annotated[list[str] | None, tyro.conf.arg(metavar="RUN [RUN ...]", help=_RUNS_HELP)] = None
+    env: Annotated[str | None, tyro.conf.arg(help=_ENV_HELP)] = None
+    personas: str = "test"
+    """train, train_wide, test, all, a persona name or names joined by ','"""
+    episodes: int = 1000
+    """number of seeded episodes"""
+    seed: int = 0
+    """seed of episode 0"""
+    n_envs: int = 64
+    """episodes played side by side"""
+    threads: Annotated[int, tyro.conf.arg(help=_THREADS_HELP)] = 1
+    backend: Literal["auto", "vector", "single"] = "auto"
+    """batched vector env or single envs"""
+    stochastic: bool = False
+    """sample actions instead of deterministic ones"""
+    by_persona: bool = False
+    """also show one row per agent and persona"""
+    json: bool = False
+    """print one JSON object instead of the table"""
+    csv: str | None = None
+    """write the summary rows to this CSV file"""
+    json_out: str | None = None
+    """write the summaries and episode records to this JSON file"""
+    plot: str | None = None
+    """write a bar chart of outcome rates per agent to this PNG file"""
+
+    def __post_init__(self) -> None:
+        """The first value no evaluation can use is a usage error naming it (``--runs`` is checked as it is read)."""
+        if self.runs is not None and not self.runs:
+            raise BadArgs("--runs: expected at least one argument")
+        if not self.runs and (problem := args_problem(self)):
+            raise BadArgs(problem)
 
 
 def _personas_arg(text: str) -> str | list[str]:
@@ -117,17 +134,16 @@ def _personas_arg(text: str) -> str | list[str]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (usage errors exit 2)."""
-    parser = _parser()
-    args = parser.parse_args(argv)
+    args = parse(Args, argv, PROG, DESCRIPTION)
     if args.runs:
-        return _report_runs(parser, args.runs, args.json)
-    entries = _checked_entries(parser, args)
+        return _report_runs(args.runs, args.json)
+    entries = _entries(args)
     names = _model_names(entries)
     # Every model is loaded and matched to its env before any episode is played.
-    planned = [_planned(parser, args, entry, names.get(entry, entry)) for entry in entries]
+    planned = [_planned(args, entry, names.get(entry, entry)) for entry in entries]
     if args.env is None:
-        planned = _scripted_on_the_models_env(parser, planned)
-    human_env = _human_env(parser, args, planned) if args.human else DEFAULT_ENV_ID
+        planned = _scripted_on_the_models_env(planned)
+    human_env = _human_env(args.human, args.env, planned) if args.human else DEFAULT_ENV_ID
     results: list[EvaluationResult] = []
     for agent, env_id, label in planned:
         try:
@@ -158,9 +174,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _report(args, results)
 
 
-def _human_env(
-    parser: argparse.ArgumentParser, args: argparse.Namespace, planned: list[tuple[Agent | str, str, str]]
-) -> str:
+def _human_env(human: str, env: str | None, planned: list[tuple[Agent | str, str, str]]) -> str:
     """The env whose played episodes ``--human`` scores: ``--env``, else the agents' env, else the CSV's only one.
 
     Without ``--env``, a CSV holding episodes of several env ids is a usage error (as is an
@@ -168,25 +182,26 @@ def _human_env(
     """
     envs = sorted({env_id for _, env_id, _ in planned})
     if len(envs) > 1:
-        parser.error(f"--human: the agents play on different envs ({', '.join(envs)}): give --env")
-    if args.env is not None:
-        return str(args.env)
+        fail(PROG, f"--human: the agents play on different envs ({', '.join(envs)}): give --env")
+    if env is not None:
+        return env
     from agents.tools.play_log import read_played
 
     try:
-        played = sorted({e.env_id for e in read_played(args.human)})
+        played = sorted({e.env_id for e in read_played(human)})
     except (OSError, ValueError) as exc:
-        parser.error(f"--human {args.human}: {exc}")
+        fail(PROG, f"--human {human}: {exc}")
     if len(played) > 1:
-        parser.error(
-            f"--human: {args.human} holds episodes of {len(played)} env ids ({', '.join(played)}): "
-            "give --env ID to score those of one"
+        fail(
+            PROG,
+            f"--human: {human} holds episodes of {len(played)} env ids ({', '.join(played)}): "
+            "give --env ID to score those of one",
         )
     return envs[0] if envs else played[0] if played else DEFAULT_ENV_ID
 
 
-def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
-    """The agents to evaluate (scripted names, model paths); a usage error for any bad argument."""
+def _entries(args: Args) -> list[str]:
+    """The agents to evaluate (scripted names, model paths): ``--agent``, ``--model``, then ``--compare``'s."""
     entries: list[str] = []
     if args.agent:
         entries.append(args.agent)
@@ -194,52 +209,55 @@ def _checked_entries(parser: argparse.ArgumentParser, args: argparse.Namespace) 
         entries.append(args.model)
     if args.compare:
         entries.extend(e.strip() for e in args.compare.split(",") if e.strip())
+    return entries
+
+
+def args_problem(args: Args) -> str | None:
+    """The first argument no evaluation can use (None if all are fine); checked before any model is loaded."""
+    entries = _entries(args)
     if not entries and not args.human:
-        parser.error("give --agent NAME, --model PATH, --compare NAME,NAME,... or --human CSV")
+        return "give --agent NAME, --model PATH, --compare NAME,NAME,... or --human CSV"
     if args.human and not Path(args.human).is_file():
-        parser.error(f"--human: no played-episodes CSV at {args.human} (python -m agents.tools.play writes one)")
+        return f"--human: no played-episodes CSV at {args.human} (python -m agents.tools.play writes one)"
     if args.episodes < 1:
-        parser.error(f"--episodes must be >= 1, got {args.episodes}")
+        return f"--episodes must be >= 1, got {args.episodes}"
     if args.n_envs < 1:
-        parser.error(f"--n-envs must be >= 1, got {args.n_envs}")
+        return f"--n-envs must be >= 1, got {args.n_envs}"
     if args.threads < 1:
-        parser.error(f"--threads must be >= 1, got {args.threads}")
+        return f"--threads must be >= 1, got {args.threads}"
     problem = seed_range_problem("--seed", args.seed, args.episodes)  # episode k uses seed + k
     if problem:
-        parser.error(problem)
+        return problem
     try:
         resolve_personas(_personas_arg(args.personas))
     except ValueError as exc:
-        parser.error(f"--personas: {exc}")
+        return f"--personas: {exc}"
     if args.env is not None and args.env not in coop_gym.ENV_IDS:
-        parser.error(
-            f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
-        )
+        return f"--env: unknown env id {args.env!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
     for flag, value in (("--csv", args.csv), ("--json-out", args.json_out), ("--plot", args.plot)):
         problem = output_path_problem(value) if value else None
         if problem:
-            parser.error(f"{flag}: {problem}")
+            return f"{flag}: {problem}"
     if args.plot and Path(args.plot).suffix.lower() not in PLOT_SUFFIXES:
-        parser.error(
-            f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
-        )
+        return f"--plot: unsupported file type {Path(args.plot).suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
+    return _entries_problem(entries)
+
+
+def _entries_problem(entries: list[str]) -> str | None:
+    """The first agent given twice, or neither a scripted agent nor a saved model (None if all are fine)."""
     given: dict[str, str] = {}
     for entry in entries:
         same = entry if entry in SCRIPTED_AGENTS or is_pretrained(entry) else str(Path(entry).resolve())
         if same in given:  # two rows of one agent, and one score would overwrite the other
             first = given[same]
             twice = f"{entry!r} is given twice" if first == entry else f"{first!r} and {entry!r} are one model"
-            parser.error(f"{twice} (--agent, --model and --compare together): list each agent once")
+            return f"{twice} (--agent, --model and --compare together): list each agent once"
         given[same] = entry
         if is_pretrained(entry) and entry.removeprefix(PREFIX) not in pretrained_names():
-            parser.error(
-                f"unknown pretrained model {entry!r}; known: {', '.join(PREFIX + n for n in pretrained_names())}"
-            )
+            return f"unknown pretrained model {entry!r}; known: {', '.join(PREFIX + n for n in pretrained_names())}"
         if entry not in SCRIPTED_AGENTS and not is_pretrained(entry) and not Path(entry).exists():
-            parser.error(
-                f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
-            )
-    return entries
+            return f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
+    return None
 
 
 def _model_names(entries: list[str]) -> dict[str, str]:
@@ -256,9 +274,7 @@ def _model_names(entries: list[str]) -> dict[str, str]:
     return {e: name if shared[name] == 1 else e for e, name in folder_names.items()}
 
 
-def _planned(
-    parser: argparse.ArgumentParser, args: argparse.Namespace, entry: str, name: str
-) -> tuple[Agent | str, str, str]:
+def _planned(args: Args, entry: str, name: str) -> tuple[Agent | str, str, str]:
     """``(agent, env_id, label)`` of one entry: a scripted name, or a model loaded and matched to its env.
 
     ``name`` is a saved model's name in the label (:func:`_model_names`).
@@ -274,7 +290,7 @@ def _planned(
         try:
             rllib_agent = load_rllib_agent(entry)
         except (OSError, ValueError) as exc:
-            parser.error(f"--model {entry}: {exc}")
+            fail(PROG, f"--model {entry}: {exc}")
         env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
         return rllib_agent, env_id, f"rllib_ppo:{name}"
     from agents.rl import load_agent, observation_features
@@ -282,28 +298,26 @@ def _planned(
     try:
         loaded = load_agent(entry)
     except (OSError, ValueError) as exc:
-        parser.error(f"--model {entry}: {exc}")
+        fail(PROG, f"--model {entry}: {exc}")
     env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
     problem = feature_mismatch(loaded.features, observation_features(env_id, env_kwargs=loaded.env_kwargs), env_id)
     if problem:
-        parser.error(f"--model {entry}: {problem}")
+        fail(PROG, f"--model {entry}: {problem}")
     label = loaded.name if is_pretrained(entry) else f"{loaded.algo}:{name}"
     return loaded, env_id, label
 
 
-def _scripted_on_the_models_env(
-    parser: argparse.ArgumentParser, planned: list[tuple[Agent | str, str, str]]
-) -> list[tuple[Agent | str, str, str]]:
+def _scripted_on_the_models_env(planned: list[tuple[Agent | str, str, str]]) -> list[tuple[Agent | str, str, str]]:
     """Without ``--env``, scripted agents play on the models' env, so a comparison compares like with like."""
     model_envs = sorted({env_id for agent, env_id, _ in planned if not isinstance(agent, str)})
     if not model_envs or all(not isinstance(agent, str) for agent, _, _ in planned):
         return planned
     if len(model_envs) > 1:
-        parser.error(f"the models were trained on different envs ({', '.join(model_envs)}): give --env")
+        fail(PROG, f"the models were trained on different envs ({', '.join(model_envs)}): give --env")
     return [(agent, model_envs[0] if isinstance(agent, str) else env_id, label) for agent, env_id, label in planned]
 
 
-def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
+def _report(args: Args, results: list[EvaluationResult]) -> int:
     """Print the results (table or JSON) and write the files asked for; the exit code."""
     if args.json:
         print(json.dumps(results_json(results)))
@@ -329,13 +343,13 @@ def _report(args: argparse.Namespace, results: list[EvaluationResult]) -> int:
     return 0
 
 
-def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: bool) -> int:
+def _report_runs(folders: list[str], as_json: bool) -> int:
     """``--runs``: the IQM of the mind-reading score per algorithm across the runs' ``results.json``.
 
     Every run given, or found in a folder given, is counted or refused with a usage error
     naming it: an IQM over fewer runs than asked would pass for the one asked for.
     """
-    runs = _run_scores(parser, folders)
+    runs = _run_scores(folders)
     report = {}
     for algo in sorted({r[1] for r in runs.values()}):
         of_algo = {folder: r for folder, r in runs.items() if r[1] == algo}
@@ -346,7 +360,7 @@ def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: b
                 + ", ".join(str(f) for f, r in of_algo.items() if r[3] == key)
                 for key in sorted(episodes, key=str)
             )
-            parser.error(f"--runs: the {algo} runs were scored on different episodes ({scored}); give like runs")
+            fail(PROG, f"--runs: the {algo} runs were scored on different episodes ({scored}); give like runs")
         aggregate = aggregate_runs(of_algo.values())
         assert aggregate is not None
         report[algo] = aggregate.as_json()
@@ -358,24 +372,24 @@ def _report_runs(parser: argparse.ArgumentParser, folders: list[str], as_json: b
     return 0
 
 
-def _run_scores(parser: argparse.ArgumentParser, folders: list[str]) -> dict[Path, RunScore]:
+def _run_scores(folders: list[str]) -> dict[Path, RunScore]:
     """The score of every run folder given or inside a folder given; a usage error for any run without one."""
     runs: dict[Path, RunScore] = {}
     given: set[Path] = set()
     for folder in folders:
         if not Path(folder).is_dir():
-            parser.error(f"--runs: {folder} is not a folder")
+            fail(PROG, f"--runs: {folder} is not a folder")
         inside = [Path(folder)] if is_run_folder(folder) else run_folders_in(folder)
         if not inside:
-            parser.error(f"--runs: {folder} is neither a train.py run folder nor a folder of them")
+            fail(PROG, f"--runs: {folder} is neither a train.py run folder nor a folder of them")
         for run in inside:
             if run.resolve() in given:  # counted twice, one seed would weigh double
-                parser.error(f"--runs: {run} is given twice")
+                fail(PROG, f"--runs: {run} is given twice")
             given.add(run.resolve())
             try:
                 runs[run] = finished_run_score(run)
             except ValueError as exc:
-                parser.error(f"--runs: {run}: {exc}; finish it or leave it out")
+                fail(PROG, f"--runs: {run}: {exc}; finish it or leave it out")
     return runs
 
 

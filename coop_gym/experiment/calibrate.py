@@ -20,18 +20,18 @@ reproduces it exactly.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
 import time
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import Annotated, Any
 
 import numpy as np
+import tyro
 
-from coop_gym.cli import positive_int as _positive_int
-from coop_gym.cli import seed as _seed
+from coop_gym.cli import BadArgs, PositiveInt, Seed, parse
 from coop_gym.experiment.protocol import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
@@ -45,7 +45,7 @@ from coop_gym.experiment.protocol import (
 )
 from estimator.judgment import ThresholdJudgment
 
-__all__ = ["compare_estimators", "delay_sweep", "main"]
+__all__ = ["PROG", "Args", "compare_estimators", "delay_sweep", "main"]
 
 DEFAULT_ESTIMATORS: tuple[str, ...] = ESTIMATORS
 """Estimators compared by default (all of them)."""
@@ -157,30 +157,45 @@ def format_sweep(sweep: dict[str, dict[str, list[float]]], delays_s: Sequence[fl
     return "\n".join(lines)
 
 
+PROG = "python -m coop_gym.experiment.calibrate"
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring is its ``--help``."""
+
+    seeds: PositiveInt = 20
+    """number of seeds (>= 20 for the report)"""
+    seed: Seed = 0
+    """first seed"""
+    estimators: Annotated[
+        str, tyro.conf.arg(help=f"comma-separated subset of {','.join(ESTIMATORS)} (identified is slow: ~10 s a seed)")
+    ] = ",".join(DEFAULT_ESTIMATORS)
+    sweep: bool = True
+    """run the judgment-delay sweep (--no-sweep: skip it)"""
+    json: bool = False
+    """print one JSON object"""
+
+    def __post_init__(self) -> None:
+        """An unknown estimator is a usage error naming the flag."""
+        if not self.names() or any(e not in ESTIMATORS for e in self.names()):
+            raise BadArgs(f"--estimators must name some of {', '.join(ESTIMATORS)}, got {self.estimators!r}")
+
+    def names(self) -> list[str]:
+        """The estimators named by ``--estimators``."""
+        return [e for e in self.estimators.split(",") if e]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; usage errors exit with status 2."""
-    parser = argparse.ArgumentParser(
-        prog="python -m coop_gym.experiment.calibrate", description=__doc__.splitlines()[0]
-    )
-    parser.add_argument("--seeds", type=_positive_int, default=20, help="number of seeds (>= 20 for the report)")
-    parser.add_argument("--seed", type=_seed, default=0, help="first seed")
-    parser.add_argument(
-        "--estimators", default=",".join(DEFAULT_ESTIMATORS),
-        help=f"comma-separated subset of {','.join(ESTIMATORS)} (identified is slow: ~10 s a seed)",
-    )  # fmt: skip
-    parser.add_argument("--no-sweep", action="store_true", help="skip the judgment-delay sweep")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
-    args = parser.parse_args(argv)
-    names = [e for e in args.estimators.split(",") if e]
-    bad = [e for e in names if e not in ESTIMATORS]
-    if bad or not names:
-        parser.error(f"--estimators must name some of {', '.join(ESTIMATORS)}, got {args.estimators!r}")
+    args = parse(Args, argv, PROG, __doc__.splitlines()[0])
+    names = args.names()
     if "kalman" not in names:
         names.insert(0, "kalman")
     config = ProtocolConfig()
     seeds = list(range(args.seed, args.seed + args.seeds))
     comparison = compare_estimators(config, seeds, names)
-    sweep = None if args.no_sweep else delay_sweep(config, seeds)
+    sweep = delay_sweep(config, seeds) if args.sweep else None
     if args.json:
         out: dict[str, Any] = {
             "seeds": seeds,

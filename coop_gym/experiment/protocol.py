@@ -10,15 +10,15 @@ re-exports their public names.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections.abc import Sequence
-from typing import Any, Literal
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
 
-from coop_gym.cli import output_path_problem, seed_range_problem
-from coop_gym.cli import positive_int as _positive_int
-from coop_gym.cli import seed as _seed
+import tyro
+
+from coop_gym.cli import BadArgs, PositiveInt, Seed, one_of, output_path_problem, parse, seed_range_problem
 from coop_gym.experiment.banks import identified_banks, intention_drive
 from coop_gym.experiment.estimators import (
     ESTIMATORS,
@@ -38,14 +38,16 @@ __all__ = [
     "ESTIMATORS",
     "NEEDS_CALIBRATION",
     "PAPER_RESULTS",
+    "PROG",
+    "Args",
     "EstimateResult",
     "ExperimentData",
     "ProtocolConfig",
     "TrialSpec",
     "accuracy",
     "aggregate",
+    "args_problem",
     "balanced_accuracy",
-    "build_parser",
     "conditional_tables",
     "confusion_matrix",
     "draw_trials",
@@ -85,55 +87,75 @@ def run_protocol(
     return summarize(data, estimate(data, estimator, decision=decision))
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``python -m coop_gym.experiment.protocol`` argument parser."""
-    parser = argparse.ArgumentParser(
-        prog="python -m coop_gym.experiment.protocol",
-        description="Bell & Asada's cooperativeness-judgment experiment on simulated subjects: the paper's "
-        "three tables side by side with its numbers on real people.",
-    )
-    parser.add_argument("--subjects", type=_positive_int, default=4, help="simulated subjects (paper: 4)")
-    parser.add_argument("--trials", type=_positive_int, default=25, help="trials per subject (paper: 25)")
-    parser.add_argument("--seed", type=_seed, default=0, help="seed of trials, subjects and noise")
-    parser.add_argument("--seeds", type=_positive_int, default=1, help="run seeds seed..seed+K-1, report mean +/- std")
-    parser.add_argument("--estimator", choices=ESTIMATORS, default="kalman", help="estimator to score")
-    parser.add_argument(
-        "--decision", choices=("map", "sequential"), default="map",
-        help="multiple-model judgment: MAP at the paper's 0.75 s, or the earliest confident step up to it",
-    )  # fmt: skip
-    parser.add_argument("--personas", default="all", help="persona set of the subjects: all, train, test or a name")
-    parser.add_argument(
-        "--difficulty",
-        choices=tuple(DIFFICULTIES),
-        default=None,
-        help="subjects at this difficulty level of the -v1 envs (default: the -v0 model)",
-    )
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
-    parser.add_argument("--plot", metavar="PATH", help="write a Fig. 6 style trace of one trial (PNG)")
-    parser.add_argument("--plot-confusion", metavar="PATH", help="write the confusion matrix beside the paper's (PNG)")
-    return parser
+PROG = "python -m coop_gym.experiment.protocol"
+DESCRIPTION = (
+    "Bell & Asada's cooperativeness-judgment experiment on simulated subjects: the paper's "
+    "three tables side by side with its numbers on real people."
+)
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring is its ``--help``."""
+
+    subjects: PositiveInt = 4
+    """simulated subjects (paper: 4)"""
+    trials: PositiveInt = 25
+    """trials per subject (paper: 25)"""
+    seed: Seed = 0
+    """seed of trials, subjects and noise"""
+    seeds: PositiveInt = 1
+    """run seeds seed..seed+K-1, report mean +/- std"""
+    estimator: Annotated[str, one_of(ESTIMATORS)] = "kalman"
+    """estimator to score"""
+    decision: Literal["map", "sequential"] = "map"
+    """multiple-model judgment: MAP at the paper's 0.75 s, or the earliest confident step up to it"""
+    personas: str = "all"
+    """persona set of the subjects: all, train, test or a name"""
+    difficulty: Annotated[str | None, one_of(tuple(DIFFICULTIES))] = None
+    """subjects at this difficulty level of the -v1 envs; None: the -v0 model"""
+    json: bool = False
+    """print one JSON object instead of tables"""
+    plot: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
+    """write a Fig. 6 style trace of one trial (PNG)"""
+    plot_confusion: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
+    """write the confusion matrix beside the paper's (PNG)"""
+
+    def __post_init__(self) -> None:
+        """The first value no run can use is a usage error naming it."""
+        if problem := args_problem(self):
+            raise BadArgs(problem)
+
+    def config(self) -> ProtocolConfig:
+        """The experiment these arguments ask for."""
+        return ProtocolConfig(
+            n_subjects=self.subjects, n_trials=self.trials, personas=self.personas, difficulty=self.difficulty
+        )
+
+
+def args_problem(args: Args) -> str | None:
+    """The first value of ``args`` no run can use (None if all are fine); checked before the experiment runs."""
+    try:
+        args.config()
+    except ValueError as err:
+        return str(err)
+    problem = seed_range_problem("--seed", args.seed, args.seeds)  # runs seed .. seed + seeds - 1
+    if problem:
+        return problem
+    for path in (args.plot, args.plot_confusion):
+        if path is not None and not path.lower().endswith(".png"):
+            return f"plot paths must end in .png, got {path!r}"
+        # Checked before the experiment runs, so a bad path fails at once, not after the work.
+        problem = output_path_problem(path) if path is not None else None
+        if problem:
+            return problem
+    return None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; usage errors exit with status 2."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        config = ProtocolConfig(
-            n_subjects=args.subjects, n_trials=args.trials, personas=args.personas, difficulty=args.difficulty
-        )
-    except ValueError as err:
-        parser.error(str(err))
-    problem = seed_range_problem("--seed", args.seed, args.seeds)  # runs seed .. seed + seeds - 1
-    if problem:
-        parser.error(problem)
-    for path in (args.plot, args.plot_confusion):
-        if path is not None and not path.lower().endswith(".png"):
-            parser.error(f"plot paths must end in .png, got {path!r}")
-        # Checked before the experiment runs, so a bad path fails at once, not after the work.
-        problem = output_path_problem(path) if path is not None else None
-        if problem:
-            parser.error(problem)
+    args = parse(Args, argv, PROG, DESCRIPTION)
+    config = args.config()
     summaries = []
     first: tuple[ExperimentData, EstimateResult] | None = None
     for seed in range(args.seed, args.seed + args.seeds):
