@@ -26,33 +26,34 @@ From Python, :func:`record_episode` does the same and returns a :class:`RecordRe
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import gymnasium as gym
 import numpy as np
+import tyro
 from gymnasium.wrappers import RecordVideo
 
 import coop_gym
 from agents.base import Agent, action_type_of, feature_mismatch, features_of, level_of
 from agents.caregivers.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.tools.timeline import Trace, TraceBuilder, plot_timeline
-from coop_gym.cli import SEED_LIMIT, output_path_problem
-from coop_gym.cli import positive_int as _positive_int
-from coop_gym.cli import seed as _seed
+from coop_gym.cli import SEED_LIMIT, BadArgs, PositiveIntOrNone, Seed, fail, one_of, output_path_problem, parse
 from coop_gym.io import atomic_path
 from estimator.compiled.checks import check_integer
 
 __all__ = [
     "DEFAULT_ENV_ID",
+    "PROG",
+    "Args",
     "IncompatibleAgentError",
     "RecordResult",
+    "args_problem",
     "load_model",
     "main",
     "play_episode",
@@ -386,49 +387,70 @@ def _check_observation_space(agent: Any, env: gym.Env[Any, Any]) -> None:
             )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command-line interface."""
-    parser = argparse.ArgumentParser(
-        prog="python -m agents.tools.record",
-        description="Record one episode of an agent: a video (MP4, else GIF) and a timeline plot (PNG).",
-    )
-    who = parser.add_mutually_exclusive_group(required=True)
-    who.add_argument("--agent", choices=sorted(SCRIPTED_AGENTS), help="a scripted caregiver")
-    who.add_argument("--model", type=Path, help="a saved Stable-Baselines3 model (.zip) or model folder")
-    parser.add_argument("--env", default=None, help=f"env id (default: the model's, else {DEFAULT_ENV_ID})")
-    parser.add_argument("--seed", type=_seed, default=0, help="reset seed, 0 <= seed < 2**32 (default 0)")
-    parser.add_argument("--persona", default=None, help=f"persona to run, one of: {', '.join(coop_gym.PERSONAS)}")
-    parser.add_argument("--out", type=Path, required=True, help="output folder")
-    parser.add_argument("--fps", type=_positive_int, default=None, help="video frame rate (default 10 = real time)")
-    parser.add_argument("--max-steps", type=_positive_int, default=None, help="stop after this many 0.1 s steps")
-    parser.add_argument("--stochastic", action="store_true", help="sample the policy's actions (default greedy)")
-    return parser
+PROG = "python -m agents.tools.record"
+DESCRIPTION = "Record one episode of an agent: a video (MP4, else GIF) and a timeline plot (PNG)."
+_Agent = tyro.conf.create_mutex_group(required=True, title="agent (one of)")
+_ENV_HELP = f"env id (default: the model's, else {DEFAULT_ENV_ID})"
+_PERSONA_HELP = f"persona to run, one of: {', '.join(coop_gym.PERSONAS)}"
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring (or ``help``) is its ``--help``."""
+
+    out: Path
+    """output folder"""
+    agent: Annotated[str | None, one_of(sorted(SCRIPTED_AGENTS)), _Agent] = None
+    """a scripted caregiver"""
+    model: Annotated[Path | None, _Agent] = None
+    """a saved Stable-Baselines3 model (.zip) or model folder"""
+    env: Annotated[str | None, tyro.conf.arg(help=_ENV_HELP)] = None
+    seed: Seed = 0
+    """reset seed, 0 <= seed < 2**32"""
+    persona: Annotated[str | None, tyro.conf.arg(help=_PERSONA_HELP)] = None
+    fps: PositiveIntOrNone = None
+    """video frame rate (None: 10 = real time)"""
+    max_steps: PositiveIntOrNone = None
+    """stop after this many 0.1 s steps"""
+    stochastic: bool = False
+    """sample the policy's actions (default greedy)"""
+
+    def __post_init__(self) -> None:
+        """The first value no recording can use is a usage error naming it, before the episode."""
+        if problem := args_problem(self):
+            raise BadArgs(problem)
+
+
+def args_problem(args: Args) -> str | None:
+    """The first value of ``args`` no recording can use (None if all are fine)."""
+    env_id = args.env or DEFAULT_ENV_ID
+    if env_id not in coop_gym.ENV_IDS:
+        return f"unknown env id {env_id!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+    if args.persona is not None and args.persona not in coop_gym.PERSONAS:
+        return f"unknown persona {args.persona!r}; known: {', '.join(coop_gym.PERSONAS)}"
+    problem = output_path_problem(args.out, folder=True)  # before the episode, not after it
+    if problem:
+        return f"--out: {problem}"
+    if args.model is not None and not args.model.exists():
+        return f"--model {args.model}: no such file or folder"
+    return None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; usage errors exit with status 2."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse(Args, argv, PROG, DESCRIPTION)
     env_id = args.env or DEFAULT_ENV_ID
-    if env_id not in coop_gym.ENV_IDS:
-        parser.error(f"unknown env id {env_id!r} (not a coop_gym env); coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
-    if args.persona is not None and args.persona not in coop_gym.PERSONAS:
-        parser.error(f"unknown persona {args.persona!r}; known: {', '.join(coop_gym.PERSONAS)}")
-    problem = output_path_problem(args.out, folder=True)  # before the episode, not after it
-    if problem:
-        parser.error(f"--out: {problem}")
     if args.model is not None:
-        if not args.model.exists():
-            parser.error(f"--model {args.model}: no such file or folder")
         try:
             agent: Agent | str = load_model(args.model)
         except (FileNotFoundError, ValueError) as exc:
-            parser.error(f"--model {args.model}: {exc}")
+            fail(PROG, f"--model {args.model}: {exc}")
         model_env_id = getattr(agent, "env_id", None)
         if args.env is None and isinstance(model_env_id, str) and model_env_id in gym.registry:
             env_id = model_env_id
         name = _recording_name(args.model)
     else:
+        assert args.agent is not None  # the required group: --agent or --model
         agent, name = args.agent, args.agent
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # never open a window
     try:
@@ -444,7 +466,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             deterministic=not args.stochastic,
         )
     except IncompatibleAgentError as exc:
-        parser.error(str(exc))
+        fail(PROG, str(exc))
     except OSError as exc:  # e.g. a full disk: the file is not there (never half-written)
         print(f"error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
         return 1

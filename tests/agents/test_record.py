@@ -209,9 +209,9 @@ def test_record_runs_a_saved_sb3_model(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--out", "o"], "one of the arguments --agent --model is required"),
+        (["--out", "o"], "Missing required argument group: • --agent, --model"),
         (["--agent", "handbook"], "--out"),
-        (["--agent", "handbook", "--model", "m.zip", "--out", "o"], "not allowed with"),
+        (["--agent", "handbook", "--model", "m.zip", "--out", "o"], "--agent and --model are not allowed together"),
         (["--agent", "nurse", "--out", "o"], "invalid choice"),
         (["--agent", "handbook", "--out", "o", "--env", "CoopGym/Nope-v0"], "unknown env id"),
         (["--agent", "handbook", "--out", "o", "--persona", "nobody"], "unknown persona"),
