@@ -33,12 +33,11 @@ env (0 for a new file), so successive sessions walk the evaluation's episodes 0,
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
@@ -59,11 +58,23 @@ from agents.base import (
 )
 from agents.evaluate import evaluate
 from agents.tools.play_log import PlayedEpisode, append_played, next_seed, read_played, score_played
-from coop_gym.cli import output_path_problem, seed_range_problem
+from coop_gym.cli import BadArgs, output_path_problem, parse, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 from coop_gym.registration import HARD_ENV_ID
 
-__all__ = ["DEFAULT_CSV", "DEFAULT_ENV_ID", "KEYS", "Controls", "main", "play", "score_played", "scripted_keys"]
+__all__ = [
+    "DEFAULT_CSV",
+    "DEFAULT_ENV_ID",
+    "KEYS",
+    "PROG",
+    "Args",
+    "Controls",
+    "args_problem",
+    "main",
+    "play",
+    "score_played",
+    "scripted_keys",
+]
 
 DEFAULT_ENV_ID = HARD_ENV_ID
 DEFAULT_CSV = "runs/played.csv"
@@ -363,34 +374,51 @@ def play(
         session.close()
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python -m agents.tools.play",
-        description="Play the robot caregiver: push, speak and lift by keyboard; every episode is saved to a CSV.",
-        epilog="Keys: " + ", ".join(f"{k} {v}" for k, v in KEYS.items()),
-    )
-    parser.add_argument("--env", default=DEFAULT_ENV_ID, help=f"coop_gym env id (default {DEFAULT_ENV_ID})")
-    parser.add_argument("--seed", type=int, default=None, help="seed of the first episode (default: next in the CSV)")
-    parser.add_argument("--personas", default="test", help="train, test, all, a persona or names joined by ','")
-    parser.add_argument("--csv", default=DEFAULT_CSV, help=f"played-episodes CSV to append to (default {DEFAULT_CSV})")
-    parser.add_argument("--pace", choices=("realtime", "turns"), default="realtime", help="see the module help")
-    parser.add_argument("--fps", type=int, default=10, help="steps a second in realtime pace (10 = real time)")
-    parser.add_argument("--episodes", type=int, default=0, help="stop after this many episodes (0: until Esc)")
-    return parser
+PROG = "python -m agents.tools.play"
+DESCRIPTION = "Play the robot caregiver: push, speak and lift by keyboard; every episode is saved to a CSV."
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring is its ``--help``."""
+
+    env: str = DEFAULT_ENV_ID
+    """coop_gym env id"""
+    seed: int | None = None
+    """seed of the first episode (None: next in the CSV)"""
+    personas: str = "test"
+    """train, test, all, a persona or names joined by ','"""
+    csv: str = DEFAULT_CSV
+    """played-episodes CSV to append to"""
+    pace: Literal["realtime", "turns"] = "realtime"
+    """see the module help"""
+    fps: int = 10
+    """steps a second in realtime pace (10 = real time)"""
+    episodes: int = 0
+    """stop after this many episodes (0: until Esc)"""
+
+    def __post_init__(self) -> None:
+        """The first value no session can use is a usage error naming it, before the window opens."""
+        if problem := args_problem(self):
+            raise BadArgs(problem)
+
+
+def args_problem(args: Args) -> str | None:
+    """The first value of ``args`` no session can use (None if all are fine)."""
+    if args.env not in coop_gym.ENV_IDS:
+        return f"--env: unknown env id {args.env!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}"
+    if args.seed is not None and (problem := seed_range_problem("--seed", args.seed)):
+        return problem
+    if problem := output_path_problem(args.csv):
+        return f"--csv: {problem}"
+    if args.fps < 1 or args.episodes < 0:
+        return "--fps must be >= 1 and --episodes >= 0"
+    return None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (usage errors exit 2)."""
-    parser = _parser()
-    args = parser.parse_args(argv)
-    if args.env not in coop_gym.ENV_IDS:
-        parser.error(f"--env: unknown env id {args.env!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
-    if args.seed is not None and (problem := seed_range_problem("--seed", args.seed)):
-        parser.error(problem)
-    if problem := output_path_problem(args.csv):
-        parser.error(f"--csv: {problem}")
-    if args.fps < 1 or args.episodes < 0:
-        parser.error("--fps must be >= 1 and --episodes >= 0")
+    args = parse(Args, argv, PROG, DESCRIPTION + "\n\nKeys: " + ", ".join(f"{k} {v}" for k, v in KEYS.items()))
     try:
         resolve_personas(args.personas if "," not in args.personas else args.personas.split(","))
         played = play(
