@@ -1,10 +1,10 @@
 """Bad command-line flags: exit status 2 and a message naming the problem on stderr.
 
-Covers the command lines that exist: ``python train.py``, ``python -m agents.evaluate``,
-``python -m agents.tools.record``, ``python -m coop_gym.experiment.protocol`` and the ``bench/`` scripts
-(``run.py``, ``cold_start.py``, ``render.py``, ``cleanrl_defaults.py``, ``time_to_quality.py``).
+Covers the command lines that exist: ``python train.py`` and the package's ``python -m`` commands
+(:data:`PACKAGE_CLIS`: typed arguments parsed by :func:`coop_gym.cli.parse`), and the ``bench/``
+scripts (``run.py``, ``cold_start.py``, ``render.py``, ``cleanrl_defaults.py``, ``time_to_quality.py``).
 A command line that no longer imports, or has lost its ``main(argv)``, fails. Cases call
-``main(argv)`` in-process (argparse exits through ``SystemExit``) under an alarm, so a bad flag
+``main(argv)`` in-process (a usage error exits through ``SystemExit``) under an alarm, so a bad flag
 that is wrongly accepted fails the test in seconds instead of starting a training run; one real
 subprocess per command line checks the exit status and stderr end to end.
 """
@@ -112,7 +112,12 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.evaluate", "negative seed", ["--agent", "random", "--seed", "-3"], r"--seed must be >= 0, got -3"),
     ("agents.evaluate", "unknown persona", ["--agent", "random", "--personas", "nobody"], r"--personas: unknown"),
     ("agents.evaluate", "unknown env", ["--agent", "random", "--env", "Nope-v0"], r"--env: unknown env id 'Nope-v0'"),
-    ("agents.evaluate", "unknown backend", ["--agent", "random", "--backend", "gpu"], r"invalid choice 'gpu' for argument '--backend'"),
+    (
+        "agents.evaluate",
+        "unknown backend",
+        ["--agent", "random", "--backend", "gpu"],
+        r"invalid choice 'gpu' for argument '--backend'",
+    ),
     ("coop_gym.experiment.protocol", "unknown flag", ["--bogus"], r"Unrecognized options: --bogus"),
     (
         "coop_gym.experiment.protocol",
@@ -248,6 +253,25 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/learners.py", "seed twice", ["--seeds", "1,1"], r"--seeds: seeds must be distinct and >= 0"),
     ("bench/learners.py", "seed not a number", ["--seeds", "a"], r"--seeds: seeds are whole numbers"),
     ("bench/learners.py", "timesteps 0", ["--timesteps", "0"], r"--timesteps: expected a positive integer, got 0"),
+    ("coop_gym.experiment.calibrate", "unknown estimator", ["--estimators", "nope"], r"--estimators must name some"),
+    ("coop_gym.experiment.calibrate", "seeds 0", ["--seeds", "0"], r"--seeds: expected a positive integer, got 0"),
+    ("coop_gym.experiment.calibrate", "unknown flag", ["--bogus"], r"Unrecognized options: --bogus"),
+    ("agents.tools.play", "unknown env", ["--env", "Nope-v0"], r"--env: unknown env id 'Nope-v0'"),
+    ("agents.tools.play", "fps 0", ["--fps", "0"], r"--fps must be >= 1"),
+    ("agents.tools.play", "unknown pace", ["--pace", "slow"], r"invalid choice 'slow' for argument '--pace'"),
+    ("agents.caregivers.reading", "episodes 0", ["--episodes", "0"], r"--episodes must be positive, got 0"),
+    ("agents.caregivers.tune_baselines", "no family", [], r"\{blind,prober\}"),
+    ("agents.caregivers.tune_baselines", "unknown family", ["nope"], r"invalid choice 'nope' for argument 'family'"),
+    (
+        "agents.caregivers.tune_baselines",
+        "unknown level",
+        ["blind", "--level", "x"],
+        r"invalid choice 'x' for argument '--level'",
+    ),
+    ("agents.caregivers.tune_belief", "episodes 0", ["--episodes", "0"], r"--episodes must be positive, got 0"),
+    ("agents.caregivers.tune_belief", "held-out -1", ["--held-out", "-1"], r"--held-out must be 0 or more, got -1"),
+    ("agents.caregivers.tune_belief", "lift-p 2", ["--lift-p", "2"], r"--lift-p: .*lift_p must be in \[0\.0, 1\.0\]"),
+    ("agents.caregivers.tune_belief", "lift-p empty", ["--lift-p"], r"--lift-p: expected at least one argument"),
     (
         "bench/run.py",
         "repeats not a number",
@@ -438,6 +462,34 @@ def _main_of(cli: str) -> Callable[[list[str]], Any]:
 @pytest.mark.parametrize(("cli", "argv", "match"), _params(CASES))
 def test_bad_flag_exits_2_naming_the_problem(cli: str, argv: list[str], match: str) -> None:
     assert_exit_2_naming(*run_main(_main_of(cli), argv), match)
+
+
+PACKAGE_CLIS = (
+    "coop_gym.experiment.protocol",
+    "coop_gym.experiment.calibrate",
+    "agents.evaluate",
+    "agents.tools.record",
+    "agents.tools.play",
+    "agents.caregivers.reading",
+    "agents.caregivers.tune_baselines",
+    "agents.caregivers.tune_belief",
+)
+"""The package's ``python -m`` command lines: each parses its typed ``Args`` with :func:`coop_gym.cli.parse`."""
+
+
+@pytest.mark.parametrize("cli", PACKAGE_CLIS)
+def test_package_cli_prints_its_help_and_one_line_usage_errors(cli: str) -> None:
+    """``--help`` exits 0 with the usage; an unknown flag is the usage line and one error line naming it."""
+    out = io.StringIO()
+    with alarm(ALARM_S), contextlib.redirect_stdout(out), pytest.raises(SystemExit) as exc:
+        _main_of(cli)(["--help"])
+    assert exc.value.code == 0 and f"usage: python -m {cli}" in out.getvalue()
+    given = ["blind"] if cli == "agents.caregivers.tune_baselines" else []  # its positional family
+    code, err = run_main(_main_of(cli), [*given, "--bogus"])
+    assert_exit_2_naming(code, err, r"Unrecognized options: --bogus")
+    lines = err.splitlines()
+    assert len(lines) == 2 and lines[0] == f"usage: python -m {cli} [-h] [OPTIONS]", err
+    assert lines[1].startswith(f"python -m {cli}: error: "), err
 
 
 # Every CLI checks its output paths before any work (train.py --out, evaluate --csv/--json-out/--plot,

@@ -23,24 +23,26 @@ writes the reliability diagram and the latency curve.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import Annotated, Any
 
 import gymnasium as gym
 import numpy as np
+import tyro
 from numpy.typing import NDArray
 from scipy.special import erfc
 
 import coop_gym  # noqa: F401  (registers the ids)
 from agents.caregivers.scripted import make_scripted
+from coop_gym.cli import BadArgs, parse
 from coop_gym.envs.switching import SwitchingEstimator, SwitchingOptions
 from coop_gym.registration import HARD_ENV_ID
 from estimator.multiple_model import IMMEstimator
 
-__all__ = ["ESTIMATORS", "collect", "main", "summarise"]
+__all__ = ["ESTIMATORS", "PROG", "Args", "collect", "main", "summarise"]
 
 ESTIMATORS = ("kalman", "imm", "switching", "switching_true")
 LAGS_S = tuple(round(0.1 * k, 1) for k in range(0, 31))
@@ -177,19 +179,37 @@ def _plot(summary: dict[str, Any], prefix: str, title: str) -> None:
     fig.savefig(f"{prefix}_latency.png", dpi=110)
 
 
+PROG = "python -m agents.caregivers.reading"
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring is its ``--help``."""
+
+    policy: str = "prober"
+    """the scripted caregiver whose cues are played"""
+    env: str = DEFAULT_ENV_ID
+    """a registered id"""
+    episodes: int = 2000
+    """episodes, one seeded env each"""
+    personas: str = "test"
+    """the personas played: train, test, all, a name or names joined by ','"""
+    seed: int = 0
+    """seed of the first env (env k uses seed + k)"""
+    json_out: str | None = None
+    """write the summary to this JSON file"""
+    png: Annotated[str | None, tyro.conf.arg(metavar="PREFIX")] = None
+    """write PREFIX_reliability.png and PREFIX_latency.png"""
+
+    def __post_init__(self) -> None:
+        """A count no run can use is a usage error naming the flag."""
+        if self.episodes < 1:
+            raise BadArgs(f"--episodes must be positive, got {self.episodes}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: see the module docstring."""
-    parser = argparse.ArgumentParser(prog="python -m agents.caregivers.reading", description=__doc__.splitlines()[0])
-    parser.add_argument("--policy", default="prober", help="the scripted caregiver whose cues are played")
-    parser.add_argument("--env", default=DEFAULT_ENV_ID, help=f"a registered id (default {DEFAULT_ENV_ID})")
-    parser.add_argument("--episodes", type=int, default=2000)
-    parser.add_argument("--personas", default="test")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--json-out", help="write the summary to this JSON file")
-    parser.add_argument("--png", help="write PREFIX_reliability.png and PREFIX_latency.png")
-    args = parser.parse_args(argv)
-    if args.episodes < 1:
-        parser.error(f"--episodes must be positive, got {args.episodes}")
+    args = parse(Args, argv, PROG, __doc__.splitlines()[0])
     summary = summarise(collect(args.policy, args.episodes, args.env, args.personas, args.seed))
     steps = summary["steps"]
     print(f"{args.env}, {args.policy} cues, {args.episodes} episodes, {steps} steps ({args.personas} personas)")

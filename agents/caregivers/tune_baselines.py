@@ -53,15 +53,16 @@ personas); the winners are kept in :data:`agents.caregivers.scripted.TUNED_PROBE
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import itertools
 import time
 from collections.abc import Iterator, Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
 
 import gymnasium as gym
 import numpy as np
+import tyro
 from numpy.typing import NDArray
 
 import coop_gym  # noqa: F401 -- registers the env ids
@@ -75,12 +76,15 @@ from agents.caregivers.scripted import (
     ScriptedAgent,
 )
 from agents.evaluate import evaluate
+from coop_gym.cli import one_of, parse
 from coop_gym.envs.config import Outcome
 from coop_gym.registration import LEVEL_ENV_IDS
 
 __all__ = [
     "ORIGINAL_BLIND_WINNERS",
+    "PROG",
     "TUNING_SEED",
+    "Args",
     "blind_grid",
     "lift_rules",
     "main",
@@ -394,22 +398,28 @@ def describe(settings: BlindSettings) -> str:
     return f"BlindSettings({', '.join(f'{k}={v!r}' for k, v in fields.items())})"
 
 
+PROG = "python -m agents.caregivers.tune_baselines"
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring is its ``--help``."""
+
+    family: tyro.conf.Positional[Literal["blind", "prober"]]
+    """the caregivers searched: the blind family or the probing caregiver"""
+    level: Annotated[str, one_of(tuple(LEVEL_ENV_IDS))] = "hard"
+    """the level searched on"""
+    episodes: int | None = None
+    """episodes per finalist (blind; None: 1000) or setting (prober; None: 300)"""
+    threads: int = 1
+    """threads of the batched env's compiled step"""
+    top: int = 10
+    """rows to print"""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run a search and print the best settings."""
-    parser = argparse.ArgumentParser(
-        prog="python -m agents.caregivers.tune_baselines", description=__doc__.split("\n")[0]
-    )
-    parser.add_argument("family", choices=("blind", "prober"))
-    parser.add_argument("--level", choices=tuple(LEVEL_ENV_IDS), default="hard")
-    parser.add_argument(
-        "--episodes",
-        type=int,
-        default=None,
-        help="episodes per finalist (blind, default 1000) or setting (prober, 300)",
-    )
-    parser.add_argument("--threads", type=int, default=1, help="threads of the batched env's compiled step")
-    parser.add_argument("--top", type=int, default=10, help="rows to print")
-    args = parser.parse_args(argv)
+    args = parse(Args, argv, PROG, (__doc__ or "").split("\n")[0])
     env_id = LEVEL_ENV_IDS[args.level]
     if args.family == "blind":
         t0 = time.perf_counter()

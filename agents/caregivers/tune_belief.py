@@ -24,19 +24,22 @@ their probabilities are calibrated differently, so ``--lift-p`` widens the grid 
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Annotated
 
 import numpy as np
+import tyro
 
 from agents.caregivers.belief import BeliefCaregiver, BeliefSettings
 from agents.caregivers.tune_baselines import TUNING_SEED
 from agents.evaluate import evaluate
+from coop_gym.cli import BadArgs, one_of, parse
 from coop_gym.envs.contract import observation_features
 from coop_gym.model.personas import TRAIN_PERSONAS, resolve_personas
 from coop_gym.registration import HARD_ENV_ID
 
-__all__ = ["ESTIMATORS", "leave_one_out", "main", "settings_grid"]
+__all__ = ["ESTIMATORS", "PROG", "Args", "leave_one_out", "main", "settings_grid"]
 
 ESTIMATORS = ("switching", "imm", "multiple_model")
 """The estimators whose ``P(xi = +1)`` the caregiver can read (``estimator=`` of the env)."""
@@ -104,29 +107,46 @@ def leave_one_out(
     return float(success), float(unsafe)
 
 
+PROG = "python -m agents.caregivers.tune_belief"
+
+
+@dataclass
+class Args:
+    """The command line's arguments; each field's docstring is its ``--help``."""
+
+    env: str = HARD_ENV_ID
+    """the env id searched on"""
+    episodes: int = 128
+    """episodes per training persona"""
+    wide: bool = False
+    """each persona with train.py's train_wide spread"""
+    estimator: Annotated[str, one_of(ESTIMATORS)] = "switching"
+    """whose P(xi = +1) is read"""
+    lift_p: list[float] = field(default_factory=lambda: [BeliefSettings.lift_p])
+    """lift gates the grid tries"""
+    hold_words: bool = False
+    """say "lean forward" through each probe window"""
+    held_out: Annotated[int, tyro.conf.arg(metavar="N")] = 0
+    """also play the winner on N held-out episodes (seeds 0..)"""
+
+    def __post_init__(self) -> None:
+        """The first value no search can use is a usage error naming it."""
+        if self.episodes < 1:
+            raise BadArgs(f"--episodes must be positive, got {self.episodes}")
+        if self.held_out < 0:
+            raise BadArgs(f"--held-out must be 0 or more, got {self.held_out}")
+        if not self.lift_p:
+            raise BadArgs("--lift-p: expected at least one argument")
+        try:
+            settings_grid(self.lift_p, self.hold_words)
+        except ValueError as exc:
+            raise BadArgs(f"--lift-p: {exc}") from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Score :func:`settings_grid` on the TRAINING personas, leaving each out of the filter, and print the best."""
-    parser = argparse.ArgumentParser(prog="python -m agents.caregivers.tune_belief", description=main.__doc__)
-    parser.add_argument("--env", default=HARD_ENV_ID)
-    parser.add_argument("--episodes", type=int, default=128, help="episodes per training persona")
-    parser.add_argument("--wide", action="store_true", help="each persona with train.py's train_wide spread")
-    parser.add_argument("--estimator", choices=ESTIMATORS, default="switching", help="whose P(xi = +1) is read")
-    parser.add_argument(
-        "--lift-p", type=float, nargs="+", default=[BeliefSettings.lift_p], help="lift gates the grid tries"
-    )
-    parser.add_argument("--hold-words", action="store_true", help='say "lean forward" through each probe window')
-    parser.add_argument(
-        "--held-out", type=int, default=0, metavar="N", help="also play the winner on N held-out episodes (seeds 0..)"
-    )
-    args = parser.parse_args(argv)
-    if args.episodes < 1:
-        parser.error(f"--episodes must be positive, got {args.episodes}")
-    if args.held_out < 0:
-        parser.error(f"--held-out must be 0 or more, got {args.held_out}")
-    try:
-        grid = settings_grid(args.lift_p, args.hold_words)
-    except ValueError as exc:
-        parser.error(f"--lift-p: {exc}")
+    args = parse(Args, argv, PROG, main.__doc__)
+    grid = settings_grid(args.lift_p, args.hold_words)
     rows = []
     for settings in grid:
         success, unsafe = leave_one_out(settings, args.env, args.episodes, wide=args.wide, estimator=args.estimator)
