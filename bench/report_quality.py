@@ -348,6 +348,13 @@ unresponsive or cooperative), judged at the paper's {delay_s} s, mean ± std ove
     return "\n".join(sections)
 
 
+def _except_cleanrl(report: dict[str, Any]) -> str:
+    """The learners page's exception: CleanRL's script keeps its own protocol."""
+    if not any(name.startswith("cleanrl-") for name in report["rows"]):
+        return ""
+    return " but `cleanrl-ppo` (CleanRL's `ppo.py` as its user runs it: its settings, its final policy)"
+
+
 def learners(results: Results) -> str:
     """Learner x observation on the hard level (``bench/learners.py``)."""
     head = "### Learners and observations on the hard level\n"
@@ -386,12 +393,13 @@ def learners(results: Results) -> str:
     return f"""{head}
 {_provenance(record)}
 
-Each row trains with `train.py`'s protocol on `{report["env_id"]}` ({report["timesteps"]:,} steps, the
-wider training personas, the best-validated policy of the last half kept) once per training seed,
-and plays the same {report["episodes"]} held-out episodes as the scripted caregivers below (seeds
-0..{report["episodes"] - 1}, the test personas). The interquartile mean over seeds and its
-stratified bootstrap interval follow rliable; the mind-reading score is `(success - blind) /
-(oracle - blind)` per seed. Training seconds were measured with other runs on the machine.
+Each row{_except_cleanrl(report)} trains with `train.py`'s protocol on `{report["env_id"]}`
+({report["timesteps"]:,} steps, the wider training personas, the best-validated policy of the last
+half kept) once per training seed, and plays the same {report["episodes"]} held-out episodes as the
+scripted caregivers below (seeds 0..{report["episodes"] - 1}, the test personas). The
+interquartile mean over seeds and its stratified bootstrap interval follow rliable; the
+mind-reading score is `(success - blind) / (oracle - blind)` per seed. Training
+seconds were measured with other runs on the machine.
 
 {_table(header, rows)}
 """
