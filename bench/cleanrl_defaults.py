@@ -60,11 +60,15 @@ class ScriptAgent:
         return actions.numpy().astype(np.int64), state
 
 
-def run_script(script: Path, env_id: str, total_timesteps: int, seed: int) -> tuple[ScriptAgent, dict[str, Any]]:
-    """Run ``script`` as ``python SCRIPT --env-id coop_gym:ID --total-timesteps N --seed S``; its agent and the run."""
+def run_script(script: Path, env_arg: str, total_timesteps: int, seed: int) -> tuple[ScriptAgent, dict[str, Any]]:
+    """Run ``script`` as ``python SCRIPT --env-id ENV_ARG --total-timesteps N --seed S``; its agent and the run.
+
+    ``env_arg`` is what ``gym.make`` gets, ``module:id`` (``coop_gym:CoopGym/...``) so that the
+    module that registers the id is imported first.
+    """
     torch.set_num_threads(1)
     command = [
-        str(script), "--env-id", f"coop_gym:{env_id}", "--total-timesteps", str(total_timesteps),
+        str(script), "--env-id", env_arg, "--total-timesteps", str(total_timesteps),
         "--seed", str(seed),
     ]  # fmt: skip
     saved_argv = sys.argv
@@ -102,7 +106,7 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    agent, run = run_script(script, args.env_id, args.total_timesteps, args.seed)
+    agent, run = run_script(script, f"coop_gym:{args.env_id}", args.total_timesteps, args.seed)
     name = agent.name
     # Greedy (argmax, SB3's deterministic=True) and sampled (how the script acts while it trains).
     agents = {"greedy": (agent, True), "sampled": (agent, False)}

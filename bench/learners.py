@@ -24,6 +24,8 @@ and the observation it gets (:data:`ROWS`):
   steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
   :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
   is not part of coop_gym, see ``bench/cleanrl_defaults.py``): the library-defaults row;
+  ``cleanrl-ppo-priced``: the same, trained with a timeout priced as a failed assistance
+  (``bench/priced_timeout.py``, a wrapper: no coop_gym id has this reward) and scored on the id;
 - ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
@@ -80,6 +82,8 @@ class Row:
     framework: str = "sb3"
     frame_stack: int = 1
     env_id: str = ENV_ID
+    train_env: str = ""
+    """What CleanRL's script gets as ``--env-id`` (``module:id``); empty: ``coop_gym:`` + ``env_id``."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -108,6 +112,14 @@ ROWS: dict[str, Row] = {
         "CleanRL's ppo.py unmodified on its defaults (its personas, no selection), SitToStandHardDiscreteUnit-v2",
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
+    ),
+    "cleanrl-ppo-priced": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py on its defaults, trained with a timeout priced as a failed assistance (-1)",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        train_env="priced_timeout:PricedTimeout/SitToStandHardDiscreteUnit-v2",
     ),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
@@ -156,7 +168,7 @@ def train_cleanrl(
     from coop_gym.io import save_with
 
     row, _ = _row(name)
-    agent, run = run_script(script, row.env_id, timesteps, seed)
+    agent, run = run_script(script, row.train_env or f"coop_gym:{row.env_id}", timesteps, seed)
     state = agent.module.state_dict()
     save_with(folder / f"{name}__{seed}__{timesteps}.pt", lambda temp: torch.save(state, temp))
     checked = evaluate(agent, row.env_id, VALIDATION_PERSONAS, validation, VALIDATION_SEED)
