@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+import gymnasium as gym
 import numpy as np
 import torch
 from held_out import held_out_report
@@ -86,6 +87,44 @@ def run_script(script: Path, env_arg: str, total_timesteps: int, seed: int) -> t
     run["script_sha256"] = hashlib.sha256(script.read_bytes()).hexdigest()  # which version of the script
     run["wall_time_s"] = wall
     return agent, run
+
+
+# --- hard-v2 with a timeout priced as a failed assistance ---------------------------------
+
+PRICED_BASE_ENV_ID = "CoopGym/SitToStandHardDiscreteUnit-v2"
+PRICED_ENV_ID = "PricedTimeout/SitToStandHardDiscreteUnit-v2"
+"""A measurement aid, not an env version: :data:`PRICED_BASE_ENV_ID` whose reward also subtracts
+:data:`TIMEOUT_PENALTY` when an episode ends in a timeout. On every coop_gym id a timeout costs
+only the time that passed (30 s x 0.01 = 0.3), less than a premature lift (0.5), so a learner that
+has not yet found the person's mind can settle on never lifting. Dynamics, observations and
+outcomes are the id's own, so a policy trained on it is scored on the id itself. Importing this
+module registers it: CleanRL's script takes ``--env-id cleanrl_defaults:PricedTimeout/...``
+(``bench/learners.py``'s ``cleanrl-ppo-priced`` row)."""
+TIMEOUT_PENALTY = 1.0
+"""Subtracted from the last reward of an episode that ends in a timeout: a failed assistance."""
+
+
+class PricedTimeout(gym.Wrapper[Any, Any, Any, Any]):
+    """Subtracts ``penalty`` from the reward of the step whose outcome is ``timeout``."""
+
+    def __init__(self, env: gym.Env[Any, Any], penalty: float = TIMEOUT_PENALTY) -> None:
+        super().__init__(env)
+        self.penalty = float(penalty)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        if info.get("outcome") == "timeout":
+            reward = float(reward) - self.penalty
+        return observation, float(reward), terminated, truncated, info
+
+
+def make_priced(**kwargs: Any) -> gym.Env[Any, Any]:
+    """:data:`PRICED_BASE_ENV_ID` made as registered (its time limit included), in :class:`PricedTimeout`."""
+    return PricedTimeout(gym.make(PRICED_BASE_ENV_ID, **kwargs))
+
+
+if PRICED_ENV_ID not in gym.registry:
+    gym.register(PRICED_ENV_ID, entry_point=make_priced)
 
 
 def main(argv: list[str] | None = None) -> None:

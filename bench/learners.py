@@ -25,7 +25,7 @@ and the observation it gets (:data:`ROWS`):
   :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
   is not part of coop_gym, see ``bench/cleanrl_defaults.py``): the library-defaults row;
   ``cleanrl-ppo-priced``: the same, trained with a timeout priced as a failed assistance
-  (``bench/priced_timeout.py``, a wrapper: no coop_gym id has this reward) and scored on the id;
+  (``bench/cleanrl_defaults.py``'s ``PricedTimeout``, a wrapper: no coop_gym id has this reward) and scored on the id;
 - ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
@@ -119,7 +119,7 @@ ROWS: dict[str, Row] = {
         "CleanRL's ppo.py on its defaults, trained with a timeout priced as a failed assistance (-1)",
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
-        train_env="priced_timeout:PricedTimeout/SitToStandHardDiscreteUnit-v2",
+        train_env="cleanrl_defaults:PricedTimeout/SitToStandHardDiscreteUnit-v2",
     ),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:

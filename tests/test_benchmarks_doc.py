@@ -98,7 +98,7 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "learners",
             [
                 "--rows",
-                "ppo-kalman,cleanrl-ppo",
+                "ppo-kalman,cleanrl-ppo,cleanrl-ppo-priced",
                 "--cleanrl-script",
                 str(tmp / "standin.py"),
                 "--seeds",
