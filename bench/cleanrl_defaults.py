@@ -6,8 +6,8 @@ runs one as a user would (``python ppo.py --env-id ... --total-timesteps N``, th
 script's globals and scores it with the common evaluation path
 (:func:`agents.evaluate.evaluate`) on the held-out personas: greedy (argmax of the policy's
 logits, what SB3's ``deterministic=True`` means) and sampled (how the script acts while it
-trains). The script is not part of coop_gym; fetch it from CleanRL (``cleanrl/ppo.py``,
-needs ``pip install tyro``)::
+trains). The script is not part of coop_gym; fetch it from CleanRL (``cleanrl/ppo.py``;
+the tyro it needs comes with coop_gym)::
 
     python bench/cleanrl_defaults.py --script ppo.py --env-id CoopGym/SitToStandDiscreteUnit-v0 \\
         --total-timesteps 1000000 --out runs/cleanrl

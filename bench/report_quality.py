@@ -171,7 +171,7 @@ each, scored greedy on held-out episodes beside the handbook caregiver on the sa
 the unit-scaled ids, whose every observation feature is about [-1, 1]).
 `bench/library_defaults.py` trains SB3's `PPO("MlpPolicy", id)` or `DQN("MlpPolicy", id)` as a
 user writes it; `bench/cleanrl_defaults.py` runs CleanRL's `ppo.py` unmodified (fetched
-separately, with `pip install tyro`) and scores its agent both greedy and sampled.
+separately; its tyro comes with coop_gym) and scores its agent both greedy and sampled.
 """
     if not records:
         return head + intro + "\n" + _missing("python bench/library_defaults.py --algo ppo") + "\n"
