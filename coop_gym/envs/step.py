@@ -163,21 +163,19 @@ def _record_readings(
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")
 def _report_belief(row: NDArray[np.float64], episode_s: float) -> None:
     # The features after a non-lift step: the cue, the filter's belief, the judgment, the clocks.
-    report = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
-    cue = row[BLOCKS.cues : BLOCKS.cues + len(CUE_COLUMNS)]
-    judge = row[BLOCKS.judge : BLOCKS.judge + len(JUDGMENT_COLUMNS)]
-    mean = row[BLOCKS.mean : BLOCKS.mean + STATE_DIM]
-    covariance = row[BLOCKS.cov : BLOCKS.cov + STATE_DIM * STATE_DIM].reshape((STATE_DIM, STATE_DIM))
-    report[REPORT.verbal_cue] = cue[CUES.verbal_value]
-    report[REPORT.time_since_cue_onset_s] = min(judge[JUDGE.since_onset_s], episode_s)
-    report[REPORT.x_hat_m] = mean[0]
-    report[REPORT.xdot_hat_m_per_s] = mean[1]
-    report[REPORT.eta_hat_m] = mean[2]
-    report[REPORT.xi_hat] = mean[3]
-    report[REPORT.xi_std] = np.sqrt(max(covariance[3, 3], 0.0))
-    report[REPORT.judgment] = judge[JUDGE.judgment]
-    report[REPORT.elapsed_s] = cue[CUES.elapsed_s]
-    report[REPORT.true_xi] = row[BLOCKS.person + STATE.xi]
+    # Read and written at their offsets in the row, as _record_readings does: a view made here (and
+    # the covariance's reshape) would cost reference counting and a reshape call on every env step.
+    at = BLOCKS.report
+    row[at + REPORT.verbal_cue] = row[BLOCKS.cues + CUES.verbal_value]
+    row[at + REPORT.time_since_cue_onset_s] = min(row[BLOCKS.judge + JUDGE.since_onset_s], episode_s)
+    row[at + REPORT.x_hat_m] = row[BLOCKS.mean + 0]
+    row[at + REPORT.xdot_hat_m_per_s] = row[BLOCKS.mean + 1]
+    row[at + REPORT.eta_hat_m] = row[BLOCKS.mean + 2]
+    row[at + REPORT.xi_hat] = row[BLOCKS.mean + 3]
+    row[at + REPORT.xi_std] = np.sqrt(max(row[BLOCKS.cov + 3 * STATE_DIM + 3], 0.0))  # covariance[3, 3]
+    row[at + REPORT.judgment] = row[BLOCKS.judge + JUDGE.judgment]
+    row[at + REPORT.elapsed_s] = row[BLOCKS.cues + CUES.elapsed_s]
+    row[at + REPORT.true_xi] = row[BLOCKS.person + STATE.xi]
 
 
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")
