@@ -352,7 +352,7 @@ def _except_cleanrl(report: dict[str, Any]) -> str:
     """The learners page's exception: CleanRL's script keeps its own protocol."""
     if not any(name.startswith("cleanrl-") for name in report["rows"]):
         return ""
-    return " but `cleanrl-ppo` (CleanRL's `ppo.py` as its user runs it: its settings, its final policy)"
+    return " but the `cleanrl-*` ones (CleanRL's `ppo.py` as its user runs it: its settings, its final policy)"
 
 
 def learners(results: Results) -> str:

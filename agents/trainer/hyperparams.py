@@ -177,9 +177,9 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
         # less per step (python bench/time_to_quality.py --env ID --contenders default,default@64).
         # The hard level's -v2 (slower recruiting, steadier willingness): the same settings.
         # An entropy bonus of 0.02 (twice -v0's): with 0.01 some seeds, after lifting unsafely
-        # early on, settle on never lifting (a timeout costs less than a failed lift) and never
-        # learn to read the person; chosen on the training personas' validation episodes
-        # (python bench/learners.py --rows ppo-kalman; bench/results/learners.json).
+        # early on, settle on never lifting and never learn to read the person; chosen on the
+        # training personas' validation episodes (python bench/learners.py --rows ppo-kalman;
+        # bench/results/learners.json).
         **{env_id: _PPO_HARD.replace(env_id=env_id) for env_id in _HARD_IDS},
     },
     "recurrent_ppo": {
