@@ -116,7 +116,7 @@ ROWS: dict[str, Row] = {
     "cleanrl-ppo-priced": Row(
         "ppo",
         {},
-        "CleanRL's ppo.py on its defaults, trained with a timeout priced as a failed assistance (-1)",
+        "CleanRL's ppo.py on its defaults, trained with a timeout priced as a failed assistance (-1), scored on the id",
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
         train_env="cleanrl_defaults:PricedTimeout/SitToStandHardDiscreteUnit-v2",
@@ -275,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
         "--no-train", action="store_true", help="report the (row, seed) runs already in --runs; train none"
     )
     parser.add_argument(
-        "--cleanrl-script", type=Path, default=None, help="CleanRL's ppo.py, to train the cleanrl-ppo row"
+        "--cleanrl-script", type=Path, default=None, help="CleanRL's ppo.py, to train the cleanrl-* rows"
     )
     add_save_argument(parser, "learners.json")
     args = parser.parse_args(argv)
@@ -285,6 +285,15 @@ def main(argv: list[str] | None = None) -> int:
     problem = output_path_problem(str(args.runs), folder=True)
     if problem:
         parser.error(f"--runs: {problem}")
+    to_run = [
+        name
+        for name in args.rows
+        for seed in args.seeds
+        if not (args.runs / f"{name}__{seed}__{args.timesteps}.json").exists()
+    ]
+    needs_script = not args.no_train and any(_row(name)[0].framework == "cleanrl" for name in to_run)
+    if needs_script and (args.cleanrl_script is None or not args.cleanrl_script.is_file()):
+        parser.error(f"--cleanrl-script: the cleanrl-* rows need CleanRL's ppo.py, got {args.cleanrl_script}")
 
     args.runs.mkdir(parents=True, exist_ok=True)
     reference_file = args.runs / f"scripted__{args.episodes}.json"
@@ -300,8 +309,6 @@ def main(argv: list[str] | None = None) -> int:
             if not path.exists() and args.no_train:
                 continue
             if not path.exists() and _row(name)[0].framework == "cleanrl":
-                if args.cleanrl_script is None or not args.cleanrl_script.is_file():
-                    parser.error(f"{name}: --cleanrl-script must name CleanRL's ppo.py (got {args.cleanrl_script})")
                 run = train_cleanrl(
                     name, args.cleanrl_script, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes
                 )

@@ -253,6 +253,13 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/learners.py", "seed twice", ["--seeds", "1,1"], r"--seeds: seeds must be distinct and >= 0"),
     ("bench/learners.py", "seed not a number", ["--seeds", "a"], r"--seeds: seeds are whole numbers"),
     ("bench/learners.py", "timesteps 0", ["--timesteps", "0"], r"--timesteps: expected a positive integer, got 0"),
+    ("bench/learners.py", "cleanrl row at 8 envs", ["--rows", "cleanrl-ppo@8"], r"--rows: unknown row\(s\)"),
+    (
+        "bench/learners.py",
+        "cleanrl row without the script",
+        ["--rows", "cleanrl-ppo", "--seeds", "4294967295"],
+        r"--cleanrl-script: the cleanrl-\* rows need CleanRL's ppo.py, got None",
+    ),
     ("coop_gym.experiment.calibrate", "unknown estimator", ["--estimators", "nope"], r"--estimators must name some"),
     ("coop_gym.experiment.calibrate", "seeds 0", ["--seeds", "0"], r"--seeds: expected a positive integer, got 0"),
     ("coop_gym.experiment.calibrate", "unknown flag", ["--bogus"], r"Unrecognized options: --bogus"),
