@@ -79,7 +79,7 @@ _RUNS_HELP = (
 )
 _THREADS_HELP = (
     "torch CPU threads of a --model's policy (as train.py: these small networks gain nothing from more, "
-    "and two evaluations at once on 2 cores ran 8x slower on torch's default)"
+    "and evaluations side by side contend for the cores under torch's default)"
 )
 
 

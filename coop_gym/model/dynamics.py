@@ -194,7 +194,7 @@ def zoh_coefficients_batch(
     results are equal bit for bit (tests/coop_gym/test_vector.py); only the loops are turned
     around. One person's Taylor sum waits on its divisions one term after the other, while the
     people of a batch are independent: with the people in the inner loop the compiler runs
-    several divisions at once (SIMD), ~3x faster for a batch of resets.
+    several divisions at once (SIMD) for a batch of resets (``python bench/reset.py``).
 
     Args:
         damping_rate_per_s: (m,) each person's damping ``lambda1`` [1/s].

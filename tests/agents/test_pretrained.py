@@ -71,7 +71,7 @@ def test_train_py_scores_a_pretrained_model_by_name(tmp_path):
 
 
 def test_the_evaluate_command_sets_the_policys_torch_threads(capsys):
-    """One thread by default (as train.py): two evaluations at once on 2 cores ran 8x slower on torch's default."""
+    """One thread by default (as train.py): evaluations side by side contend for the cores under torch's default."""
     import torch
 
     before = torch.get_num_threads()
