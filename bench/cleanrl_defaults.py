@@ -61,8 +61,10 @@ class ScriptAgent:
         return actions.numpy().astype(np.int64), state
 
 
-def run_script(script: Path, env_arg: str, total_timesteps: int, seed: int) -> tuple[ScriptAgent, dict[str, Any]]:
-    """Run ``script`` as ``python SCRIPT --env-id ENV_ARG --total-timesteps N --seed S``; its agent and the run.
+def run_script(
+    script: Path, env_arg: str, total_timesteps: int, seed: int, extra: tuple[str, ...] = ()
+) -> tuple[ScriptAgent, dict[str, Any]]:
+    """Run ``script`` as ``python SCRIPT --env-id ENV_ARG --total-timesteps N --seed S [EXTRA]``; its agent and the run.
 
     ``env_arg`` is what ``gym.make`` gets, ``module:id`` (``coop_gym:CoopGym/...``) so that the
     module that registers the id is imported first.
@@ -70,7 +72,7 @@ def run_script(script: Path, env_arg: str, total_timesteps: int, seed: int) -> t
     torch.set_num_threads(1)
     command = [
         str(script), "--env-id", env_arg, "--total-timesteps", str(total_timesteps),
-        "--seed", str(seed),
+        "--seed", str(seed), *extra,
     ]  # fmt: skip
     saved_argv = sys.argv
     sys.argv = command

@@ -26,6 +26,8 @@ and the observation it gets (:data:`ROWS`):
   is not part of coop_gym, see ``bench/cleanrl_defaults.py``): the library-defaults row;
   ``cleanrl-ppo-priced``: the same, trained with a timeout priced as a failed assistance
   (``bench/cleanrl_defaults.py``'s ``PricedTimeout``, a wrapper: no coop_gym id has this reward) and scored on the id;
+  ``cleanrl-ppo-ent02``: the same script on the id with one flag changed, ``--ent-coef 0.02``
+  (``train.py``'s entropy bonus, CleanRL's default is 0.01);
 - ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
@@ -84,6 +86,8 @@ class Row:
     env_id: str = ENV_ID
     train_env: str = ""
     """What CleanRL's script gets as ``--env-id`` (``module:id``); empty: ``coop_gym:`` + ``env_id``."""
+    script_args: tuple[str, ...] = ()
+    """Flags CleanRL's script gets beyond its defaults (e.g. ``("--ent-coef", "0.02")``)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -120,6 +124,14 @@ ROWS: dict[str, Row] = {
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
         train_env="cleanrl_defaults:PricedTimeout/SitToStandHardDiscreteUnit-v2",
+    ),
+    "cleanrl-ppo-ent02": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py on its defaults but train.py's entropy bonus (--ent-coef 0.02), SitToStandHardDiscreteUnit-v2",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        script_args=("--ent-coef", "0.02"),
     ),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
@@ -168,7 +180,7 @@ def train_cleanrl(
     from coop_gym.io import save_with
 
     row, _ = _row(name)
-    agent, run = run_script(script, row.train_env or f"coop_gym:{row.env_id}", timesteps, seed)
+    agent, run = run_script(script, row.train_env or f"coop_gym:{row.env_id}", timesteps, seed, row.script_args)
     state = agent.module.state_dict()
     save_with(folder / f"{name}__{seed}__{timesteps}.pt", lambda temp: torch.save(state, temp))
     checked = evaluate(agent, row.env_id, VALIDATION_PERSONAS, validation, VALIDATION_SEED)

@@ -98,7 +98,7 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "learners",
             [
                 "--rows",
-                "ppo-kalman,cleanrl-ppo,cleanrl-ppo-priced",
+                "ppo-kalman,cleanrl-ppo,cleanrl-ppo-priced,cleanrl-ppo-ent02",
                 "--cleanrl-script",
                 str(tmp / "standin.py"),
                 "--seeds",
@@ -160,6 +160,11 @@ def test_each_bench_script_writes_its_results_file_and_the_page_renders_from_the
     finally:
         torch.set_num_threads(threads)
     assert {path.stem for path in results.glob("*.json")} == {stem for *_, stem in cases} | {"cold_start"}
+    # A cleanrl row's own flags reach the script, after the common ones.
+    ent02 = json.loads((tmp_path / "learners" / "cleanrl-ppo-ent02__0__64.json").read_text(encoding="utf-8"))
+    assert ent02["script_command"][-2:] == ["--ent-coef", "0.02"]
+    plain = json.loads((tmp_path / "learners" / "cleanrl-ppo__0__64.json").read_text(encoding="utf-8"))
+    assert "--ent-coef" not in plain["script_command"]
     for path in results.glob("*.json"):
         record = json.loads(path.read_text(encoding="utf-8"))
         assert record["command"].startswith(f"python bench/{record['benchmark']}.py"), path
