@@ -39,6 +39,7 @@ from coop_gym.io import atomic_path, write_bytes, write_json
 __all__ = [
     "BUNDLE_INFO",
     "BUNDLE_VECNORMALIZE",
+    "GreedyActor",
     "SB3Agent",
     "load_agent",
     "load_model",
@@ -205,6 +206,68 @@ def load_model(path: str | Path, env: VecEnv | None = None, **kwargs: Any) -> tu
     raise ValueError(f"could not load {model_path} as any of {algos}: {'; '.join(errors)}")
 
 
+class GreedyActor:
+    """SB3's ``policy.predict(obs, deterministic=True)`` of an MLP actor-critic, without its per-call overhead.
+
+    The same torch modules on the same tensors, then what SB3's categorical distributions do
+    for their mode: each head's logits normalised by their ``logsumexp`` (``Categorical``),
+    ``softmax`` into probabilities, the ``argmax`` of the probabilities. So the actions are
+    SB3's, bit for bit; what is left out is the per-call work around them (building a torch
+    ``Distribution`` per head and validating its arguments, switching every module to eval
+    mode, checking the observation's shape), which costs several times the forward pass on
+    an evaluation's batch of envs.
+
+    :meth:`of` gives one for a policy it covers (SB3's ``ActorCriticPolicy`` itself, a flat
+    ``Box`` observation, a ``Discrete`` or ``MultiDiscrete`` action), else None.
+    """
+
+    def __init__(self, policy: Any, heads: list[int] | None) -> None:
+        self.policy = policy
+        self.heads = heads  # None: one Discrete action
+
+    @classmethod
+    def of(cls, policy: Any) -> GreedyActor | None:
+        """The greedy actor of ``policy``, or None where SB3's own ``predict`` must answer."""
+        from stable_baselines3.common.distributions import CategoricalDistribution, MultiCategoricalDistribution
+        from stable_baselines3.common.policies import ActorCriticPolicy
+        from stable_baselines3.common.preprocessing import is_image_space
+        from stable_baselines3.common.torch_layers import FlattenExtractor
+
+        space = policy.observation_space
+        if type(policy) is not ActorCriticPolicy or not isinstance(space, spaces.Box) or is_image_space(space):
+            return None
+        if not isinstance(policy.pi_features_extractor, FlattenExtractor) or len(space.shape) != 1:
+            return None
+        if type(policy.action_dist) is CategoricalDistribution:
+            return cls(policy, None)
+        if type(policy.action_dist) is MultiCategoricalDistribution:
+            return cls(policy, [int(n) for n in policy.action_dist.action_dims])
+        return None
+
+    def __call__(self, obs: NDArray[Any]) -> NDArray[np.int64]:
+        """Actions ``(N,)`` or ``(N, heads)`` for a batch of (normalised) observations ``(N, D)``."""
+        import torch
+
+        policy = self.policy
+        if policy.training:
+            policy.set_training_mode(False)
+        with torch.inference_mode():
+            features = policy.pi_features_extractor(torch.as_tensor(np.asarray(obs)).float())
+            logits = policy.action_net(policy.mlp_extractor.forward_actor(features))
+            if self.heads is None:
+                return _mode(logits).numpy()  # type: ignore[no-any-return]
+            modes = [_mode(head) for head in torch.split(logits, self.heads, dim=1)]
+            return torch.stack(modes, dim=1).numpy()  # type: ignore[no-any-return]
+
+
+def _mode(logits: Any) -> Any:
+    """``argmax`` of ``Categorical(logits=logits).probs``, as SB3's distributions take their mode."""
+    import torch
+
+    normalised = logits - logits.logsumexp(dim=-1, keepdim=True)
+    return torch.argmax(torch.nn.functional.softmax(normalised, dim=-1), dim=1)
+
+
 class SB3Agent:
     """A trained SB3 model behind the common ``predict`` protocol, with its observation normalisation.
 
@@ -254,6 +317,7 @@ class SB3Agent:
             d = space.shape[-1] // frame_stack
             self.observation_space = spaces.Box(space.low[..., -d:], space.high[..., -d:], dtype=space.dtype)
         self.action_space = model.action_space
+        self._greedy: tuple[Any, GreedyActor | None] = (None, None)  # (the policy, its greedy actor)
 
     def normalize(self, observation: NDArray[Any]) -> NDArray[np.float32]:
         """Apply the saved observation normalisation (identity without one)."""
@@ -272,12 +336,24 @@ class SB3Agent:
         obs = self.normalize(observation)
         if episode_start is not None:
             episode_start = np.asarray(episode_start, dtype=bool).reshape(-1)
+        greedy = self._greedy_actor() if deterministic else None
         if self.frame_stack == 1:
+            if greedy is not None and obs.ndim == 2 and obs.shape[1:] == self.observation_space.shape:
+                return greedy(obs), state
             return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
         single = obs.ndim == 1
         stack = self._push(obs.reshape(1, -1) if single else obs, np.asarray(observation), state, episode_start)
+        if greedy is not None and not single:
+            return greedy(stack), stack
         actions, _ = self.model.predict(stack[0] if single else stack, deterministic=deterministic)
         return actions, stack
+
+    def _greedy_actor(self) -> GreedyActor | None:
+        """The :class:`GreedyActor` of the model's current policy (None: SB3's ``predict`` answers)."""
+        policy = self.model.policy
+        if self._greedy[0] is not policy:
+            self._greedy = (policy, GreedyActor.of(policy))
+        return self._greedy[1]
 
     def _push(
         self,

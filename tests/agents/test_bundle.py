@@ -159,3 +159,60 @@ def test_compare_of_models_of_different_envs_needs_env(saved, tmp_path, capsys):
         main(["--compare", f"{folder / MODEL_FILE},{saved / MODEL_FILE},handbook", "--episodes", "4"])
     assert exit_info.value.code == 2
     assert "trained on different envs" in capsys.readouterr().err
+
+
+def _sb3_actions(agent, obs):
+    """What SB3's own ``predict`` answers (the agent's greedy shortcut switched off)."""
+    agent._greedy = (agent.model.policy, None)
+    try:
+        return agent.predict(obs, deterministic=True)[0]
+    finally:
+        agent._greedy = (None, None)
+
+
+@pytest.mark.parametrize("name", ["pretrained:hard-v2-ppo", "pretrained:hard-ppo-switching", "discrete"])
+def test_the_greedy_shortcut_acts_as_sb3s_predict_bit_for_bit(name, tmp_path):
+    from agents.rl.bundle import GreedyActor
+
+    if name == "discrete":  # a Discrete action space (the ids CleanRL's scripts take)
+        env = make_train_env("CoopGym/SitToStandHardDiscreteUnit-v2", 2, 0)
+        config = hyperparams_for("ppo", "CoopGym/SitToStandHardDiscreteUnit-v2").replace(normalize=False)
+        model = make_model(config, env, 0, overrides={"n_steps": 32, "batch_size": 32, "n_epochs": 1})
+        model.learn(64)
+        save_agent(model, tmp_path, algo="ppo", env_id="CoopGym/SitToStandHardDiscreteUnit-v2")
+        name = str(tmp_path)
+    agent = load_agent(name)
+    assert GreedyActor.of(agent.model.policy) is not None
+    rng = np.random.default_rng(0)
+    dim = agent.observation_space.shape[0]
+    # Wide random observations (many near-ties between heads' logits) and one repeated row.
+    obs = np.concatenate([rng.normal(0, 3, (20_000, dim)), np.ones((3, dim))]).astype(np.float32)
+    fast = agent.predict(obs, deterministic=True)[0]
+    np.testing.assert_array_equal(fast, _sb3_actions(agent, obs))
+    assert fast.dtype == _sb3_actions(agent, obs).dtype and fast.shape == _sb3_actions(agent, obs).shape
+    # Whole evaluations: the same records.
+    env_id = agent.env_id
+    kwargs = agent.env_kwargs
+    played = evaluate(agent, env_id, "test", 24, 5, env_kwargs=kwargs).records
+    assert played == _evaluate_without_shortcut(agent, env_id, kwargs)
+
+
+def _evaluate_without_shortcut(agent, env_id, kwargs):
+    original = agent._greedy_actor
+    agent._greedy_actor = lambda: None
+    try:
+        return evaluate(agent, env_id, "test", 24, 5, env_kwargs=kwargs).records
+    finally:
+        agent._greedy_actor = original
+
+
+def test_the_greedy_shortcut_leaves_other_policies_to_sb3(saved):
+    from agents.rl.bundle import GreedyActor
+
+    env = make_train_env("CoopGym/SitToStandDiscrete-v0", 1, 0)
+    dqn = make_model(hyperparams_for("dqn"), env, 0, overrides={"learning_starts": 0})
+    assert GreedyActor.of(dqn.policy) is None  # a Q-network: SB3's predict
+    agent = load_agent(saved)
+    assert GreedyActor.of(agent.model.policy) is not None
+    single = np.zeros(agent.observation_space.shape, dtype=np.float32)  # one observation: SB3's path
+    assert agent.predict(single, deterministic=True)[0].shape == agent.action_space.shape
