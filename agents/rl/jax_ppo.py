@@ -65,8 +65,17 @@ class _RolloutPolicy:
     def __init__(self, params: dict[str, list[tuple[Any, Any]]], nvec: list[int], relu: bool) -> None:
         self.pi = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["pi"]]
         self.vf = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["vf"]]
-        self.bounds = np.cumsum([0, *nvec])
         self.activation = (lambda x: np.maximum(x, 0.0)) if relu else np.tanh
+        # All heads at once: head h's logits in row h of a (heads, widest) block, padded with a
+        # -inf logit (column `total` of the logits with one -inf column appended), whose
+        # probability is exactly 0.
+        total, widest = sum(nvec), max(nvec)
+        bounds = np.cumsum([0, *nvec])
+        columns = np.full((len(nvec), widest), total)
+        for head, n in enumerate(nvec):
+            columns[head, :n] = np.arange(bounds[head], bounds[head] + n)
+        self.columns = columns.ravel()
+        self.last = np.asarray(nvec) - 1
 
     def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
         for weight, bias in layers[:-1]:
@@ -83,21 +92,31 @@ class _RolloutPolicy:
         return actions, self.value(obs), log_prob
 
     def sample(self, logits: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """``(actions (n, heads), log_probs)`` drawn from the action logits, each head by its inverse CDF."""
-        heads = len(self.bounds) - 1
-        actions = np.empty((logits.shape[0], heads), dtype=np.int32)
-        log_prob = np.zeros(logits.shape[0], dtype=np.float32)
-        uniform = rng.random((logits.shape[0], heads), dtype=np.float32)
-        rows = np.arange(logits.shape[0])
+        """``(actions (n, heads), log_probs)`` drawn from the action logits, each head by its inverse CDF.
+
+        Per head, with one uniform ``u`` per head and row::
+
+            log_p  = logits - max(logits) - log(sum(exp(logits - max(logits))))
+            action = min(#{j : u > cumsum(exp(log_p))_j}, n_head - 1)
+
+        and ``log_prob`` the sum of the heads' ``log_p[action]``, added head by head. The
+        block of all heads is C-contiguous, so each head's sums run as they would on that
+        head alone (tests/agents/test_jax_ppo.py holds it to the head-by-head form).
+        """
+        n, heads = logits.shape[0], len(self.last)
+        uniform = rng.random((n, heads), dtype=np.float32)
+        padded = np.empty((n, logits.shape[1] + 1), dtype=logits.dtype)
+        padded[:, :-1], padded[:, -1] = logits, -np.inf
+        block = np.take(padded, self.columns, axis=1).reshape(n, heads, -1)
+        shifted = block - block.max(axis=2, keepdims=True)
+        log_p = shifted - np.log(np.exp(shifted).sum(axis=2, keepdims=True))
+        cdf = np.cumsum(np.exp(log_p), axis=2)
+        choice = np.minimum((uniform[:, :, None] > cdf).sum(axis=2), self.last)
+        picked = np.take_along_axis(log_p, choice[:, :, None], axis=2)[:, :, 0]
+        log_prob = np.zeros(n, dtype=np.float32)
         for head in range(heads):
-            block = logits[:, self.bounds[head] : self.bounds[head + 1]]
-            shifted = block - block.max(axis=1, keepdims=True)
-            log_p = shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
-            cdf = np.cumsum(np.exp(log_p), axis=1)
-            choice = np.minimum((uniform[:, head : head + 1] > cdf).sum(axis=1), block.shape[1] - 1)
-            actions[:, head] = choice
-            log_prob += log_p[rows, choice]
-        return actions, log_prob
+            log_prob += picked[:, head]
+        return choice.astype(np.int32), log_prob
 
 
 class JaxTraining:

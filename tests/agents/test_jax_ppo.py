@@ -75,6 +75,40 @@ def test_the_rollout_policy_is_the_torch_policy():
     assert greedy.shape == (obs.shape[0], 3)
 
 
+def _head_by_head(logits, nvec, rng):
+    """The rollout's sampling written one head at a time (the form the all-heads sampler must equal)."""
+    bounds = np.cumsum([0, *nvec])
+    actions = np.empty((logits.shape[0], len(nvec)), dtype=np.int32)
+    log_prob = np.zeros(logits.shape[0], dtype=np.float32)
+    uniform = rng.random((logits.shape[0], len(nvec)), dtype=np.float32)
+    for head in range(len(nvec)):
+        block = logits[:, bounds[head] : bounds[head + 1]]
+        shifted = block - block.max(axis=1, keepdims=True)
+        log_p = shifted - np.log(np.exp(shifted).sum(axis=1, keepdims=True))
+        cdf = np.cumsum(np.exp(log_p), axis=1)
+        choice = np.minimum((uniform[:, head : head + 1] > cdf).sum(axis=1), block.shape[1] - 1)
+        actions[:, head] = choice
+        log_prob += log_p[np.arange(logits.shape[0]), choice]
+    return actions, log_prob
+
+
+@pytest.mark.parametrize("nvec", [[3, 3, 2], [18], [2, 5, 3, 4]])
+def test_all_heads_sample_as_each_head_alone_bit_for_bit(nvec):
+    from agents.rl.jax_ppo import _RolloutPolicy
+
+    policy = _RolloutPolicy({"pi": [], "vf": []}, nvec, relu=False)
+    for trial in range(120):
+        rows, scale = [1, 16, 64, 256][trial % 4], [0.1, 1.0, 5.0, 30.0][trial % 4]
+        logits = np.random.default_rng(trial).normal(0, scale, (rows, sum(nvec))).astype(np.float32)
+        if trial % 3 == 0:
+            logits[:, 1] = logits[:, 0]  # an exact tie
+        actions, log_prob = policy.sample(logits, np.random.default_rng(trial))
+        expected_actions, expected_log_prob = _head_by_head(logits, nvec, np.random.default_rng(trial))
+        assert actions.dtype == expected_actions.dtype and log_prob.dtype == expected_log_prob.dtype
+        np.testing.assert_array_equal(actions, expected_actions)
+        np.testing.assert_array_equal(log_prob.view(np.int32), expected_log_prob.view(np.int32))
+
+
 def test_a_saved_model_loads_plays_and_continues(tmp_path):
     model = _model()
     model.learn(256)
