@@ -19,7 +19,7 @@ and the observation it gets (:data:`ROWS`):
   :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (the hard level's RecurrentPPO settings: PPO's,
   with an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
-  samples) compares sizings;
+  samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
 - ``cleanrl-ppo``: CleanRL's public ``ppo.py``, unmodified, on its defaults (4 envs x 128
   steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
   :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
@@ -135,23 +135,31 @@ ROWS: dict[str, Row] = {
     ),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
-memory of a fixed window, 0.1 s per frame); ``ROW@N`` is a ``jax-*`` row on ``N`` envs."""
+memory of a fixed window, 0.1 s per frame); ``ROW@N`` is a ``jax-*`` row on ``N`` envs, ``ROW@N-eE``
+the same with ``E`` epochs per update."""
 
 
-def _row(name: str) -> tuple[Row, int | None]:
-    """The row of a name (``ROW``, ``ROW-stackK``, ``ROW@N``), and the env count of ``@N`` (None: the row's own)."""
+def _row(name: str) -> tuple[Row, tuple[int, int | None] | None]:
+    """The row of a name (``ROW``, ``ROW-stackK``, ``ROW@N``, ``ROW@N-eE``) and its sizing.
+
+    The sizing is ``(N, E)`` (``E`` None: the row's own epochs), or None: the row's own.
+    """
     base, _, size = name.partition("@")
     stacked = re.fullmatch(r"(.+)-stack([1-9][0-9]*)", base)
     key = stacked.group(1) if stacked else base
     if key not in ROWS or ((size or stacked) and ROWS[key].framework == "cleanrl"):
         raise KeyError(name)
-    if size and not (size.isdigit() and int(size) > 0 and ROWS[key].framework == "jax"):
+    sizing = re.fullmatch(r"([1-9][0-9]*)(?:-e([1-9][0-9]*))?", size) if size else None
+    if size and (sizing is None or ROWS[key].framework != "jax"):
         raise KeyError(name)
     row = ROWS[key]
     if stacked:
         k = int(stacked.group(2))
         row = dataclasses.replace(row, frame_stack=k, what=f"{row.what}, last {k} observations stacked")
-    return row, int(size) if size else None
+    if sizing is None:
+        return row, None
+    epochs = int(sizing.group(2)) if sizing.group(2) else None
+    return row, (int(sizing.group(1)), epochs)
 
 
 def _rows(text: str) -> list[str]:
@@ -163,7 +171,7 @@ def _rows(text: str) -> list[str]:
         except KeyError:
             unknown.append(n)
     if unknown or not names:
-        known = f"{', '.join(ROWS)} (also ROW-stackK; jax-* rows: ROW@N)"
+        known = f"{', '.join(ROWS)} (also ROW-stackK; jax-* rows: ROW@N, ROW@N-eE)"
         raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {known}")
     return names
 
@@ -208,13 +216,17 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)  # as train.py --threads
-    row, n_envs = _row(name)
+    row, sizing = _row(name)
     config = hyperparams_for(row.algo, ENV_ID, row.framework).replace(total_timesteps=timesteps, personas="train_wide")
-    if n_envs is not None:  # the same samples per update on n_envs envs
+    if sizing is not None:  # the same samples per update on N envs (and E epochs)
+        n_envs, epochs = sizing
         samples = config.n_envs * config.algo_kwargs["n_steps"]
         if samples % n_envs:
             raise ValueError(f"{name}: N must divide the {samples} samples of an update")
-        config = config.replace(n_envs=n_envs, algo_kwargs={**config.algo_kwargs, "n_steps": samples // n_envs})
+        kwargs = {**config.algo_kwargs, "n_steps": samples // n_envs}
+        if epochs is not None:
+            kwargs["n_epochs"] = epochs
+        config = config.replace(n_envs=n_envs, algo_kwargs=kwargs)
     env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
     if config.normalize:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -335,7 +347,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
         if not runs:
             parser.error(f"--no-train: no run of {name} in {args.runs} for --seeds {args.seeds}")
-        what = _row(name)[0].what + (f", {name.partition('@')[2]} envs" if "@" in name else "")
+        row, sizing = _row(name)
+        what = row.what
+        if sizing is not None:
+            what += f", {sizing[0]} envs" + (f", {sizing[1]} epochs" if sizing[1] is not None else "")
         table[name] = {"what": what, **aggregate(runs, blind, oracle), "per_seed": runs}
     for name, row in table.items():
         s, c = row["success"], row["score"]

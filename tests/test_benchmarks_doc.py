@@ -171,3 +171,25 @@ def test_each_bench_script_writes_its_results_file_and_the_page_renders_from_the
         assert record["machine"]["cpu_count"] and record["machine"]["numba"], path
     page = _bench("report").render(results)
     assert "No results file yet" not in page
+
+
+def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``ROW@N-eE``: N envs, the update's samples kept (n_steps scaled), E epochs; ``ROW@N``: the row's epochs."""
+    pytest.importorskip("stable_baselines3")
+    import agents.rl
+
+    learners = _bench("learners")
+    built: dict[str, Any] = {}
+
+    class Built(Exception):
+        pass
+
+    def capture(config: Any, env: Any, seed: int, **_: Any) -> Any:
+        built.update(n_envs=env.num_envs, **config.algo_kwargs)
+        raise Built
+
+    monkeypatch.setattr(agents.rl, "make_model", capture)
+    for name, expected in (("jax-kalman@64-e4", (64, 64, 4)), ("jax-kalman@64", (64, 64, 10))):
+        with pytest.raises(Built):
+            learners.train_one(name, 0, 64, 4, tmp_path, 4)
+        assert (built["n_envs"], built["n_steps"], built["n_epochs"]) == expected, name
