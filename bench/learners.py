@@ -128,7 +128,8 @@ ROWS: dict[str, Row] = {
     "cleanrl-ppo-ent02": Row(
         "ppo",
         {},
-        "CleanRL's ppo.py on its defaults but train.py's entropy bonus (--ent-coef 0.02), SitToStandHardDiscreteUnit-v2",
+        "CleanRL's ppo.py on its defaults but train.py's entropy bonus (--ent-coef 0.02), "
+        "SitToStandHardDiscreteUnit-v2",
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
         script_args=("--ent-coef", "0.02"),

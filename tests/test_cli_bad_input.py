@@ -254,7 +254,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/learners.py", "seed not a number", ["--seeds", "a"], r"--seeds: seeds are whole numbers"),
     ("bench/learners.py", "timesteps 0", ["--timesteps", "0"], r"--timesteps: expected a positive integer, got 0"),
     ("bench/learners.py", "cleanrl row at 8 envs", ["--rows", "cleanrl-ppo@8"], r"--rows: unknown row\(s\)"),
-    ("bench/learners.py", "0 epochs", ["--rows", "jax-kalman@16-e0"], r"--rows: unknown row\(s\) \['jax-kalman@16-e0'\]"),
+    ("bench/learners.py", "0 epochs", ["--rows", "jax-kalman@16-e0"], r"--rows: unknown row\(s\) \['jax-kalman@16-e0"),
     ("bench/learners.py", "epochs without envs", ["--rows", "jax-kalman@-e4"], r"--rows: unknown row\(s\)"),
     (
         "bench/learners.py",

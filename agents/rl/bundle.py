@@ -222,6 +222,7 @@ class GreedyActor:
     """
 
     def __init__(self, policy: Any, heads: list[int] | None) -> None:
+        """The actor of ``policy`` with action heads of sizes ``heads`` (None: one ``Discrete`` action)."""
         self.policy = policy
         self.heads = heads  # None: one Discrete action
 
