@@ -16,7 +16,7 @@ other (or ``--jobs`` at a time, each in its own process):
   its own sizing (``hyperparams_for(..., framework="jax")``);
 - ``default@N`` / ``jax@N``: either on ``N`` envs with ``n_steps`` scaled so each update still
   takes ``n_envs * n_steps`` samples (``default@N`` at the jax sizing's env count is SB3 on the
-  same configuration as ``jax``);
+  same configuration as ``jax``); ``@N-eE`` also sets ``E`` epochs per update;
 - ``first_script``: what a user writes first --
   ``PPO("MlpPolicy", make_vec_env(env_id, n_envs=8))`` with SB3's default hyperparameters
   on a ``DummyVecEnv`` of 8 ``gymnasium.make`` envs (the env's default personas: the
@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import statistics
 import sys
 import time
@@ -70,21 +71,37 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _resized(config: Any, n_envs: int) -> Any:
-    """``config`` on ``n_envs`` envs with the same samples per update (``n_envs * n_steps``)."""
+def _sizing(size: str) -> tuple[int, int | None] | None:
+    """``N`` or ``N-eE`` (N envs, E epochs per update) as ``(N, E or None)``; None if it is neither."""
+    found = re.fullmatch(r"([1-9][0-9]*)(?:-e([1-9][0-9]*))?", size)
+    if found is None:
+        return None
+    return int(found.group(1)), int(found.group(2)) if found.group(2) else None
+
+
+def _resized(config: Any, size: str) -> Any:
+    """``config`` on ``N`` envs with the same samples per update (``n_envs * n_steps``), and ``E`` epochs if given."""
+    sizing = _sizing(size)
+    assert sizing is not None, size
+    n_envs, epochs = sizing
     batch = config.n_envs * config.algo_kwargs["n_steps"]
-    if n_envs < 1 or batch % n_envs:
+    if batch % n_envs:
         raise ValueError(f"CONTENDER@N: N must divide the {batch}-step rollout of its config, got {n_envs}")
-    return config.replace(n_envs=n_envs, algo_kwargs={**config.algo_kwargs, "n_steps": batch // n_envs})
+    kwargs = {**config.algo_kwargs, "n_steps": batch // n_envs}
+    if epochs is not None:
+        kwargs["n_epochs"] = epochs
+    return config.replace(n_envs=n_envs, algo_kwargs=kwargs)
 
 
 def _contender(text: str) -> str:
     if text in CONTENDERS:
         return text
     kind, _, size = text.partition("@")
-    if kind in ("default", "jax") and size.isdigit() and int(size) > 0:
+    if kind in ("default", "jax") and _sizing(size) is not None:
         return text
-    raise argparse.ArgumentTypeError(f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N, jax@N")
+    raise argparse.ArgumentTypeError(
+        f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N, jax@N (also @N-eE: E epochs)"
+    )
 
 
 def _build(contender: str, env_id: str, seed: int) -> Any:
@@ -100,7 +117,7 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     if kind in ("default", "jax"):
         config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
         if size:
-            config = _resized(config, int(size))
+            config = _resized(config, size)
         env = make_train_env(env_id, config.n_envs, seed, personas=config.personas)
         if config.normalize:
             env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -357,7 +374,7 @@ def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str)
         if "@" in c:
             try:
                 kind, _, size = c.partition("@")
-                _resized(hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax"), int(size))
+                _resized(hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax"), size)
             except ValueError as error:
                 parser.error(f"--contenders: {error}")
     return contenders

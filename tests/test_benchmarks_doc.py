@@ -193,3 +193,11 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
         with pytest.raises(Built):
             learners.train_one(name, 0, 64, 4, tmp_path, 4)
         assert (built["n_envs"], built["n_steps"], built["n_epochs"]) == expected, name
+    # The same sizing names a time_to_quality contender.
+    from agents.trainer.hyperparams import hyperparams_for
+
+    ttq = _bench("time_to_quality")
+    config = ttq._resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64-e4")
+    assert (config.n_envs, config.algo_kwargs["n_steps"], config.algo_kwargs["n_epochs"]) == (64, 64, 4)
+    config = ttq._resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64")
+    assert (config.n_envs, config.algo_kwargs["n_epochs"]) == (64, 10)

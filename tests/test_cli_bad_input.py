@@ -248,6 +248,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/time_to_quality.py", "episodes 0", ["--episodes", "0"], r"--episodes: expected a positive integer, got 0"),
     ("bench/time_to_quality.py", "unknown contender", ["--contenders", "x"], r"--contenders: unknown contender 'x'"),
     ("bench/time_to_quality.py", "contender size 5", ["--contenders", "default@5"], r"N must divide the 4096-step"),
+    ("bench/time_to_quality.py", "contender 0 epochs", ["--contenders", "jax@64-e0"], r"unknown contender 'jax@64-e0'"),
     ("bench/time_to_quality.py", "unknown env", ["--env", "CartPole-v1"], r"--env: unknown env id 'CartPole-v1'"),
     ("bench/learners.py", "unknown row", ["--rows", "ppo-x"], r"--rows: unknown row\(s\) \['ppo-x'\]"),
     ("bench/learners.py", "seed twice", ["--seeds", "1,1"], r"--seeds: seeds must be distinct and >= 0"),
