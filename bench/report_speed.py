@@ -203,7 +203,8 @@ needs to reach a scripted caregiver's level (the low end of its 95 % interval on
 episodes; the target counts successes only). Contenders: `default` is `train.py`'s SB3
 configuration, `jax` the same PPO as `JaxPPO` (`train.py --framework jax`) on its sizing,
 `default@N` SB3 on `N` envs with the same samples per update (`default@16` is SB3 on `jax`'s
-configuration), `first_script` SB3's defaults on 8 `gymnasium.make` envs. A change of load
+configuration), `jax@N-eE` JaxPPO on `N` envs with `E` epochs per update, `first_script` SB3's
+defaults on 8 `gymnasium.make` envs. A change of load
 between runs moves the ratios (the results file holds the load average before and after each).
 """
     if not records:
