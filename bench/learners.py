@@ -64,6 +64,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from result_files import add_save_argument, save
+from time_to_quality import resized, sizing
 
 from coop_gym.cli import positive_int, seed_list
 
@@ -140,27 +141,20 @@ memory of a fixed window, 0.1 s per frame); ``ROW@N`` is a ``jax-*`` row on ``N`
 the same with ``E`` epochs per update."""
 
 
-def _row(name: str) -> tuple[Row, tuple[int, int | None] | None]:
-    """The row of a name (``ROW``, ``ROW-stackK``, ``ROW@N``, ``ROW@N-eE``) and its sizing.
-
-    The sizing is ``(N, E)`` (``E`` None: the row's own epochs), or None: the row's own.
-    """
+def _row(name: str) -> tuple[Row, str]:
+    """The row of a name (``ROW``, ``ROW-stackK``, ``ROW@N``, ``ROW@N-eE``) and its sizing (``""``: the row's own)."""
     base, _, size = name.partition("@")
     stacked = re.fullmatch(r"(.+)-stack([1-9][0-9]*)", base)
     key = stacked.group(1) if stacked else base
     if key not in ROWS or ((size or stacked) and ROWS[key].framework == "cleanrl"):
         raise KeyError(name)
-    sizing = re.fullmatch(r"([1-9][0-9]*)(?:-e([1-9][0-9]*))?", size) if size else None
-    if size and (sizing is None or ROWS[key].framework != "jax"):
+    if size and (sizing(size) is None or ROWS[key].framework != "jax"):
         raise KeyError(name)
     row = ROWS[key]
     if stacked:
         k = int(stacked.group(2))
         row = dataclasses.replace(row, frame_stack=k, what=f"{row.what}, last {k} observations stacked")
-    if sizing is None:
-        return row, None
-    epochs = int(sizing.group(2)) if sizing.group(2) else None
-    return row, (int(sizing.group(1)), epochs)
+    return row, size
 
 
 def _rows(text: str) -> list[str]:
@@ -217,17 +211,13 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)  # as train.py --threads
-    row, sizing = _row(name)
+    row, size = _row(name)
     config = hyperparams_for(row.algo, ENV_ID, row.framework).replace(total_timesteps=timesteps, personas="train_wide")
-    if sizing is not None:  # the same samples per update on N envs (and E epochs)
-        n_envs, epochs = sizing
-        samples = config.n_envs * config.algo_kwargs["n_steps"]
-        if samples % n_envs:
-            raise ValueError(f"{name}: N must divide the {samples} samples of an update")
-        kwargs = {**config.algo_kwargs, "n_steps": samples // n_envs}
-        if epochs is not None:
-            kwargs["n_epochs"] = epochs
-        config = config.replace(n_envs=n_envs, algo_kwargs=kwargs)
+    if size:  # the same samples per update on N envs (and E epochs)
+        try:
+            config = resized(config, size)
+        except ValueError as error:
+            raise ValueError(f"{name}: {error}") from None
     env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
     if config.normalize:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -348,10 +338,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
         if not runs:
             parser.error(f"--no-train: no run of {name} in {args.runs} for --seeds {args.seeds}")
-        row, sizing = _row(name)
+        row, size = _row(name)
         what = row.what
-        if sizing is not None:
-            what += f", {sizing[0]} envs" + (f", {sizing[1]} epochs" if sizing[1] is not None else "")
+        found = sizing(size) if size else None
+        if found is not None:
+            what += f", {found[0]} envs" + (f", {found[1]} epochs" if found[1] is not None else "")
         table[name] = {"what": what, **aggregate(runs, blind, oracle), "per_seed": runs}
     for name, row in table.items():
         s, c = row["success"], row["score"]

@@ -71,22 +71,25 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _sizing(size: str) -> tuple[int, int | None] | None:
-    """``N`` or ``N-eE`` (N envs, E epochs per update) as ``(N, E or None)``; None if it is neither."""
+def sizing(size: str) -> tuple[int, int | None] | None:
+    """``N`` or ``N-eE`` (N envs, E epochs per update) as ``(N, E or None)``; None if it is neither.
+
+    The sizing after ``@`` in a contender here and in a row of ``bench/learners.py``.
+    """
     found = re.fullmatch(r"([1-9][0-9]*)(?:-e([1-9][0-9]*))?", size)
     if found is None:
         return None
     return int(found.group(1)), int(found.group(2)) if found.group(2) else None
 
 
-def _resized(config: Any, size: str) -> Any:
+def resized(config: Any, size: str) -> Any:
     """``config`` on ``N`` envs with the same samples per update (``n_envs * n_steps``), and ``E`` epochs if given."""
-    sizing = _sizing(size)
-    assert sizing is not None, size
-    n_envs, epochs = sizing
+    found = sizing(size)
+    assert found is not None, size
+    n_envs, epochs = found
     batch = config.n_envs * config.algo_kwargs["n_steps"]
     if batch % n_envs:
-        raise ValueError(f"CONTENDER@N: N must divide the {batch}-step rollout of its config, got {n_envs}")
+        raise ValueError(f"N must divide the {batch}-step rollout of its config, got {n_envs}")
     kwargs = {**config.algo_kwargs, "n_steps": batch // n_envs}
     if epochs is not None:
         kwargs["n_epochs"] = epochs
@@ -97,7 +100,7 @@ def _contender(text: str) -> str:
     if text in CONTENDERS:
         return text
     kind, _, size = text.partition("@")
-    if kind in ("default", "jax") and _sizing(size) is not None:
+    if kind in ("default", "jax") and sizing(size) is not None:
         return text
     raise argparse.ArgumentTypeError(
         f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N, jax@N (also @N-eE: E epochs)"
@@ -117,7 +120,7 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     if kind in ("default", "jax"):
         config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
         if size:
-            config = _resized(config, size)
+            config = resized(config, size)
         env = make_train_env(env_id, config.n_envs, seed, personas=config.personas)
         if config.normalize:
             env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -374,7 +377,7 @@ def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str)
         if "@" in c:
             try:
                 kind, _, size = c.partition("@")
-                _resized(hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax"), size)
+                resized(hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax"), size)
             except ValueError as error:
                 parser.error(f"--contenders: {error}")
     return contenders

@@ -197,7 +197,7 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     from agents.trainer.hyperparams import hyperparams_for
 
     ttq = _bench("time_to_quality")
-    config = ttq._resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64-e4")
+    config = ttq.resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64-e4")
     assert (config.n_envs, config.algo_kwargs["n_steps"], config.algo_kwargs["n_epochs"]) == (64, 64, 4)
-    config = ttq._resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64")
+    config = ttq.resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64")
     assert (config.n_envs, config.algo_kwargs["n_epochs"]) == (64, 10)

@@ -114,7 +114,7 @@ def test_config_mirrors_sb3_ppo_lr_decay_no_kl_penalty_and_normalised_observatio
 
 
 def test_env_runners_share_64_envs_unless_told():
-    # 8 envs per runner (SB3's count) sampled ~1,000 env steps/s, 64 ~4,000: RLlib's cost is per vector step.
+    # RLlib's sampler costs mostly per vector step (agents/rl/rllib.py), so 64 envs share it, not SB3's 8.
     assert DEFAULT_NUM_ENVS == 64
     assert envs_per_runner(None, 0) == 64  # sampling in the driver
     assert envs_per_runner(None, 1) == 64
