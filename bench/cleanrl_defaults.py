@@ -129,6 +129,24 @@ if PRICED_ENV_ID not in gym.registry:
     gym.register(PRICED_ENV_ID, entry_point=make_priced)
 
 
+# --- hard-v2 on train.py's wider training personas -----------------------------------------
+
+WIDE_ENV_ID = "WidePersonas/SitToStandHardDiscreteUnit-v2"
+"""A measurement aid, not an env version: :data:`PRICED_BASE_ENV_ID` made with
+``personas="train_wide"``, the persona set ``train.py`` trains on, where the id's own default is
+``"train"``. CleanRL's ``gym.make(env_id)`` passes no keyword, so the set goes into the
+registration (``bench/learners.py``'s ``cleanrl-ppo-wide`` row)."""
+
+
+def make_wide(**kwargs: Any) -> gym.Env[Any, Any]:
+    """:data:`PRICED_BASE_ENV_ID` made as registered, on the ``"train_wide"`` personas."""
+    return gym.make(PRICED_BASE_ENV_ID, **{"personas": "train_wide", **kwargs})
+
+
+if WIDE_ENV_ID not in gym.registry:
+    gym.register(WIDE_ENV_ID, entry_point=make_wide)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--script", required=True, help="path of CleanRL's ppo.py (or another script defining `agent`)")

@@ -27,7 +27,12 @@ and the observation it gets (:data:`ROWS`):
   ``cleanrl-ppo-priced``: the same, trained with a timeout priced as a failed assistance
   (``bench/cleanrl_defaults.py``'s ``PricedTimeout``, a wrapper: no coop_gym id has this reward) and scored on the id;
   ``cleanrl-ppo-ent02``: the same script on the id with one flag changed, ``--ent-coef 0.02``
-  (``train.py``'s entropy bonus, CleanRL's default is 0.01);
+  (``train.py``'s entropy bonus, CleanRL's default is 0.01); ``cleanrl-ppo-trainpy``: the script
+  with all of ``train.py``'s PPO settings as flags (:data:`TRAINPY_FLAGS`), ``cleanrl-ppo-rollout`` and
+  ``cleanrl-ppo-loss`` with its first half (rollout and update size) or second half (learning rate,
+  discount, entropy bonus, value clipping); ``cleanrl-ppo-wide``: on
+  its defaults, trained on ``train.py``'s wider personas (``bench/cleanrl_defaults.py``'s ``WidePersonas``);
+  ``cleanrl-ppo-trainpy-wide``: both;
 - ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
@@ -96,6 +101,15 @@ SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_
 costs about one person step per particle, so the default filter (1024 particles, 128 hypotheses, what
 the belief caregiver reads) would make each run about four times longer."""
 
+TRAINPY_FLAGS = (
+    "--num-envs", "16", "--num-steps", "256", "--num-minibatches", "8", "--update-epochs", "10",
+    "--learning-rate", "3e-4", "--gamma", "0.995", "--ent-coef", "0.02", "--no-clip-vloss",
+)  # fmt: skip
+"""CleanRL ``ppo.py``'s flags for ``train.py``'s PPO settings on the hard level
+(:func:`agents.trainer.hyperparams.hyperparams_for` with ``JAX_SIZING``): the same rollout,
+minibatch, epochs, learning rate (both decay linearly), discount, entropy bonus and no value
+clipping. What stays the script's: its personas, no observation normalisation, its final policy."""
+
 ROWS: dict[str, Row] = {
     "ppo-kalman": Row("ppo", {}, "SB3's PPO (MLP), Kalman estimate + measurements (train.py --framework sb3)"),
     "ppo-switching": Row("ppo", SWITCHING, "PPO (MLP), + switching filter's P(xi) (256 particles, 32 hypotheses)"),
@@ -134,6 +148,51 @@ ROWS: dict[str, Row] = {
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
         script_args=("--ent-coef", "0.02"),
+    ),
+    "cleanrl-ppo-trainpy": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py with train.py's PPO settings as its flags (16 x 256 rollouts, 8 minibatches, "
+        "10 epochs, lr 3e-4, gamma 0.995, entropy 0.02, no value clipping), its personas, no selection",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        script_args=TRAINPY_FLAGS,
+    ),
+    "cleanrl-ppo-rollout": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py on its defaults but train.py's rollout and update size (16 x 256 rollouts, "
+        "8 minibatches, 10 epochs), its personas, no selection",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        script_args=TRAINPY_FLAGS[:8],
+    ),
+    "cleanrl-ppo-loss": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py on its defaults but train.py's learning rate, discount, entropy bonus and "
+        "no value clipping, its personas, no selection",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        script_args=TRAINPY_FLAGS[8:],
+    ),
+    "cleanrl-ppo-trainpy-wide": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py with train.py's PPO settings as its flags, trained on train.py's wider personas, "
+        "no selection",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        train_env="cleanrl_defaults:WidePersonas/SitToStandHardDiscreteUnit-v2",
+        script_args=TRAINPY_FLAGS,
+    ),
+    "cleanrl-ppo-wide": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py on its defaults, trained on train.py's wider personas, no selection",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        train_env="cleanrl_defaults:WidePersonas/SitToStandHardDiscreteUnit-v2",
     ),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:

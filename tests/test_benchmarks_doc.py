@@ -201,3 +201,49 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     assert (config.n_envs, config.algo_kwargs["n_steps"], config.algo_kwargs["n_epochs"]) == (64, 64, 4)
     config = ttq.resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64")
     assert (config.n_envs, config.algo_kwargs["n_epochs"]) == (64, 10)
+
+
+def test_cleanrl_rows_flags_are_train_pys_settings() -> None:
+    """``TRAINPY_FLAGS`` say, in CleanRL's flags, what ``train.py`` trains the hard level with."""
+    from agents.trainer.hyperparams import hyperparams_for
+
+    learners = _bench("learners")
+    config = hyperparams_for("ppo", learners.ENV_ID, "jax")
+    kwargs = config.algo_kwargs
+    flags = learners.TRAINPY_FLAGS
+    assert flags[-1] == "--no-clip-vloss" and "clip_range_vf" not in kwargs  # SB3 clips no value by default
+    given = dict(zip(flags[:-1:2], flags[1:-1:2], strict=True))
+    assert int(given["--num-envs"]) == config.n_envs
+    assert int(given["--num-steps"]) == kwargs["n_steps"]
+    assert int(given["--num-minibatches"]) * kwargs["batch_size"] == config.n_envs * kwargs["n_steps"]
+    assert int(given["--update-epochs"]) == kwargs["n_epochs"]
+    assert kwargs["learning_rate"] == f"lin_{given['--learning-rate']}"  # CleanRL anneals linearly by default
+    assert float(given["--gamma"]) == kwargs["gamma"]
+    assert float(given["--ent-coef"]) == kwargs["ent_coef"]
+    # The rest are CleanRL ppo.py's own defaults already.
+    assert (kwargs["gae_lambda"], kwargs["clip_range"], kwargs["vf_coef"], kwargs["max_grad_norm"]) == (
+        0.95, 0.2, 0.5, 0.5,
+    )  # fmt: skip
+    assert config.policy_kwargs == {"net_arch": [64, 64]}
+    # The two halves are the rollout/update-size row and the loss row.
+    assert learners.ROWS["cleanrl-ppo-rollout"].script_args + learners.ROWS["cleanrl-ppo-loss"].script_args == flags
+
+
+def test_cleanrl_wide_row_trains_on_train_pys_personas() -> None:
+    """The ``WidePersonas`` id is the CleanRL id on ``train_wide``, however CleanRL's ``gym.make`` calls it."""
+    import gymnasium as gym
+
+    from coop_gym.model.personas import resolve_personas
+
+    learners = _bench("learners")
+    defaults = _bench("cleanrl_defaults")
+    assert learners.ROWS["cleanrl-ppo-wide"].train_env == f"cleanrl_defaults:{defaults.WIDE_ENV_ID}"
+    wide = gym.make(defaults.WIDE_ENV_ID).unwrapped
+    own = gym.make(learners.CLEANRL_ENV_ID).unwrapped
+
+    # The level sets its own person parameters; the set decides who and how widely they vary.
+    def spread(personas: Any) -> list[tuple[str, float]]:
+        return [(p.name, p.variation_relative_std) for p in personas]
+
+    assert spread(wide.personas) == spread(resolve_personas("train_wide"))
+    assert spread(own.personas) == spread(resolve_personas("train")) != spread(wide.personas)
