@@ -20,6 +20,8 @@ and the observation it gets (:data:`ROWS`):
   with an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
+  ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
+  :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
 - ``cleanrl-ppo``: CleanRL's public ``ppo.py``, unmodified, on its defaults (4 envs x 128
   steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
   :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
@@ -94,6 +96,8 @@ class Row:
     """What CleanRL's script gets as ``--env-id`` (``module:id``); empty: ``coop_gym:`` + ``env_id``."""
     script_args: tuple[str, ...] = ()
     """Flags CleanRL's script gets beyond its defaults (e.g. ``("--ent-coef", "0.02")``)."""
+    normalize: bool = True
+    """Whether observations pass through ``VecNormalize``, as ``train.py``'s do (not CleanRL's script's)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -125,6 +129,14 @@ ROWS: dict[str, Row] = {
         "recurrent_ppo", {"observation_mode": "raw"}, "JaxRecurrentPPO (LSTM: memory), measurements only", "jax"
     ),
     "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
+    "jax-discreteunit": Row(
+        "ppo",
+        {"action_type": "discrete", "observation_scale": "unit"},
+        "JaxPPO on CleanRL's interface (SitToStandHardDiscreteUnit-v2's 18 joint actions and unit-scaled "
+        "observations, no VecNormalize)",
+        "jax",
+        normalize=False,
+    ),
     "cleanrl-ppo": Row(
         "ppo",
         {},
@@ -278,7 +290,7 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
         except ValueError as error:
             raise ValueError(f"{name}: {error}") from None
     env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
-    if config.normalize:
+    if config.normalize and row.normalize:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
     if row.frame_stack > 1:  # normalised frames stacked (what the saved agent rebuilds when it plays)
         env = VecFrameStack(env, row.frame_stack)

@@ -174,7 +174,10 @@ def test_each_bench_script_writes_its_results_file_and_the_page_renders_from_the
 
 
 def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``ROW@N-eE``: N envs, the update's samples kept (n_steps scaled), E epochs; ``ROW@N``: the row's epochs."""
+    """``ROW@N-eE``: N envs, the update's samples kept (n_steps scaled), E epochs; ``ROW@N``: the row's epochs.
+
+    And a row's ``normalize=False`` leaves ``VecNormalize`` out.
+    """
     pytest.importorskip("stable_baselines3")
     import agents.rl
 
@@ -185,7 +188,7 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
         pass
 
     def capture(config: Any, env: Any, seed: int, **_: Any) -> Any:
-        built.update(n_envs=env.num_envs, **config.algo_kwargs)
+        built.update(n_envs=env.num_envs, env=env, **config.algo_kwargs)
         raise Built
 
     monkeypatch.setattr(agents.rl, "make_model", capture)
@@ -193,6 +196,15 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
         with pytest.raises(Built):
             learners.train_one(name, 0, 64, 4, tmp_path, 4)
         assert (built["n_envs"], built["n_steps"], built["n_epochs"]) == expected, name
+    # A row without normalisation trains on its own env, as CleanRL's script would see it.
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    with pytest.raises(Built):
+        learners.train_one("jax-discreteunit", 0, 64, 4, tmp_path, 4)
+    assert not isinstance(built["env"], VecNormalize) and built["env"].action_space.n == 18
+    with pytest.raises(Built):
+        learners.train_one("jax-kalman", 0, 64, 4, tmp_path, 4)
+    assert isinstance(built["env"], VecNormalize)
     # The same sizing names a time_to_quality contender.
     from agents.trainer.hyperparams import hyperparams_for
 
