@@ -22,6 +22,7 @@ and the observation it gets (:data:`ROWS`):
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
   :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
+  ``jax-discreteunit-ends``: the same with a time-out ending the return, as in CleanRL's script;
 - ``cleanrl-ppo``: CleanRL's public ``ppo.py``, unmodified, on its defaults (4 envs x 128
   steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
   :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
@@ -98,6 +99,8 @@ class Row:
     """Flags CleanRL's script gets beyond its defaults (e.g. ``("--ent-coef", "0.02")``)."""
     normalize: bool = True
     """Whether observations pass through ``VecNormalize``, as ``train.py``'s do (not CleanRL's script's)."""
+    bootstrap: bool = True
+    """Whether a time-out adds ``gamma * V(final observation)`` as in SB3 (CleanRL's script ends the return)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -136,6 +139,14 @@ ROWS: dict[str, Row] = {
         "observations, no VecNormalize)",
         "jax",
         normalize=False,
+    ),
+    "jax-discreteunit-ends": Row(
+        "ppo",
+        {"action_type": "discrete", "observation_scale": "unit"},
+        "jax-discreteunit with a time-out ending the return (no bootstrap), as CleanRL's script treats it",
+        "jax",
+        normalize=False,
+        bootstrap=False,
     ),
     "cleanrl-ppo": Row(
         "ppo",
@@ -272,6 +283,28 @@ def train_cleanrl(
     }
 
 
+def _timeouts_end(env: Any) -> Any:
+    """``env`` with every episode end reported as the task's end: no time-out is bootstrapped.
+
+    SB3 (and ``JaxPPO``) add ``gamma * V(final observation)`` to the reward of a step whose info says
+    ``TimeLimit.truncated``; CleanRL's ``ppo.py`` ends the return at a truncation as at a termination.
+    """
+    import numpy as np
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    class TimeoutsEnd(VecEnvWrapper):  # type: ignore[misc]
+        def reset(self) -> Any:
+            return self.venv.reset()
+
+        def step_wait(self) -> Any:
+            obs, rewards, dones, infos = self.venv.step_wait()
+            for i in np.flatnonzero(dones):
+                infos[i]["TimeLimit.truncated"] = False
+            return obs, rewards, dones, infos
+
+    return TimeoutsEnd(env)
+
+
 def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int) -> dict[str, Any]:
     """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out."""
     import torch
@@ -290,6 +323,8 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
         except ValueError as error:
             raise ValueError(f"{name}: {error}") from None
     env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
+    if not row.bootstrap:
+        env = _timeouts_end(env)
     if config.normalize and row.normalize:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
     if row.frame_stack > 1:  # normalised frames stacked (what the saved agent rebuilds when it plays)

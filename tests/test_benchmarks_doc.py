@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -176,7 +177,7 @@ def test_each_bench_script_writes_its_results_file_and_the_page_renders_from_the
 def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``ROW@N-eE``: N envs, the update's samples kept (n_steps scaled), E epochs; ``ROW@N``: the row's epochs.
 
-    And a row's ``normalize=False`` leaves ``VecNormalize`` out.
+    And a row's ``normalize=False`` leaves ``VecNormalize`` out, ``bootstrap=False`` ends the return at a time-out.
     """
     pytest.importorskip("stable_baselines3")
     import agents.rl
@@ -205,6 +206,17 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     with pytest.raises(Built):
         learners.train_one("jax-kalman", 0, 64, 4, tmp_path, 4)
     assert isinstance(built["env"], VecNormalize)
+    # ... and a row without bootstrap reports a time-out as the task's end.
+    with pytest.raises(Built):
+        learners.train_one("jax-discreteunit-ends", 0, 64, 4, tmp_path, 4)
+    env = built["env"]
+    n = env.num_envs
+    dones = np.arange(n) < 2
+    infos = [{"TimeLimit.truncated": True}, {"TimeLimit.truncated": False}] + [{} for _ in range(n - 2)]
+    env.venv.step_wait = lambda: (np.zeros((n, 11)), np.zeros(n), dones, infos)
+    _, _, out_dones, out_infos = env.step_wait()
+    assert out_dones.tolist() == dones.tolist()
+    assert [info.get("TimeLimit.truncated") for info in out_infos[:3]] == [False, False, None]
     # The same sizing names a time_to_quality contender.
     from agents.trainer.hyperparams import hyperparams_for
 
