@@ -20,6 +20,7 @@ and the observation it gets (:data:`ROWS`):
   with an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
+  ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no ``VecNormalize``;
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
   :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
   ``jax-discreteunit-ends``: the same with a time-out ending the return, as in CleanRL's script;
@@ -132,6 +133,13 @@ ROWS: dict[str, Row] = {
         "recurrent_ppo", {"observation_mode": "raw"}, "JaxRecurrentPPO (LSTM: memory), measurements only", "jax"
     ),
     "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
+    "jax-unit": Row(
+        "ppo",
+        {"observation_scale": "unit"},
+        "JaxPPO, unit-scaled observations (SitToStandHardUnit-v2) instead of VecNormalize",
+        "jax",
+        normalize=False,
+    ),
     "jax-discreteunit": Row(
         "ppo",
         {"action_type": "discrete", "observation_scale": "unit"},
