@@ -118,6 +118,10 @@ TRAINPY_FLAGS = (
 minibatch, epochs, learning rate (both decay linearly), discount, entropy bonus and no value
 clipping. What stays the script's: its personas, no observation normalisation, its final policy."""
 
+DISCRETE_UNIT: dict[str, Any] = {"action_type": "discrete", "observation_scale": "unit"}
+"""The keywords that make :data:`ENV_ID` into :data:`CLEANRL_ENV_ID`."""
+_NO_NORM = "SitToStandHardDiscreteUnit-v2's 18 joint actions and unit-scaled observations, no VecNormalize"
+
 ROWS: dict[str, Row] = {
     "ppo-kalman": Row("ppo", {}, "SB3's PPO (MLP), Kalman estimate + measurements (train.py --framework sb3)"),
     "ppo-switching": Row("ppo", SWITCHING, "PPO (MLP), + switching filter's P(xi) (256 particles, 32 hypotheses)"),
@@ -140,18 +144,11 @@ ROWS: dict[str, Row] = {
         "jax",
         normalize=False,
     ),
-    "jax-discreteunit": Row(
-        "ppo",
-        {"action_type": "discrete", "observation_scale": "unit"},
-        "JaxPPO on CleanRL's interface (SitToStandHardDiscreteUnit-v2's 18 joint actions and unit-scaled "
-        "observations, no VecNormalize)",
-        "jax",
-        normalize=False,
-    ),
+    "jax-discreteunit": Row("ppo", DISCRETE_UNIT, "JaxPPO on CleanRL's interface, " + _NO_NORM, "jax", normalize=False),
     "jax-discreteunit-ends": Row(
         "ppo",
-        {"action_type": "discrete", "observation_scale": "unit"},
-        "jax-discreteunit with a time-out ending the return (no bootstrap), as CleanRL's script treats it",
+        DISCRETE_UNIT,
+        "jax-discreteunit, a time-out ending the return as in CleanRL's",
         "jax",
         normalize=False,
         bootstrap=False,

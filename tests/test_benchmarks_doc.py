@@ -262,6 +262,8 @@ def test_cleanrl_wide_row_trains_on_train_pys_personas() -> None:
     learners = _bench("learners")
     defaults = _bench("cleanrl_defaults")
     assert learners.ROWS["cleanrl-ppo-wide"].train_env == f"cleanrl_defaults:{defaults.WIDE_ENV_ID}"
+    # The jax rows on CleanRL's interface make the same env from ENV_ID.
+    assert gym.spec(learners.CLEANRL_ENV_ID).kwargs == {**gym.spec(learners.ENV_ID).kwargs, **learners.DISCRETE_UNIT}
     wide = gym.make(defaults.WIDE_ENV_ID).unwrapped
     own = gym.make(learners.CLEANRL_ENV_ID).unwrapped
 
