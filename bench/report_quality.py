@@ -352,7 +352,10 @@ def _except_cleanrl(report: dict[str, Any]) -> str:
     """The learners page's exception: CleanRL's script keeps its own protocol."""
     if not any(name.startswith("cleanrl-") for name in report["rows"]):
         return ""
-    return " but the `cleanrl-*` ones (CleanRL's `ppo.py` as its user runs it: its settings, its final policy)"
+    return (
+        " but the `cleanrl-*` ones (CleanRL's `ppo.py` as its user runs it: its settings or the flags"
+        " and id the row names, its personas unless the row says otherwise, its final policy)"
+    )
 
 
 def learners(results: Results) -> str:
@@ -395,11 +398,12 @@ def learners(results: Results) -> str:
 
 Each row{_except_cleanrl(report)} trains with `train.py`'s protocol on `{report["env_id"]}`
 ({report["timesteps"]:,} steps, the wider training personas, the best-validated policy of the last
-half kept) once per training seed, and plays the same {report["episodes"]} held-out episodes as the
-scripted caregivers below (seeds 0..{report["episodes"] - 1}, the test personas). The
-interquartile mean over seeds and its stratified bootstrap interval follow rliable; the
-mind-reading score is `(success - blind) / (oracle - blind)` per seed. Training
-seconds were measured with other runs on the machine.
+half kept; the observation, action and normalisation the row names) once per training seed,
+and plays the same {report["episodes"]} held-out episodes as the scripted caregivers below
+(seeds 0..{report["episodes"] - 1}, the test personas). The interquartile mean over seeds and
+its stratified bootstrap interval follow rliable; the mind-reading score is
+`(success - blind) / (oracle - blind)` per seed. Training seconds were measured with other runs
+on the machine.
 
 {_table(header, rows)}
 """
