@@ -118,6 +118,9 @@ TRAINPY_FLAGS = (
 minibatch, epochs, learning rate (both decay linearly), discount, entropy bonus and no value
 clipping. What stays the script's: its personas, no observation normalisation, its final policy."""
 
+WIDE_TRAIN_ENV = "cleanrl_defaults:WidePersonas/SitToStandHardDiscreteUnit-v2"
+"""What CleanRL's script trains on for the wider personas (``bench/cleanrl_defaults.py``'s ``WIDE_ENV_ID``)."""
+
 DISCRETE_UNIT: dict[str, Any] = {"action_type": "discrete", "observation_scale": "unit"}
 """The keywords that make :data:`ENV_ID` into :data:`CLEANRL_ENV_ID`."""
 _NO_NORM = "SitToStandHardDiscreteUnit-v2's 18 joint actions and unit-scaled observations, no VecNormalize"
@@ -211,7 +214,7 @@ ROWS: dict[str, Row] = {
         "no selection",
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
-        train_env="cleanrl_defaults:WidePersonas/SitToStandHardDiscreteUnit-v2",
+        train_env=WIDE_TRAIN_ENV,
         script_args=TRAINPY_FLAGS,
     ),
     "cleanrl-ppo-wide": Row(
@@ -220,7 +223,7 @@ ROWS: dict[str, Row] = {
         "CleanRL's ppo.py on its defaults, trained on train.py's wider personas, no selection",
         "cleanrl",
         env_id=CLEANRL_ENV_ID,
-        train_env="cleanrl_defaults:WidePersonas/SitToStandHardDiscreteUnit-v2",
+        train_env=WIDE_TRAIN_ENV,
     ),
 }
 """The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:

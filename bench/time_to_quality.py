@@ -379,7 +379,7 @@ def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str)
                 kind, _, size = c.partition("@")
                 resized(hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax"), size)
             except ValueError as error:
-                parser.error(f"--contenders: {error}")
+                parser.error(f"--contenders: {c}: {error}")
     return contenders
 
 

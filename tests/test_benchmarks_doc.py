@@ -261,7 +261,9 @@ def test_cleanrl_wide_row_trains_on_train_pys_personas() -> None:
 
     learners = _bench("learners")
     defaults = _bench("cleanrl_defaults")
-    assert learners.ROWS["cleanrl-ppo-wide"].train_env == f"cleanrl_defaults:{defaults.WIDE_ENV_ID}"
+    assert learners.WIDE_TRAIN_ENV == f"cleanrl_defaults:{defaults.WIDE_ENV_ID}"
+    assert learners.ROWS["cleanrl-ppo-wide"].train_env == learners.ROWS["cleanrl-ppo-trainpy-wide"].train_env
+    assert learners.ROWS["cleanrl-ppo-wide"].train_env == learners.WIDE_TRAIN_ENV
     # The jax rows on CleanRL's interface make the same env from ENV_ID.
     assert gym.spec(learners.CLEANRL_ENV_ID).kwargs == {**gym.spec(learners.ENV_ID).kwargs, **learners.DISCRETE_UNIT}
     wide = gym.make(defaults.WIDE_ENV_ID).unwrapped
