@@ -102,6 +102,8 @@ class Row:
     """Whether observations pass through ``VecNormalize``, as ``train.py``'s do (not CleanRL's script's)."""
     bootstrap: bool = True
     """Whether a time-out adds ``gamma * V(final observation)`` as in SB3 (CleanRL's script ends the return)."""
+    algo_kwargs: dict[str, Any] = field(default_factory=dict)
+    """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -133,6 +135,13 @@ ROWS: dict[str, Row] = {
     "recurrent-kalman": Row("recurrent_ppo", {}, "RecurrentPPO (LSTM), Kalman estimate + measurements"),
     "jax-kalman": Row(
         "ppo", {}, "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements (train.py's default)", "jax"
+    ),
+    "jax-kalman-lag": Row(
+        "ppo",
+        {},
+        "JaxPPO, policy_lag=1 (each update runs while the next rollout plays), Kalman estimate + measurements",
+        "jax",
+        algo_kwargs={"policy_lag": 1},
     ),
     "jax-switching": Row("ppo", SWITCHING, "JaxPPO, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"),
     "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
@@ -324,7 +333,10 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
 
     torch.set_num_threads(1)  # as train.py --threads
     row, size = _row(name)
-    config = hyperparams_for(row.algo, ENV_ID, row.framework).replace(total_timesteps=timesteps, personas="train_wide")
+    config = hyperparams_for(row.algo, ENV_ID, row.framework)
+    config = config.replace(
+        total_timesteps=timesteps, personas="train_wide", algo_kwargs={**config.algo_kwargs, **row.algo_kwargs}
+    )
     if size:  # the same samples per update on N envs (and E epochs)
         try:
             config = resized(config, size)

@@ -161,6 +161,19 @@ class JaxTraining:
     _update_info_buffer: Any
 
     _jax: dict[str, Any] | None = None
+    _pending: Any = None
+
+    policy_lag: int = 0
+    """0: each rollout runs the weights of the update before it (PPO). 1: each rollout runs the
+    weights of the update before last, while the last update runs on another core (set with the
+    constructor's ``policy_lag``; see :meth:`train`)."""
+
+    def __init__(self, *args: Any, policy_lag: int = 0, **kwargs: Any) -> None:
+        """The SB3 class's constructor, plus ``policy_lag`` (0 or 1; see :attr:`policy_lag`)."""
+        if policy_lag not in (0, 1) or isinstance(policy_lag, bool):
+            raise ValueError(f"policy_lag must be 0 or 1, got {policy_lag!r}")
+        self.policy_lag = policy_lag
+        super().__init__(*args, **kwargs)
 
     def _excluded_save_params(self) -> list[str]:
         """The compiled functions and the working state are rebuilt on use, never saved (``jax_saved_state`` is)."""
@@ -172,6 +185,7 @@ class JaxTraining:
             "_key",
             "_policy",
             "_rng",
+            "_pending",
         ]
 
     def _setup_model(self) -> None:
@@ -224,6 +238,8 @@ class JaxTraining:
         activation = self.policy.activation_fn  # type: ignore[union-attr]
         if activation not in (torch.nn.Tanh, torch.nn.ReLU):
             raise ValueError(f"{type(self).__name__} needs a Tanh or ReLU activation, got {activation.__name__}")
+        if self.policy_lag and not self._lag_supported:
+            raise ValueError(f"{type(self).__name__} does not support policy_lag")
         if self.use_sde or self.target_kl is not None or self.clip_range_vf is not None:
             raise ValueError(f"{type(self).__name__} supports neither use_sde, target_kl nor clip_range_vf")
         samples = self.n_envs * self.n_steps
@@ -232,6 +248,8 @@ class JaxTraining:
                 f"{type(self).__name__}: n_envs * n_steps ({samples}) must be a multiple of "
                 f"batch_size ({self.batch_size})"
             )
+
+    _lag_supported = True
 
     def _build_options(self) -> dict[str, Any]:
         """Options of :func:`agents.rl.jax_update.build` beyond PPO's own (none for the MLP)."""
@@ -279,11 +297,18 @@ class JaxTraining:
         return self._jax
 
     def _jax_state(self) -> tuple[Any, Any, Any]:
-        """``(params, optimiser state, key)``: the torch weights, and the saved moments and keys if any."""
-        jax, _, _ = _jax()
+        """``(params, optimiser state, key)``: the torch weights, and the saved moments and keys if any.
+
+        A checkpoint taken while an update ran ahead of the rollout (``policy_lag``) holds that
+        update's weights under ``"params"``; the torch weights are then the rollout's.
+        """
+        jax, jnp, _ = _jax()
         compiled = self._compiled()
         params = self._params_from_torch()
         saved = getattr(self, "jax_saved_state", None)
+        if saved is not None and "params" in saved:
+            treedef = jax.tree_util.tree_structure(params)
+            params = jax.tree_util.tree_unflatten(treedef, [jnp.asarray(leaf) for leaf in saved["params"]])
         seed = int(self.seed or 0) % (2**31)
         self._rng = np.random.Generator(np.random.PCG64(seed))
         if saved is None or "opt" not in saved:  # fresh: no optimiser state saved
@@ -295,13 +320,21 @@ class JaxTraining:
             self._rng.bit_generator.state = saved["rollout_rng"]
         return params, opt_state, key
 
-    def _keep_state(self, params: Any, opt_state: Any, key: Any) -> None:
-        """Hold the state for the next call and for ``save`` (as NumPy: a zip loads without JAX)."""
+    def _keep_state(self, params: Any, opt_state: Any, key: Any, *, rollout: bool = True) -> None:
+        """Hold the state for the next call and for ``save`` (as NumPy: a zip loads without JAX).
+
+        ``rollout``: the rollout policy (and the torch weights) take ``params`` too; if not, the
+        state saves ``params`` apart from the torch weights (see :meth:`_jax_state`).
+        """
         jax, _, _ = _jax()
         self._params, self._opt_state, self._key = params, opt_state, key
-        self._policy = self._rollout_policy(params)
+        saved = {k: v for k, v in (getattr(self, "jax_saved_state", None) or {}).items() if k != "params"}
+        if rollout:
+            self._policy = self._rollout_policy(params)
+        else:
+            saved["params"] = [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(params)]
         self.jax_saved_state = {
-            **(getattr(self, "jax_saved_state", None) or {}),
+            **saved,
             "opt": [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(opt_state)],
             "key": np.asarray(key),
             "rollout_rng": self._rng.bit_generator.state,
@@ -310,8 +343,27 @@ class JaxTraining:
     def _setup_learn(self, *args: Any, **kwargs: Any) -> Any:
         """SB3's set-up, then the JAX state from the torch weights (a load or ``set_parameters`` included)."""
         result = super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
-        self._keep_state(*self._jax_state())
+        self._pending = None
+        saved = getattr(self, "jax_saved_state", None) or {}
+        self._keep_state(*self._jax_state(), rollout="params" not in saved)
+        if "params" in saved:  # a checkpoint of a lagged run: the rollout runs the torch weights
+            self._policy = self._rollout_policy(self._params_from_torch())
         return result
+
+    def learn(self, *args: Any, **kwargs: Any) -> Any:
+        """SB3's ``learn``; with ``policy_lag``, the update still running lands in the weights at the end."""
+        result = super().learn(*args, **kwargs)  # type: ignore[misc]
+        if self.policy_lag:
+            self._land()
+            self._params_to_torch(self._params)
+            self._keep_state(self._params, self._opt_state, self._key)
+        return result
+
+    def save(self, *args: Any, **kwargs: Any) -> None:
+        """SB3's ``save``; an update still running (``policy_lag``) is waited for, saved beside the rollout's weights."""
+        if self._land():
+            self._keep_state(self._params, self._opt_state, self._key, rollout=False)
+        super().save(*args, **kwargs)  # type: ignore[misc]
 
     # --- SB3's two methods, replaced -------------------------------------------------
 
@@ -386,25 +438,55 @@ class JaxTraining:
         """Called after a rollout's last step."""
 
     def train(self) -> None:
-        """One PPO update: every epoch and minibatch in one compiled call, then the torch weights."""
+        """One PPO update: every epoch and minibatch in one compiled call, then the torch weights.
+
+        With ``policy_lag=1`` the update is started and not waited for: the next rollout runs
+        the weights this update starts from while it runs (JAX dispatches it to its own thread),
+        and it lands at the start of the next ``train``. Each update then starts from the
+        weights of the one before, on a rollout played by the weights before those; PPO's
+        ratio is taken to the policy that played. The values do not depend on timing: a seed
+        trains the same weights, and a checkpoint (taken by ``save``, which waits for the
+        update) continues exactly.
+        """
         compiled = self._compiled()
         self._update_learning_rate(self.policy.optimizer)  # type: ignore[attr-defined]
         learning_rate = float(self.lr_schedule(self._current_progress_remaining))
         clip_range = float(self.clip_range(self._current_progress_remaining))
         buffer = self.rollout_buffer
-        params, opt_state, key, stats = compiled["update"](
-            self._params, self._opt_state, self._key, *self._update_inputs(), learning_rate, clip_range
-        )
-        self._params_to_torch(params)
-        self._keep_state(params, opt_state, key)
+        inputs = self._update_inputs()
+        if self.policy_lag:
+            self._land()
+            self._params_to_torch(self._params)
+            self._keep_state(self._params, self._opt_state, self._key)
+            # The next rollout refills the buffer while the update reads its own copy.
+            inputs = tuple(np.array(column) for column in inputs)
+        result = compiled["update"](self._params, self._opt_state, self._key, *inputs, learning_rate, clip_range)
         self._n_updates += self.n_epochs
-        stats = {name: float(value) for name, value in stats.items()}
-        for name in ("entropy_loss", "policy_gradient_loss", "value_loss", "approx_kl", "clip_fraction", "loss"):
-            self.logger.record(f"train/{name}", stats[name])
         explained = explained_variance(buffer.values.ravel(), buffer.returns.ravel())
         self.logger.record("train/explained_variance", float(explained))
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/clip_range", clip_range)
+        if self.policy_lag:
+            self._pending = result
+        else:
+            self._land(result)
+            self._params_to_torch(self._params)
+            self._keep_state(self._params, self._opt_state, self._key)
+
+    def _land(self, result: Any = None) -> bool:
+        """Wait for an update (``result``, or the one running ahead of the rollout) and hold its state.
+
+        The torch weights and the rollout policy are left as they are. False if there was none.
+        """
+        if result is None:
+            result, self._pending = self._pending, None
+            if result is None:
+                return False
+        self._params, self._opt_state, self._key, stats = result
+        stats = {name: float(value) for name, value in stats.items()}
+        for name in ("entropy_loss", "policy_gradient_loss", "value_loss", "approx_kl", "clip_fraction", "loss"):
+            self.logger.record(f"train/{name}", stats[name])
+        return True
 
 
 class JaxPPO(JaxTraining, PPO):

@@ -90,6 +90,8 @@ class _LstmRolloutPolicy(_RolloutPolicy):
 class JaxRecurrentPPO(JaxTraining, RecurrentPPO):
     """sb3-contrib's RecurrentPPO, its update compiled by JAX and its rollout in NumPy (see the module docstring)."""
 
+    _lag_supported = False
+
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_lstm_state", "_rollout_start"]
 

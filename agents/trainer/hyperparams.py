@@ -130,17 +130,15 @@ _PPO = TrainingConfig(
     policy="MlpPolicy",
     normalize=True,
     algo_kwargs={
-        # 8 x 512 = 4096 steps per update in minibatches of 512: half the gradient steps
-        # per sample of 256/256, which overfitted the training personas less and trains
-        # faster (held-out success over seeds: python train.py --env CoopGym/SitToStand-v0 --seed S).
+        # 4096 steps per update in minibatches of 512 (held-out success over seeds:
+        # python train.py --env CoopGym/SitToStand-v0 --seed S).
         "n_steps": 512,
         "batch_size": 512,
         "n_epochs": 10,
-        # Decaying to 0 settles the final policy: with a constant rate some seeds' final
-        # policies lifted held-out people prematurely.
+        # Decaying to 0 settles the final policy.
         "learning_rate": "lin_3e-4",
-        # 0.995 over 0.99: gentler pushes (mean ~10 N vs 11-14 N), fewer premature lifts
-        # of the held-out frail persona, whom a firm push moves whatever they think.
+        # A long horizon favours gentle pushes: a firm push moves a frail person whatever
+        # they think, and reads as cooperation.
         "gamma": 0.995,
         "gae_lambda": 0.95,
         "clip_range": 0.2,
@@ -164,22 +162,14 @@ _PPO_HARD = _PPO.replace(
 
 HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
     "ppo": {
-        # Sized for time to quality (python bench/time_to_quality.py): the same
-        # 4096 samples per update from 64 envs x 64 steps -- one policy call per 64 env-steps
-        # instead of per 8 -- reached the handbook's level sooner than 8 x 512
-        # (bench/results/time_to_quality_CoopGym-SitToStand-v0.json).
+        # Sized for time to quality: 4096 samples per update from 64 envs x 64 steps
+        # (python bench/time_to_quality.py; bench/results/time_to_quality_CoopGym-SitToStand-v0.json).
         "CoopGym/SitToStand-v0": _PPO.replace(n_envs=64, algo_kwargs={**_PPO.algo_kwargs, "n_steps": 64}),
-        # The same settings; the hard level needs more samples: the policy must learn to stop
-        # pushing, ask, and read the answer -- and a wider spread of people: on the training
-        # personas' own spread a seed can learn their exact push compliance and read a frail
-        # person's pushed lean as cooperation (docs/agents.md, "Why the wider spread").
-        # 8 x 512 stays: on the hard level wider rollouts of the same size (64 x 64) learned
-        # less per step (python bench/time_to_quality.py --env ID --contenders default,default@64).
-        # The hard level's -v2 (slower recruiting, steadier willingness): the same settings.
-        # An entropy bonus of 0.02 (twice -v0's): with 0.01 some seeds, after lifting unsafely
-        # early on, settle on never lifting and never learn to read the person; chosen on the
-        # training personas' validation episodes (python bench/learners.py --rows ppo-kalman;
-        # bench/results/learners.json).
+        # The hard level (-v1 and -v2 alike): 8 x 512, more samples (the policy must learn to
+        # stop pushing, ask, and read the answer), a wider spread of people (docs/agents.md,
+        # "Why the wider spread") and an entropy bonus of 0.02, which keeps seeds from settling
+        # on never lifting; chosen on the training personas' validation episodes
+        # (python bench/time_to_quality.py; python bench/learners.py --rows ppo-kalman).
         **{env_id: _PPO_HARD.replace(env_id=env_id) for env_id in _HARD_IDS},
     },
     "recurrent_ppo": {
@@ -187,8 +177,8 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
             algo="recurrent_ppo",
             env_id="CoopGym/SitToStandRaw-v0",
             n_envs=8,
-            # 300k steps: the LSTM learns -v0 from the measurements alone in that budget (held-out
-            # score: docs/agents.md, "Other algorithms"); it is far slower per step than PPO's MLP.
+            # The LSTM learns -v0 from the measurements alone in 300k steps (held-out score:
+            # docs/agents.md, "Other algorithms").
             total_timesteps=300_000,
             policy="MlpLstmPolicy",
             normalize=True,
@@ -231,8 +221,7 @@ HYPERPARAMS: dict[str, dict[str, TrainingConfig]] = {
                 "learning_starts": 5_000,
                 "batch_size": 128,
                 "gamma": 0.995,
-                # 5-step returns carry the lift's reward back through the ~20-step guiding phase;
-                # with 1-step targets DQN settled on never lifting (all timeouts).
+                # 5-step returns carry the lift's reward back through the ~20-step guiding phase.
                 "n_steps": 5,
                 "train_freq": 4,
                 "gradient_steps": 1,

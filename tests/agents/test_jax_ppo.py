@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import subprocess
 import sys
@@ -31,12 +32,12 @@ ENV_ID = "CoopGym/SitToStandHard-v2"
 _TINY = {"n_steps": 32, "batch_size": 64, "n_epochs": 2}
 
 
-def _model(seed: int = 0, n_envs: int = 4, folder: Path | None = None) -> JaxPPO:
+def _model(seed: int = 0, n_envs: int = 4, folder: Path | None = None, lag: int = 0) -> JaxPPO:
     config = hyperparams_for("ppo", ENV_ID, "jax")
     env = make_train_env(
         ENV_ID, n_envs, seed, personas=config.personas, normalize=True, monitor_file=folder and folder / "monitor.csv"
     )
-    model = make_model(config, env, seed, overrides=_TINY)
+    model = make_model(config, env, seed, overrides={**_TINY, "policy_lag": lag})
     assert isinstance(model, JaxPPO)
     return model
 
@@ -124,12 +125,16 @@ def test_a_saved_model_loads_plays_and_continues(tmp_path):
     assert _weights(loaded) == _weights(model)
 
 
-def test_checkpoint_and_resume_give_the_unbroken_run(tmp_path):
-    """Stopped at a rollout boundary, restored onto fresh envs, finished: the weights of the run that never stopped."""
+@pytest.mark.parametrize("lag", [0, 1])
+def test_checkpoint_and_resume_give_the_unbroken_run(tmp_path, lag):
+    """Stopped at a rollout boundary, restored onto fresh envs, finished: the weights of the run that never stopped.
+
+    With ``policy_lag=1`` the checkpoint is taken while an update runs ahead of the rollout.
+    """
     total = 768
 
     def run(folder: Path, stop_at: int | None) -> bytes:
-        model = _model(folder=folder)
+        model = _model(folder=folder, lag=lag)
         stop = lambda: stop_at is not None and model.num_timesteps >= stop_at  # noqa: E731
         callback = CheckpointCallback(folder, 256, algo="ppo", env_id=ENV_ID, stop_requested=stop)
         try:
@@ -140,11 +145,38 @@ def test_checkpoint_and_resume_give_the_unbroken_run(tmp_path):
                 ENV_ID, 4, 0, personas=config.personas, monitor_file=folder / "monitor.csv", monitor_append=True
             )
             model, _ = restore_checkpoint(latest_checkpoint(folder), fresh)
-            assert isinstance(model, JaxPPO) and model.num_timesteps < total
+            assert isinstance(model, JaxPPO) and model.num_timesteps < total and model.policy_lag == lag
             model.learn(total - model.num_timesteps, reset_num_timesteps=False)
         return _weights(model)
 
     assert run(tmp_path / "stopped", stop_at=300) == run(tmp_path / "unbroken", stop_at=None)
+
+
+def test_a_lagged_rollout_is_played_by_the_weights_before_the_last_update():
+    """``policy_lag=1``: the second rollout is played by the initial weights (the first update runs beside it).
+
+    With 0 it is played by the first update's weights.
+    """
+    for lag in (0, 1):
+        model = _model(lag=lag)
+        initial = copy.deepcopy(model.policy)
+        model.learn(2 * 4 * 32)  # two rollouts of 4 envs x 32 steps, two updates
+        buffer = model.rollout_buffer  # the second rollout
+        obs = torch.from_numpy(buffer.observations.reshape(-1, buffer.observations.shape[-1]))
+        actions = torch.from_numpy(buffer.actions.reshape(-1, 3).astype(np.int64))
+        with torch.no_grad():
+            _, log_probs, _ = initial.evaluate_actions(obs, actions)
+        by_initial = np.allclose(buffer.log_probs.ravel(), log_probs.numpy(), rtol=1e-4, atol=1e-5)
+        assert by_initial == bool(lag), lag
+        # Both updates have landed in the weights a user gets: the rollout policy is the torch policy.
+        rollout_obs = np.asarray(model._last_obs, dtype=np.float32)
+        picked, _, rollout_log_probs = model._policy.act(rollout_obs, np.random.default_rng(0))
+        with torch.no_grad():
+            _, torch_log_probs, _ = model.policy.evaluate_actions(
+                torch.from_numpy(rollout_obs), torch.from_numpy(picked.astype(np.int64))
+            )
+        np.testing.assert_allclose(rollout_log_probs, torch_log_probs.numpy(), rtol=1e-4, atol=1e-5)
+        assert model._n_updates == 2 * _TINY["n_epochs"]
 
 
 _SAME_SEED = """
@@ -152,23 +184,27 @@ import hashlib, sys, torch
 torch.set_num_threads(int(sys.argv[1]))
 sys.path.insert(0, "tests/agents")
 from test_jax_ppo import _model, _weights
-model = _model()
+model = _model(lag=int(sys.argv[2]))
 model.learn(512)
 print(hashlib.sha256(_weights(model)).hexdigest())
 """
 
 
-def test_a_seed_trains_the_same_weights_in_fresh_processes_whatever_the_torch_threads():
-    """Unlike SB3's PPO, whose weights depend on torch's thread count (tests/agents/test_rl.py)."""
+@pytest.mark.parametrize("lag", [0, 1])
+def test_a_seed_trains_the_same_weights_in_fresh_processes_whatever_the_torch_threads(lag):
+    """Unlike SB3's PPO, whose weights depend on torch's thread count (tests/agents/test_rl.py).
+
+    With ``policy_lag=1`` the update runs on its own thread beside the rollout: the weights do not depend on timing.
+    """
     root = Path(__file__).resolve().parents[2]
     digests = {
         subprocess.run(
-            [sys.executable, "-c", _SAME_SEED, threads], cwd=root, capture_output=True, text=True, check=True
+            [sys.executable, "-c", _SAME_SEED, threads, str(lag)], cwd=root, capture_output=True, text=True, check=True
         ).stdout.strip()
         for threads in ("1", "1", "2")
     }
     assert len(digests) == 1 and len(next(iter(digests))) == 64, digests
-    another_seed = _model(seed=1)
+    another_seed = _model(seed=1, lag=lag)
     another_seed.learn(512)
     assert hashlib.sha256(_weights(another_seed)).hexdigest() not in digests
 
@@ -184,6 +220,9 @@ def test_what_it_cannot_train_is_named():
     assert make_model(config, env, 0, overrides={"n_steps": 10, "batch_size": 64}).learn(40).num_timesteps == 40
     with pytest.raises(ValueError, match="target_kl"):
         make_model(config, env, 0, overrides={**_TINY, "target_kl": 0.01}).learn(64)
+    for lag in (2, -1, True, 0.5):
+        with pytest.raises(ValueError, match="policy_lag must be 0 or 1"):
+            make_model(config, env, 0, overrides={**_TINY, "policy_lag": lag})
 
 
 def test_one_update_is_sb3s_update():

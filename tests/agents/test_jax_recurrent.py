@@ -155,6 +155,8 @@ def test_checkpoint_and_resume_give_the_unbroken_run(tmp_path):
 def test_what_it_cannot_train_is_named():
     with pytest.raises(ValueError, match="whole env rollouts"):
         _model(overrides={"n_steps": 32, "batch_size": 16}).learn(128)
+    with pytest.raises(ValueError, match="JaxRecurrentPPO does not support policy_lag"):
+        _model(overrides={"policy_lag": 1}).learn(128)
     # A rollout smaller than one minibatch is one minibatch, as in SB3.
     assert _model(overrides={"n_steps": 32, "batch_size": 512}).learn(128).num_timesteps == 128
     config = hyperparams_for("recurrent_ppo", ENV_ID, "jax")
