@@ -360,7 +360,7 @@ class JaxTraining:
         return result
 
     def save(self, *args: Any, **kwargs: Any) -> None:
-        """SB3's ``save``; an update still running (``policy_lag``) is waited for, saved beside the rollout's weights."""
+        """SB3's ``save``; an update still running (``policy_lag``) is waited for and kept beside the rollout's."""
         if self._land():
             self._keep_state(self._params, self._opt_state, self._key, rollout=False)
         super().save(*args, **kwargs)  # type: ignore[misc]
