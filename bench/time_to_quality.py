@@ -14,7 +14,9 @@ other (or ``--jobs`` at a time, each in its own process):
   start value);
 - ``jax``: the same PPO as :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --framework jax``), on
   its own sizing (``hyperparams_for(..., framework="jax")``);
-- ``default@N`` / ``jax@N``: either on ``N`` envs with ``n_steps`` scaled so each update still
+- ``jax-lag``: ``jax`` with ``policy_lag=1`` (each update runs on its own thread while the
+  next rollout plays; :meth:`agents.rl.jax_ppo.JaxTraining.train`);
+- ``default@N`` / ``jax@N`` / ``jax-lag@N``: any of these on ``N`` envs with ``n_steps`` scaled so each update still
   takes ``n_envs * n_steps`` samples (``default@N`` at the jax sizing's env count is SB3 on the
   same configuration as ``jax``); ``@N-eE`` also sets ``E`` epochs per update;
 - ``first_script``: what a user writes first --
@@ -58,7 +60,9 @@ from result_files import add_save_argument, save
 
 from coop_gym.cli import output_path_problem, positive_int, seed_list
 
-CONTENDERS: tuple[str, ...] = ("default", "jax", "first_script")
+CONTENDERS: tuple[str, ...] = ("default", "jax", "jax-lag", "first_script")
+_CONFIGURED = ("default", "jax", "jax-lag")
+"""The contenders built from ``train.py``'s settings (:func:`_config`), which take a sizing ``@N``."""
 
 
 def _positive_float(text: str) -> float:
@@ -100,11 +104,22 @@ def _contender(text: str) -> str:
     if text in CONTENDERS:
         return text
     kind, _, size = text.partition("@")
-    if kind in ("default", "jax") and sizing(size) is not None:
+    if kind in _CONFIGURED and sizing(size) is not None:
         return text
     raise argparse.ArgumentTypeError(
-        f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N, jax@N (also @N-eE: E epochs)"
+        f"unknown contender {text!r}; known: {', '.join(CONTENDERS)}, default@N, jax@N, jax-lag@N "
+        "(also @N-eE: E epochs)"
     )
+
+
+def _config(kind: str, env_id: str) -> Any:
+    """``train.py``'s PPO configuration of contender kind ``kind`` (one of :data:`_CONFIGURED`)."""
+    from agents.trainer.hyperparams import hyperparams_for
+
+    config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
+    if kind == "jax-lag":
+        config = config.replace(algo_kwargs={**config.algo_kwargs, "policy_lag": 1})
+    return config
 
 
 def _build(contender: str, env_id: str, seed: int) -> Any:
@@ -114,11 +129,10 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.rl import make_model, make_train_env
-    from agents.trainer.hyperparams import hyperparams_for
 
     kind, _, size = contender.partition("@")
-    if kind in ("default", "jax"):
-        config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
+    if kind in _CONFIGURED:
+        config = _config(kind, env_id)
         if size:
             config = resized(config, size)
         env = make_train_env(env_id, config.n_envs, seed, personas=config.personas)
@@ -371,13 +385,11 @@ def _checked_contenders(parser: argparse.ArgumentParser, env_id: str, spec: str)
 
     if env_id not in coop_gym.ENV_IDS:
         parser.error(f"--env: unknown env id {env_id!r}; coop_gym ids: {', '.join(coop_gym.ENV_IDS)}")
-    from agents.trainer.hyperparams import hyperparams_for
-
     for c in contenders:
         if "@" in c:
             try:
                 kind, _, size = c.partition("@")
-                resized(hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax"), size)
+                resized(_config(kind, env_id), size)
             except ValueError as error:
                 parser.error(f"--contenders: {c}: {error}")
     return contenders
@@ -413,8 +425,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--contenders",
         default="default,jax",
-        help="comma-separated contenders: default, jax, first_script, default@N or jax@N (the config on N envs, "
-        "the same samples per update)",
+        help="comma-separated contenders: default, jax, jax-lag, first_script, default@N, jax@N or jax-lag@N "
+        "(the config on N envs, the same samples per update)",
     )
     parser.add_argument("--stop-at-target", action="store_true", help="stop a run once it reaches every target")
     add_save_argument(parser, "time_to_quality_<env>.json")

@@ -197,6 +197,14 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
         with pytest.raises(Built):
             learners.train_one(name, 0, 64, 4, tmp_path, 4)
         assert (built["n_envs"], built["n_steps"], built["n_epochs"]) == expected, name
+    # A row's own learner settings reach the model, over train.py's.
+    with pytest.raises(Built):
+        learners.train_one("jax-kalman-lag", 0, 64, 4, tmp_path, 4)
+    assert built["policy_lag"] == 1 and built["ent_coef"] == 0.02
+    built.clear()
+    with pytest.raises(Built):
+        learners.train_one("jax-kalman", 0, 64, 4, tmp_path, 4)
+    assert "policy_lag" not in built
     # A row without normalisation trains on its own env, as CleanRL's script would see it.
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -225,6 +233,10 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     assert (config.n_envs, config.algo_kwargs["n_steps"], config.algo_kwargs["n_epochs"]) == (64, 64, 4)
     config = ttq.resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64")
     assert (config.n_envs, config.algo_kwargs["n_epochs"]) == (64, 10)
+    monkeypatch.undo()  # the real make_model
+    lagged = ttq._build("jax-lag@32", "CoopGym/SitToStandHard-v2", 0)
+    assert (lagged.policy_lag, lagged.n_envs, lagged.n_steps) == (1, 32, 128)
+    assert ttq._build("jax", "CoopGym/SitToStandHard-v2", 0).policy_lag == 0
 
 
 def test_cleanrl_rows_flags_are_train_pys_settings() -> None:
