@@ -66,6 +66,8 @@ def plan_run(args: Any) -> Plan:
     algo = saved_agent.algo if saved_agent is not None else args.algo
     env_id = args.env or (saved_agent.env_id if saved_agent else None) or hyperparams_for(algo).env_id
     config = hyperparams_for(algo, env_id, settings_framework(args, algo))
+    if getattr(args, "policy_lag", None) is not None:
+        config = config.replace(algo_kwargs={**config.algo_kwargs, "policy_lag": args.policy_lag})
     timesteps = args.timesteps or config.total_timesteps
     checkpoint_every = args.checkpoint_every if args.checkpoint_every is not None else max(1, timesteps // 10)
     # A model must meet the observation it was trained on: checked before any folder is made.

@@ -66,6 +66,7 @@ RUN_FIELDS = (
     "select_episodes",
     "checkpoint_every",
     "framework",
+    "policy_lag",
 )
 """Settings that define a run: ``--resume`` of an unfinished run takes them from its ``args.json``."""
 RECORDED_FIELDS = ("algo", "env", "seed", "timesteps", "n_envs")
@@ -189,6 +190,8 @@ def _problem_with_framework(args: Any) -> str | None:
     if args.framework == "jax" and args.algo not in JAX_ALGORITHMS and not args.eval_only:  # asked for by name
         trains = " and ".join(JAX_ALGORITHMS)
         return f"--framework jax trains {trains} only, not --algo {args.algo}; use --framework sb3"
+    if getattr(args, "policy_lag", None) is not None and (args.algo != "ppo" or learner_framework(args) != "jax"):
+        return "--policy-lag needs --algo ppo and --framework jax"
     if (
         learner_framework(args) == "jax"
         and not args.eval_only

@@ -212,19 +212,21 @@ def test_the_algo_choices_are_the_algorithms_with_defaults():
 def test_framework_jax_trains_and_reports_and_its_model_continues_with_jax(tmp_path):
     """train.py --framework jax: the same run folder and report; the model loads as JaxPPO and --resume keeps JAX.
 
-    (That a JaxPPO checkpoint continues exactly: tests/agents/test_jax_ppo.py.)
+    With ``--policy-lag 1``, which the run's settings and the model keep (a run continuing the
+    model keeps it). That a JaxPPO checkpoint continues exactly, lagged or not:
+    tests/agents/test_jax_ppo.py.
     """
     import train
     from agents.rl import load_model
 
-    tiny = [*TINY, "--timesteps", "512", "--checkpoint-every", "128", "--framework", "jax"]
+    tiny = [*TINY, "--timesteps", "512", "--checkpoint-every", "128", "--framework", "jax", "--policy-lag", "1"]
     proc = run_train(*tiny, "--out", str(tmp_path), cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     (run_dir,) = tmp_path.iterdir()
     settings = json.loads((run_dir / "args.json").read_text())
-    assert settings["framework"] == "jax"
+    assert settings["framework"] == "jax" and settings["policy_lag"] == 1
     model, info = load_model(run_dir / "model.zip")
-    assert type(model).__name__ == "JaxPPO" and info["framework"] == "jax"
+    assert type(model).__name__ == "JaxPPO" and info["framework"] == "jax" and model.policy_lag == 1
     results = json.loads((run_dir / "results.json").read_text())
     assert results["training"]["timesteps"] >= 512
     assert results["evaluation"]["results"][0]["agent"] == "ppo (learned)" and results["framework"] == "jax"

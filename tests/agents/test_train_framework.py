@@ -16,6 +16,9 @@ import train
         ["--framework", "rllib", "--algo", "dqn"],
         ["--framework", "rllib", "--num-env-runners", "-1"],
         ["--framework", "jax", "--algo", "dqn"],
+        ["--policy-lag", "1", "--framework", "sb3"],
+        ["--policy-lag", "1", "--algo", "recurrent_ppo"],
+        ["--policy-lag", "2"],
     ],
 )
 def test_bad_framework_arguments_exit_2(argv):
