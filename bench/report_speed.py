@@ -203,7 +203,8 @@ needs to reach a scripted caregiver's level (the low end of its 95 % interval on
 episodes; the target counts successes only). Contenders: `default` is `train.py`'s SB3
 configuration, `jax` the same PPO as `JaxPPO` (`train.py --framework jax`) on its sizing,
 `default@N` SB3 on `N` envs with the same samples per update (`default@16` is SB3 on `jax`'s
-configuration), `jax@N-eE` JaxPPO on `N` envs with `E` epochs per update, `first_script` SB3's
+configuration), `jax-lag` `jax` with `policy_lag=1` (each update runs on a second core while the
+next rollout plays), `jax@N-eE` JaxPPO on `N` envs with `E` epochs per update, `first_script` SB3's
 defaults on 8 `gymnasium.make` envs. A change of load
 between runs moves the ratios (the results file holds the load average before and after each).
 """
@@ -223,10 +224,14 @@ def _ttq_seeds(report: dict[str, Any]) -> str:
 
     targets = report["targets"]
     rows = []
+    first = next(iter(report["contenders"].values()))
+    # Ratios to each SB3 contender of the run (older files: to `default` only).
+    bases = list(first.get("steps_per_s_ratio_to", {"default": None}))
     for name, row in report["contenders"].items():
-        ratios = row.get("steps_per_s_ratio_to_default") or []
         cells = [f"`{name}`", _count(row["steps_per_s_median"] or 0)]
-        cells.append(f"{statistics.median(ratios):.2f}{TIMES}" if ratios else "")
+        for base in bases:
+            ratios = (row.get("steps_per_s_ratio_to") or {"default": row.get("steps_per_s_ratio_to_default")})[base]
+            cells.append(f"{statistics.median(ratios):.2f}{TIMES}" if ratios else "")
         for target in targets:
             times = [t[target] for t in row["time_to_targets_s"].values()]
             reached = sorted(t for t in times if t is not None)
@@ -244,7 +249,8 @@ def _ttq_seeds(report: dict[str, Any]) -> str:
             f"{last['train_s_median']:.0f} s, {_count(last['timesteps_median'])} steps"
         )
         rows.append(cells)
-    header = ["contender", "steps/s (median)", f"steps/s {TIMES} `default`'s (median over seeds)"]
+    header = ["contender", "steps/s (median)"]
+    header += [f"steps/s {TIMES} `{base}`'s (median over seeds)" for base in bases]
     header += [f"time to the {t} level (per seed)" for t in targets]
     header += ["held-out success at the last score, IQM over seeds"]
     levels = ", ".join(f"{name} {_pct(t['success'])} (target {_pct(t['level'])})" for name, t in targets.items())

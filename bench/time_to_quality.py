@@ -278,7 +278,12 @@ def _median_rate(row: dict[str, Any]) -> float:
 
 
 def _summary(runs: list[dict[str, Any]], contenders: tuple[str, ...], seeds: list[int]) -> dict[str, Any]:
-    """Per contender: steps/s, time to each target per seed, the IQM success curve; steps/s ratios to ``default``."""
+    """Per contender: steps/s, time to each target per seed, the IQM success curve; steps/s ratios to SB3's.
+
+    ``steps_per_s_ratio_to`` holds, per SB3 contender in the run (``default``, ``default@N``), the
+    per-seed ratios of this contender's steps/s to that one's; ``steps_per_s_ratio_to_default``
+    repeats those to ``default``.
+    """
     import statistics
 
     from agents.evaluate.headroom import iqm_across_runs
@@ -305,15 +310,19 @@ def _summary(runs: list[dict[str, Any]], contenders: tuple[str, ...], seeds: lis
             "time_to_targets_s": {r["seed"]: r["time_to_targets_s"] for r in mine},
             "iqm_curve": curve,
         }
-    if "default" in contenders:
-        for contender in contenders:
+    bases = [c for c in contenders if c.partition("@")[0] == "default"]
+    for contender in contenders:
+        out[contender]["steps_per_s_ratio_to"] = {}
+        for name in bases:
             ratios = []
             for seed in seeds:
-                base = next(r for r in runs if r["contender"] == "default" and r["seed"] == seed)
+                base = next(r for r in runs if r["contender"] == name and r["seed"] == seed)
                 mine_run = next(r for r in runs if r["contender"] == contender and r["seed"] == seed)
                 if base["steps_per_s"] and mine_run["steps_per_s"]:
                     ratios.append(mine_run["steps_per_s"] / base["steps_per_s"])
-            out[contender]["steps_per_s_ratio_to_default"] = ratios
+            out[contender]["steps_per_s_ratio_to"][name] = ratios
+        if "default" in bases:
+            out[contender]["steps_per_s_ratio_to_default"] = out[contender]["steps_per_s_ratio_to"]["default"]
     return out
 
 
@@ -457,8 +466,11 @@ def main(argv: list[str] | None = None) -> int:
         reached = "; ".join(
             f"{target}: " + ", ".join("-" if t is None else f"{t:.0f} s" for t in ts) for target, ts in times.items()
         )
-        ratio = row.get("steps_per_s_ratio_to_default")
-        ratio_text = f", x{statistics.median(ratio):.2f} default's" if ratio else ""
+        ratio_text = "".join(
+            f", x{statistics.median(ratios):.2f} {base}'s"
+            for base, ratios in row["steps_per_s_ratio_to"].items()
+            if ratios and base != name
+        )
         print(f"{name:>13}: {_median_rate(row):.0f} steps/s{ratio_text}; time to {reached}")
     if args.save:
         # The runs' torch, SB3 and JAX (in worker processes with --jobs) go into the results file.
