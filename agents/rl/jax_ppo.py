@@ -18,6 +18,10 @@ or ``ReLU`` activation) on a ``Discrete`` or ``MultiDiscrete`` action space; the
 samples per update (``n_envs * n_steps``) must be a multiple of ``batch_size`` (or at most one
 minibatch: then the whole rollout is one, as in SB3).
 
+With ``policy_lag=1`` each update runs on JAX's own thread while the next rollout plays with
+the weights it started from (:meth:`JaxTraining.train`): on two cores a run takes about the
+longer of rollout and update instead of their sum.
+
 XLA runs on one thread (set on first use through ``XLA_FLAGS``, unless the caller set it)
 and the initial weights are drawn on one torch thread: a seed trains the same weights
 whatever ``torch.set_num_threads`` and the machine's core count.
