@@ -21,6 +21,8 @@ and the observation it gets (:data:`ROWS`):
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no ``VecNormalize``;
+  ``jax-kalman-lag``: ``jax-kalman`` with ``policy_lag=1`` (each update on a second core while the
+  next rollout plays, one update behind);
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
   :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
   ``jax-discreteunit-ends``: the same with a time-out ending the return, as in CleanRL's script;
