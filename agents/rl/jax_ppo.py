@@ -48,6 +48,7 @@ from stable_baselines3.common.utils import explained_variance
 from stable_baselines3.common.vec_env import VecEnv
 
 from agents.rl.jax_update import _jax, build
+from agents.rl.sb3_vec import fused_step
 
 __all__ = ["JaxPPO", "JaxTraining", "jax_available"]
 
@@ -380,6 +381,8 @@ class JaxTraining:
     ) -> bool:
         """SB3's rollout (callbacks, episode infos, timeout bootstrap, its buffer and GAE), the policy in NumPy.
 
+        ``make_train_env``'s stack steps through :func:`agents.rl.sb3_vec.fused_step`.
+
         The policy's step is the subclass's :meth:`_act`; :meth:`_final_values` values the final
         observation of a time-limit end, :meth:`_next_values` the observations after the rollout.
         """
@@ -388,11 +391,12 @@ class JaxTraining:
         buffer.reset()
         callback.on_rollout_start()
         self._rollout_begins()
+        env_step = fused_step(env) or env.step  # train.py's stack in one function, the same numbers
         for step in range(n_rollout_steps):
             obs = np.asarray(self._last_obs, dtype=np.float32)
             actions, values, log_probs = self._act(obs, buffer, step)
             env_actions = actions[:, 0] if isinstance(self.action_space, spaces.Discrete) else actions
-            new_obs, rewards, dones, infos = env.step(env_actions)
+            new_obs, rewards, dones, infos = env_step(env_actions)
             self.num_timesteps += env.num_envs
             callback.update_locals(locals())
             if not callback.on_step():

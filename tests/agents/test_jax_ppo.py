@@ -152,6 +152,22 @@ def test_checkpoint_and_resume_give_the_unbroken_run(tmp_path, lag):
     assert run(tmp_path / "stopped", stop_at=300) == run(tmp_path / "unbroken", stop_at=None)
 
 
+def test_the_rollout_through_the_fused_step_trains_the_weights_of_the_wrappers_step(monkeypatch):
+    """``collect_rollouts`` steps ``make_train_env``'s stack by ``fused_step``: the same run as ``env.step``."""
+    import agents.rl.jax_ppo as jax_ppo
+
+    fused = _model()
+    assert jax_ppo.fused_step(fused.get_env()) is not None
+    fused.learn(1024)
+    monkeypatch.setattr(jax_ppo, "fused_step", lambda env: None)
+    wrapped = _model()
+    wrapped.learn(1024)
+    assert _weights(fused) == _weights(wrapped)
+    a, b = fused.get_env(), wrapped.get_env()
+    assert np.array_equal(a.obs_rms.var, b.obs_rms.var) and np.array_equal(a.ret_rms.var, b.ret_rms.var)
+    assert [e["r"] for e in fused.ep_info_buffer] == [e["r"] for e in wrapped.ep_info_buffer]
+
+
 def test_a_lagged_rollout_is_played_by_the_weights_before_the_last_update():
     """``policy_lag=1``: the second rollout is played by the initial weights (the first update runs beside it).
 

@@ -241,3 +241,64 @@ def test_finished_step_infos_keep_every_finished_episodes_info_and_nothing_else(
     assert finished >= 4
     with pytest.raises(ValueError, match="step_infos"):
         make_sb3_vec_env("CoopGym/SitToStand-v0", 2, step_infos="some")
+
+
+def _train_stack(seed: int, folder: Any) -> Any:
+    from agents.rl import make_train_env
+
+    return make_train_env(
+        "CoopGym/SitToStandHard-v2", 8, seed, normalize=True, monitor_file=folder / "monitor.csv", env_kwargs=SHORT
+    )
+
+
+def test_the_fused_step_is_the_wrapper_stacks_step_bit_for_bit(tmp_path: Any) -> None:
+    """``fused_step``: the observations, rewards, dones, infos and every layer's state of ``env.step``."""
+    from agents.rl.sb3_vec import fused_step
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    wrapped, fused = _train_stack(3, tmp_path / "a"), _train_stack(3, tmp_path / "b")
+    step = fused_step(fused)
+    assert step is not None
+    np.testing.assert_array_equal(wrapped.reset(), fused.reset())
+    rng = np.random.default_rng(0)
+    finished = 0
+    for k in range(400):
+        actions = np.stack([rng.integers(0, 3, 8), rng.integers(0, 3, 8), rng.random(8) < 0.03], axis=1)
+        if k == 200:  # not training: the wrappers' own step, the statistics frozen
+            wrapped.training = fused.training = False
+        if k == 250:
+            wrapped.training = fused.training = True
+        expected, got = wrapped.step(actions), step(actions)
+        for a, b in zip(expected[:3], got[:3], strict=True):
+            assert a.dtype == b.dtype and np.array_equal(a, b), k
+        for a, b in zip(expected[3], got[3], strict=True):
+            assert list(a) == list(b), k
+            for key in a:
+                if key == "episode":
+                    assert {n: v for n, v in a[key].items() if n != "t"} == {
+                        n: v for n, v in b[key].items() if n != "t"
+                    }
+                    assert [type(v) for v in a[key].values()] == [type(v) for v in b[key].values()]
+                elif isinstance(a[key], np.ndarray):
+                    assert a[key].dtype == b[key].dtype and np.array_equal(a[key], b[key]), (k, key)
+                else:
+                    assert a[key] == b[key], (k, key)
+        finished += int(expected[2].sum())
+    assert finished > 50  # lifts, unsafe ends and time-outs (SHORT) all passed through
+    for rms in ("obs_rms", "ret_rms"):
+        a, b = getattr(wrapped, rms), getattr(fused, rms)
+        assert np.array_equal(a.mean, b.mean) and np.array_equal(a.var, b.var) and a.count == b.count
+    assert np.array_equal(wrapped.returns, fused.returns)
+    assert np.array_equal(wrapped.old_obs, fused.old_obs) and np.array_equal(wrapped.old_reward, fused.old_reward)
+    for a, b in ((wrapped.venv, fused.venv), (wrapped.venv.venv, fused.venv.venv)):
+        for name in ("episode_returns", "episode_lengths", "_episode_return", "_episode_length"):
+            if hasattr(a, name):
+                assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert wrapped.venv.episode_count == fused.venv.episode_count == finished
+    rows = [(tmp_path / f / "monitor.csv").read_text().splitlines()[2:] for f in ("a", "b")]
+    assert [r.split(",")[:2] + r.split(",")[3:] for r in rows[0]] == [
+        r.split(",")[:2] + r.split(",")[3:] for r in rows[1]
+    ]
+    # Any other stack keeps env.step.
+    assert fused_step(fused.venv) is None and fused_step(VecNormalize(fused.venv, norm_reward=True)) is None
