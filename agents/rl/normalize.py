@@ -21,6 +21,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from estimator.compiled import guard_kernel_cache
+
 __all__ = ["ObsNormalizer", "update_and_normalize"]
 
 
@@ -127,3 +129,6 @@ def update_and_normalize(vec_normalize: Any, obs: NDArray[np.float32]) -> NDArra
         obs, rms.mean, rms.var, float(rms.count), float(vec_normalize.epsilon), float(vec_normalize.clip_obs)
     )
     return normalized  # type: ignore[no-any-return]
+
+
+guard_kernel_cache(__name__)
