@@ -5,7 +5,7 @@ RLlib's ``MeanStdFilter`` by ``std + 1e-6`` (its ``SMALL_NUMBER``); both subtrac
 divisor is computed once from the saved statistics (:meth:`ObsNormalizer.from_vec_normalize`,
 :meth:`ObsNormalizer.from_mean_std`) and the arithmetic is the same float64 sequence the
 training wrapper ran, so an evaluated agent sees exactly the observations it trained on.
-NumPy only: the statistics are read from the objects, neither library is imported here.
+Neither library is imported here: the statistics are read from the objects.
 
 :func:`update_and_normalize` is the training side: ``VecNormalize``'s running-statistics update
 and normalisation of one batch in one compiled call, with the same numbers.
