@@ -167,6 +167,10 @@ def _clock(
 
         def _on_rollout_end(self) -> None:
             now = time.perf_counter()
+            if self.train_s + now - self.since >= min(self.next_eval, budget_s):
+                # A lagged JaxPPO's update may still run: training time, not the evaluation's.
+                getattr(self.model, "wait_for_update", lambda: None)()
+                now = time.perf_counter()
             self.train_s += now - self.since
             if self.train_s >= self.next_eval or self.train_s >= budget_s:
                 self.next_eval = self.train_s + every_s

@@ -71,6 +71,7 @@ agent = Agent()
 def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
     """(script, flags, --save PATH's name with the script's placeholders, the file it becomes)."""
     ttq = ["--env", "CoopGym/SitToStand-v0", "--budget-s", "0.3", "--eval-every-s", "0.3", "--episodes", "4"]
+    ttq += ["--contenders", "default,jax,jax-lag"]
     return [
         ("run", ["--quick", "--repeats", "1"], "run.json", "run"),
         ("reset", ["--num-envs", "64", "--repeats", "1"], "reset.json", "reset"),
@@ -170,6 +171,12 @@ def test_each_bench_script_writes_its_results_file_and_the_page_renders_from_the
         record = json.loads(path.read_text(encoding="utf-8"))
         assert record["command"].startswith(f"python bench/{record['benchmark']}.py"), path
         assert record["machine"]["cpu_count"] and record["machine"]["numba"], path
+    # Every contender's steps/s against each SB3 contender of the run, per seed.
+    ttq = json.loads((results / "time_to_quality_CoopGym-SitToStand-v0.json").read_text(encoding="utf-8"))
+    contenders = ttq["results"]["contenders"]
+    assert list(contenders) == ["default", "jax", "jax-lag"]
+    assert all(list(c["steps_per_s_ratio_to"]) == ["default"] for c in contenders.values())
+    assert set(contenders["default"]["steps_per_s_ratio_to"]["default"]) == {1.0}
     page = _bench("report").render(results)
     assert "No results file yet" not in page
 

@@ -481,6 +481,13 @@ class JaxTraining:
             self._params_to_torch(self._params)
             self._keep_state(self._params, self._opt_state, self._key)
 
+    def wait_for_update(self) -> None:
+        """Wait until an update running ahead of the rollout (``policy_lag``) has finished; the numbers do not change.
+
+        For a clock that should count the update's time where it ran, not where it was next needed.
+        """
+        self._land()
+
     def _land(self, result: Any = None) -> bool:
         """Wait for an update (``result``, or the one running ahead of the rollout) and hold its state.
 

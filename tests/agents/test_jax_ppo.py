@@ -168,6 +168,25 @@ def test_the_rollout_through_the_fused_step_trains_the_weights_of_the_wrappers_s
     assert [e["r"] for e in fused.ep_info_buffer] == [e["r"] for e in wrapped.ep_info_buffer]
 
 
+def test_waiting_for_a_lagged_update_changes_no_number():
+    """``wait_for_update`` at every rollout's end (what a clock that counts training time does): the same run."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Wait(BaseCallback):
+        def _on_step(self) -> bool:
+            return True
+
+        def _on_rollout_end(self) -> None:
+            self.model.wait_for_update()
+            assert self.model._pending is None
+
+    waited, free = _model(lag=1), _model(lag=1)
+    waited.learn(768, callback=Wait())
+    free.learn(768)
+    assert _weights(waited) == _weights(free)
+    _model().wait_for_update()  # without lag: nothing to wait for
+
+
 def test_a_lagged_rollout_is_played_by_the_weights_before_the_last_update():
     """``policy_lag=1``: the second rollout is played by the initial weights (the first update runs beside it).
 
