@@ -121,8 +121,9 @@ def update_and_normalize(vec_normalize: Any, obs: NDArray[np.float32]) -> NDArra
     compiled call; ``tests/agents/test_sb3_vec.py`` holds them equal bit for bit.
     """
     rms = vec_normalize.obs_rms
-    if obs.ndim != 2 or obs.shape[1] < 2 or obs.dtype != np.float32:
-        # One feature sums contiguously (NumPy's pairwise sum), another dtype promotes otherwise: NumPy's own.
+    if obs.ndim != 2 or obs.shape[1] < 2 or obs.dtype != np.float32 or not obs.flags.c_contiguous:
+        # NumPy sums a contiguous column pairwise (one feature, a column-major batch) and promotes
+        # another dtype otherwise: those batches take NumPy's own steps.
         rms.update(obs)
         return vec_normalize.normalize_obs(obs)  # type: ignore[no-any-return]
     rms.mean, rms.var, rms.count, normalized = _update_and_normalize(

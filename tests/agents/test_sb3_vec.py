@@ -302,3 +302,32 @@ def test_the_fused_step_is_the_wrapper_stacks_step_bit_for_bit(tmp_path: Any) ->
     ]
     # Any other stack keeps env.step.
     assert fused_step(fused.venv) is None and fused_step(VecNormalize(fused.venv, norm_reward=True)) is None
+
+
+@pytest.mark.parametrize("shape", [(16, 11), (1, 11), (300, 3), (16, 1)])
+@pytest.mark.parametrize("order", ["C", "F"])
+def test_the_compiled_normaliser_update_is_vec_normalizes(shape: tuple[int, int], order: str) -> None:
+    """``update_and_normalize``: VecNormalize's ``obs_rms.update`` and ``normalize_obs`` bit for bit, batch by batch."""
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    from agents.rl.normalize import update_and_normalize
+
+    class Stats:  # the attributes VecNormalize's two methods read
+        norm_obs, epsilon, clip_obs = True, 1e-8, 10.0
+        normalize_obs, _normalize_obs = VecNormalize.normalize_obs, VecNormalize._normalize_obs
+
+        def __init__(self) -> None:
+            self.obs_rms = RunningMeanStd(shape=(shape[1],))
+
+    ours, theirs = Stats(), Stats()
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    scale = 10.0 ** rng.uniform(-3, 3, size=shape[1])
+    for _ in range(30):
+        obs = np.asarray((rng.normal(size=shape) + 3.0) * scale, dtype=np.float32, order=order)
+        theirs.obs_rms.update(obs)
+        expected = theirs.normalize_obs(obs)
+        got = update_and_normalize(ours, obs)
+        assert got.dtype == np.float32 and np.array_equal(got.view(np.int32), expected.view(np.int32))
+        for name in ("mean", "var"):
+            assert np.array_equal(getattr(ours.obs_rms, name), getattr(theirs.obs_rms, name)), name
+        assert ours.obs_rms.count == theirs.obs_rms.count
