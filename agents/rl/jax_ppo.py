@@ -360,8 +360,7 @@ class JaxTraining:
         result = super().learn(*args, **kwargs)  # type: ignore[misc]
         if self.policy_lag:
             self._land()
-            self._params_to_torch(self._params)
-            self._keep_state(self._params, self._opt_state, self._key)
+            self._adopt_newest()
         return result
 
     def save(self, *args: Any, **kwargs: Any) -> None:
@@ -464,8 +463,7 @@ class JaxTraining:
         inputs = self._update_inputs()
         if self.policy_lag:
             self._land()
-            self._params_to_torch(self._params)
-            self._keep_state(self._params, self._opt_state, self._key)
+            self._adopt_newest()
             # The next rollout refills the buffer while the update reads its own copy.
             inputs = tuple(np.array(column) for column in inputs)
         result = compiled["update"](self._params, self._opt_state, self._key, *inputs, learning_rate, clip_range)
@@ -478,8 +476,7 @@ class JaxTraining:
             self._pending = result
         else:
             self._land(result)
-            self._params_to_torch(self._params)
-            self._keep_state(self._params, self._opt_state, self._key)
+            self._adopt_newest()
 
     def wait_for_update(self) -> None:
         """Wait until an update running ahead of the rollout (``policy_lag``) has finished; the numbers do not change.
@@ -487,6 +484,11 @@ class JaxTraining:
         For a clock that should count the update's time where it ran, not where it was next needed.
         """
         self._land()
+
+    def _adopt_newest(self) -> None:
+        """The last landed update's weights become the torch weights and the rollout policy."""
+        self._params_to_torch(self._params)
+        self._keep_state(self._params, self._opt_state, self._key)
 
     def _land(self, result: Any = None) -> bool:
         """Wait for an update (``result``, or the one running ahead of the rollout) and hold its state.
