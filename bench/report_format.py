@@ -68,7 +68,8 @@ def _provenance(record: dict[str, Any]) -> str:
         if m.get(key)
     )
     return (
-        f"*Measured by* `{record['command']}` · {record['date']} · {m['cpu_count']} cores, "
+        f"*Measured by* `{record['command']}` · {record['date']} · {m['cpu_count']} cores"
+        f"{' (' + m['cpu'] + ')' if m.get('cpu') else ''}, "
         f"load average {m['load_average_1min']:.1f} at the end · {versions}"
     )
 

@@ -60,10 +60,32 @@ def _version(package: str) -> str | None:
         return None
 
 
+def cpu(cpuinfo: Path = Path("/proc/cpuinfo")) -> str | None:
+    """The CPU's model name and its widest vector extension (``"... (avx512f)"``), from ``cpuinfo``.
+
+    The vector extension decides which kernels NumPy's BLAS, torch and XLA run, so a training
+    seed's weights (docs/agents.md, "Reproducibility"); None where ``cpuinfo`` is missing.
+    """
+    try:
+        text = cpuinfo.read_text(encoding="utf-8")
+    except OSError:
+        return None
+    fields = dict(
+        (key.strip(), value.strip())
+        for key, _, value in (line.partition(":") for line in text.splitlines())
+        if key.strip() in ("model name", "flags")
+    )
+    flags = set(fields.get("flags", "").split())
+    widest = next((flag for flag in ("avx512f", "avx2", "avx", "sse4_2") if flag in flags), None)
+    name = fields.get("model name") or platform.processor() or None
+    return None if name is None else f"{name} ({widest})" if widest else name
+
+
 def machine() -> dict[str, Any]:
-    """What the figures were measured on: cores, load and the versions that set the speed."""
+    """What the figures were measured on: cores, CPU, load and the versions that set the speed."""
     info: dict[str, Any] = {
         "cpu_count": os.cpu_count(),
+        "cpu": cpu(),
         "load_average_1min": os.getloadavg()[0],
         "platform": f"{platform.system()} {platform.machine()}",
         "python": platform.python_version(),

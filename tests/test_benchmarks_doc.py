@@ -294,3 +294,15 @@ def test_cleanrl_wide_row_trains_on_train_pys_personas() -> None:
 
     assert spread(wide.personas) == spread(resolve_personas("train_wide"))
     assert spread(own.personas) == spread(resolve_personas("train")) != spread(wide.personas)
+
+
+def test_the_machine_record_names_the_cpu_and_its_widest_vector_extension(tmp_path: Path) -> None:
+    result_files = _bench("result_files")
+    info = tmp_path / "cpuinfo"
+    processor = "processor\t: {n}\nmodel name\t: Some CPU\nflags\t\t: fpu sse4_2 avx avx2 fma{extra}\n\n"
+    info.write_text(processor.format(n=0, extra="") + processor.format(n=1, extra=""), encoding="utf-8")
+    assert result_files.cpu(info) == "Some CPU (avx2)"
+    info.write_text(processor.format(n=0, extra=" avx512f avx512bw"), encoding="utf-8")
+    assert result_files.cpu(info) == "Some CPU (avx512f)"
+    assert result_files.cpu(tmp_path / "missing") is None
+    assert "cpu" in result_files.machine()
