@@ -22,7 +22,7 @@ With ``policy_lag=1`` each update runs on JAX's own thread while the next rollou
 the weights it started from (:meth:`JaxTraining.train`): on two cores a run takes about the
 longer of rollout and update instead of their sum.
 
-XLA runs on one thread (set on first use through ``XLA_FLAGS``, unless the caller set it)
+XLA runs on one thread (added to ``XLA_FLAGS`` on first use, unless the caller's flags set it)
 and the initial weights are drawn on one torch thread: a seed trains the same weights
 whatever ``torch.set_num_threads`` and the machine's core count.
 

@@ -34,14 +34,21 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["build"]
+__all__ = ["build", "xla_flags"]
 
-_XLA_ONE_THREAD = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+_XLA_ONE_THREAD = ("--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1")
+
+
+def xla_flags(given: str) -> str:
+    """``XLA_FLAGS`` with the one-thread flags added to ``given``, except those ``given`` sets itself."""
+    names = {flag.split("=")[0].lstrip("-") for flag in given.split()}
+    added = [flag for flag in _XLA_ONE_THREAD if flag.split("=")[0].lstrip("-") not in names]
+    return " ".join([*given.split(), *added])
 
 
 def _jax() -> tuple[Any, Any, Any]:
-    """``(jax, jax.numpy, optax)``, XLA held to one thread before its first use."""
-    os.environ.setdefault("XLA_FLAGS", _XLA_ONE_THREAD)
+    """``(jax, jax.numpy, optax)``, XLA held to one thread before its first use (:func:`xla_flags`)."""
+    os.environ["XLA_FLAGS"] = xla_flags(os.environ.get("XLA_FLAGS", ""))
     import jax
     import jax.numpy as jnp
     import optax

@@ -312,3 +312,15 @@ def _initial_state(config, envs: int, overrides: dict) -> dict:
         config.replace(framework="sb3"), make_train_env(ENV_ID, envs, 0, normalize=True), 0, overrides=overrides
     )
     return {k: v.clone() for k, v in model.policy.state_dict().items()}
+
+
+def test_a_callers_xla_flags_keep_xla_on_one_thread():
+    """The caller's ``XLA_FLAGS`` (say, a pinned instruction set) are kept and the one-thread flags added."""
+    from agents.rl.jax_update import xla_flags
+
+    one_thread = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    assert xla_flags("") == one_thread
+    assert xla_flags("--xla_cpu_max_isa=AVX2") == "--xla_cpu_max_isa=AVX2 " + one_thread
+    assert xla_flags(one_thread) == one_thread  # the flags of a second build are not added twice
+    mine = "--xla_cpu_multi_thread_eigen=true"
+    assert xla_flags(mine) == mine + " intra_op_parallelism_threads=1"
