@@ -71,7 +71,8 @@ class Args:
     """jax (SB3's PPO with its update compiled by JAX; ppo only), sb3 or rllib (Ray RLlib PPO); None: jax for ppo"""
     policy_lag: Literal[0, 1] | None = None
     """--framework jax, ppo: 1 runs each update on a second core while the next rollout plays with the weights
-    before it (faster; docs/agents.md, "Policy lag"); None: 0 (a model continued with --resume keeps its own)"""
+    before it (faster; docs/agents.md, "Policy lag"); None: the env's (1 on CoopGym/SitToStandHard-v2, else 0:
+    agents/trainer/hyperparams.py JAX_POLICY_LAG; a model continued with --resume keeps its own)"""
     num_env_runners: int = 0
     """--framework rllib: sampling actors (0: in the driver, no episodes between processes; cluster: 1+ per node)"""
     address: str | None = None

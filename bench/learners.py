@@ -14,7 +14,7 @@ and the observation it gets (:data:`ROWS`):
 - ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
   on the measurements alone / on the default observation;
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO as ``ppo-*`` trained by
-  :class:`agents.rl.jax_ppo.JaxPPO` on its sizing (``jax-kalman`` is what ``python train.py`` trains);
+  :class:`agents.rl.jax_ppo.JaxPPO` on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
   ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by
   :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (the hard level's RecurrentPPO settings: PPO's,
   with an LSTM before the heads); ``ROW@N``
@@ -22,7 +22,7 @@ and the observation it gets (:data:`ROWS`):
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no ``VecNormalize``;
   ``jax-kalman-lag``: ``jax-kalman`` with ``policy_lag=1`` (each update on a second core while the
-  next rollout plays, one update behind);
+  next rollout plays, one update behind): what ``python train.py`` trains;
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
   :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
   ``jax-discreteunit-ends``: the same with a time-out ending the return, as in CleanRL's script;
@@ -105,7 +105,8 @@ class Row:
     bootstrap: bool = True
     """Whether a time-out adds ``gamma * V(final observation)`` as in SB3 (CleanRL's script ends the return)."""
     algo_kwargs: dict[str, Any] = field(default_factory=dict)
-    """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``)."""
+    """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``). A JaxPPO row without
+    ``policy_lag`` here runs ``policy_lag=0``, whatever ``train.py``'s default."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -136,12 +137,16 @@ ROWS: dict[str, Row] = {
     "recurrent-raw": Row("recurrent_ppo", {"observation_mode": "raw"}, "RecurrentPPO (LSTM), measurements only"),
     "recurrent-kalman": Row("recurrent_ppo", {}, "RecurrentPPO (LSTM), Kalman estimate + measurements"),
     "jax-kalman": Row(
-        "ppo", {}, "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements (train.py's default)", "jax"
+        "ppo",
+        {},
+        "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements (train.py --policy-lag 0)",
+        "jax",
     ),
     "jax-kalman-lag": Row(
         "ppo",
         {},
-        "JaxPPO, policy_lag=1 (each update runs while the next rollout plays), Kalman estimate + measurements",
+        "JaxPPO, policy_lag=1 (each update runs while the next rollout plays), Kalman estimate + measurements"
+        " (train.py's default)",
         "jax",
         algo_kwargs={"policy_lag": 1},
     ),
@@ -336,8 +341,11 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     torch.set_num_threads(1)  # as train.py --threads
     row, size = _row(name)
     config = hyperparams_for(row.algo, ENV_ID, row.framework)
+    sequential = {"policy_lag": 0} if row.algo == "ppo" and row.framework == "jax" else {}
     config = config.replace(
-        total_timesteps=timesteps, personas="train_wide", algo_kwargs={**config.algo_kwargs, **row.algo_kwargs}
+        total_timesteps=timesteps,
+        personas="train_wide",
+        algo_kwargs={**config.algo_kwargs, **sequential, **row.algo_kwargs},
     )
     if size:  # the same samples per update on N envs (and E epochs)
         try:

@@ -20,7 +20,16 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from report_format import Results
-from report_quality import learners, library_defaults, papers_experiment, rllib, test_command, the_levels, train_py
+from report_quality import (
+    learners,
+    learners_across_cpus,
+    library_defaults,
+    papers_experiment,
+    rllib,
+    test_command,
+    the_levels,
+    train_py,
+)
 from report_speed import against_gymnasium, cold_start, rendering, reset, soak, threads, time_to_quality
 from result_files import RESULTS, ROOT, load_all
 
@@ -52,6 +61,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     the_levels,
     train_py,
     learners,
+    learners_across_cpus,
     library_defaults,
     rllib,
     papers_experiment,

@@ -1,10 +1,12 @@
 """The quality sections of ``docs/BENCHMARKS.md``.
 
-The levels, ``train.py``, library defaults, RLlib, the paper's experiment.
+The levels, ``train.py``, the learners (and the same seeds on another CPU), library defaults, RLlib,
+the paper's experiment.
 """
 
 from __future__ import annotations
 
+import statistics
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -404,6 +406,80 @@ and plays the same {report["episodes"]} held-out episodes as the scripted caregi
 its stratified bootstrap interval follow rliable; the mind-reading score is
 `(success - blind) / (oracle - blind)` per seed. Training seconds were measured with other runs
 on the machine.
+
+{_table(header, rows)}
+"""
+
+
+def _seeds_at(runs: list[dict[str, Any]], level: float | None) -> str:
+    return "—" if level is None else f"{sum(run['success_rate'] >= level for run in runs)}/{len(runs)}"
+
+
+def _moved(changes: list[float]) -> str:
+    """The median and the largest of per-seed changes of a rate, in points."""
+    return "—" if not changes else f"{100 * statistics.median(changes):.1f} / {100 * max(changes):.1f}"
+
+
+def learners_across_cpus(results: Results) -> str:
+    """The same rows and seeds of ``bench/learners.py`` trained on several CPUs (``learners*.json``)."""
+    head = "### The same seeds on another CPU\n"
+    records = {stem: record for stem, record in results.items() if stem == "learners" or stem.startswith("learners_")}
+    if "learners" not in records or len(records) < 2:
+        return (
+            f"{head}\nNo second machine yet: on a CPU other than `bench/results/learners.json`'s, `python"
+            " bench/learners.py --rows jax-kalman --seeds 0,1,2,3,4,5,6,7 --save bench/results/learners_<cpu>.json`,"
+            " then `python bench/report.py`.\n"
+        )
+    reference = records["learners"]["results"]["rows"]
+    ordered = ["learners", *sorted(stem for stem in records if stem != "learners")]
+    rows = []
+    for name in reference:
+        for stem in ordered:
+            report = records[stem]["results"]
+            row = report["rows"].get(name)
+            if row is None or not any(name in records[other]["results"]["rows"] for other in ordered if other != stem):
+                continue
+            runs = row["per_seed"]
+            first = {run["training_seed"]: run["success_rate"] for run in reference[name]["per_seed"]}
+            moved = [abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first]
+            validation = [run["validation_success_rate"] for run in runs if "validation_success_rate" in run]
+            scripted = report["scripted"]
+            rows.append(
+                [
+                    f"`{name}`",
+                    records[stem]["machine"].get("cpu") or "not recorded",
+                    str(len(runs)),
+                    _pct(sum(validation) / len(validation)) if validation else "—",
+                    _pct(min(validation)) if validation else "—",
+                    f"{_pct(row['success']['iqm'])} {_ci(row['success']['ci95'])}",
+                    _pct(min(run["success_rate"] for run in runs)),
+                    _seeds_at(runs, scripted.get("belief", {}).get("success_rate")),
+                    _seeds_at(runs, scripted.get("prober", {}).get("success_rate")),
+                    "(reference)" if stem == "learners" else _moved(moved),
+                ]
+            )
+    header = [
+        "row",
+        "CPU (widest vector extension)",
+        "seeds",
+        "validation: mean",
+        "validation: lowest",
+        "held-out success, IQM [95 % CI]",
+        "held-out: lowest seed",
+        "seeds ≥ belief",
+        "seeds ≥ prober",
+        "held-out change per seed: median / largest (points)",
+    ]
+    provenance = "\n\n".join(_provenance(records[stem]) for stem in ordered if stem != "learners")
+    return f"""{head}
+{provenance}
+
+A seed trains the same weights in every process on one machine, not on another CPU: NumPy's BLAS,
+MKL and XLA pick their kernels by the CPU's vector extensions and add in another order
+(docs/agents.md, "Reproducibility"). Each row here is trained by `bench/learners.py` on the
+same seeds on each machine and scored on the same held-out episodes; the first machine's rows
+are those of the table above (`bench/results/learners.json`), and the last column compares each
+seed's held-out success with that seed's there.
 
 {_table(header, rows)}
 """

@@ -200,11 +200,11 @@ def time_to_quality(results: Results) -> str:
 each in its own process, with `--jobs 2`), scoring held-out success on the same episodes at
 intervals of training time (evaluation time not counted), and reports the training time each
 needs to reach a scripted caregiver's level (the low end of its 95 % interval on those
-episodes; the target counts successes only). Contenders: `default` is `train.py`'s SB3
-configuration, `jax` the same PPO as `JaxPPO` (`train.py --framework jax`) on its sizing,
+episodes; the target counts successes only). Contenders: `default` is `train.py --framework sb3`'s
+configuration, `jax` the same PPO as `JaxPPO` (`train.py --policy-lag 0`) on its sizing,
 `default@N` SB3 on `N` envs with the same samples per update (`default@16` is SB3 on `jax`'s
 configuration), `jax-lag` `jax` with `policy_lag=1` (each update runs on a second core while the
-next rollout plays), `jax@N-eE` JaxPPO on `N` envs with `E` epochs per update, `first_script` SB3's
+next rollout plays; `train.py`'s learner on `-v2`), `jax@N-eE` JaxPPO on `N` envs with `E` epochs per update, `first_script` SB3's
 defaults on 8 `gymnasium.make` envs. A change of load
 between runs moves the ratios (the results file holds the load average before and after each).
 """

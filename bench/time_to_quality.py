@@ -12,10 +12,11 @@ other (or ``--jobs`` at a time, each in its own process):
   env count, persona set, batched env adapter, ``VecNormalize``, tuned SB3 PPO; training is
   cut by the clock, not a step budget, so a linearly decaying learning rate stays at its
   start value);
-- ``jax``: the same PPO as :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --framework jax``), on
-  its own sizing (``hyperparams_for(..., framework="jax")``);
+- ``jax``: the same PPO as :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --policy-lag 0``), on
+  its own sizing (``hyperparams_for(..., framework="jax")``), each update between two rollouts;
 - ``jax-lag``: ``jax`` with ``policy_lag=1`` (each update runs on its own thread while the
-  next rollout plays; :meth:`agents.rl.jax_ppo.JaxTraining.train`);
+  next rollout plays; :meth:`agents.rl.jax_ppo.JaxTraining.train`): ``train.py``'s learner on
+  the hard level ``-v2``;
 - ``default@N`` / ``jax@N`` / ``jax-lag@N``: any of these on ``N`` envs with ``n_steps`` scaled so each update still
   takes ``n_envs * n_steps`` samples (``default@N`` at the jax sizing's env count is SB3 on the
   same configuration as ``jax``); ``@N-eE`` also sets ``E`` epochs per update;
@@ -117,8 +118,8 @@ def _config(kind: str, env_id: str) -> Any:
     from agents.trainer.hyperparams import hyperparams_for
 
     config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
-    if kind == "jax-lag":
-        config = config.replace(algo_kwargs={**config.algo_kwargs, "policy_lag": 1})
+    if kind != "default":
+        config = config.replace(algo_kwargs={**config.algo_kwargs, "policy_lag": int(kind == "jax-lag")})
     return config
 
 

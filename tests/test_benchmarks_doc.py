@@ -211,7 +211,7 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     built.clear()
     with pytest.raises(Built):
         learners.train_one("jax-kalman", 0, 64, 4, tmp_path, 4)
-    assert "policy_lag" not in built
+    assert built["policy_lag"] == 0  # a JaxPPO row is sequential unless it says otherwise, whatever train.py's default
     # A row without normalisation trains on its own env, as CleanRL's script would see it.
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -306,3 +306,22 @@ def test_the_machine_record_names_the_cpu_and_its_widest_vector_extension(tmp_pa
     assert result_files.cpu(info) == "Some CPU (avx512f)"
     assert result_files.cpu(tmp_path / "missing") is None
     assert "cpu" in result_files.machine()
+
+
+def test_the_same_seeds_on_another_cpu_are_rendered_seed_by_seed(tmp_path: Path) -> None:
+    report = _bench("report_quality")
+    reference = json.loads((BENCH / "results" / "learners.json").read_text(encoding="utf-8"))
+    # One machine: the section names the command that measures another.
+    assert "bench/results/learners_<cpu>.json" in report.learners_across_cpus({"learners": reference})
+    name = next(iter(reference["results"]["rows"]))
+    other = json.loads(json.dumps(reference))
+    other["machine"]["cpu"] = "Another CPU (avx2)"
+    other["results"]["rows"] = {name: other["results"]["rows"][name]}
+    runs = other["results"]["rows"][name]["per_seed"]
+    for run, change in zip(runs, [0.02, -0.10] + [0.0] * (len(runs) - 2), strict=True):
+        run["success_rate"] += change
+    page = report.learners_across_cpus({"learners": reference, "learners_avx2": other})
+    lines = [line for line in page.splitlines() if line.startswith(f"| `{name}` |")]
+    assert len(lines) == 2, page  # one row per machine, the reference first
+    assert "(reference)" in lines[0] and "Another CPU (avx2)" in lines[1]
+    assert lines[1].endswith(" | 0.0 / 10.0 |"), lines[1]  # median and largest change per seed, in points

@@ -31,6 +31,7 @@ __all__ = [
     "FRAMEWORKS",
     "HYPERPARAMS",
     "JAX_ALGORITHMS",
+    "JAX_POLICY_LAG",
     "JAX_SIZING",
     "ZOO_ALGO_NAMES",
     "TrainingConfig",
@@ -250,11 +251,17 @@ personas' validation episodes (python bench/learners.py --rows jax-kalman@8,jax-
 docs/agents.md, "The JAX learner")."""
 
 
+JAX_POLICY_LAG: dict[str, int] = {"CoopGym/SitToStandHard-v2": 1}
+"""``JaxPPO``'s ``policy_lag`` on an env id (0 on the others): 1 runs each update on a second core
+while the next rollout plays (:meth:`agents.rl.jax_ppo.JaxTraining.train`). Chosen on the
+training personas' validation episodes, 16 seeds on each of two CPUs (docs/agents.md, "Policy lag")."""
+
+
 def hyperparams_for(algo: str, env_id: str | None = None, framework: str = "sb3") -> TrainingConfig:
     """The defaults of ``algo`` for ``env_id`` (its own env when None), for the learner ``framework``.
 
     An env id without tuned settings gets the algorithm's default settings, pointed at
-    that env. ``framework="jax"`` takes :data:`JAX_SIZING` over them.
+    that env. ``framework="jax"`` takes :data:`JAX_SIZING` over them, and PPO :data:`JAX_POLICY_LAG`.
 
     Raises:
         ValueError: unknown algorithm, or a framework that cannot train it.
@@ -267,6 +274,8 @@ def hyperparams_for(algo: str, env_id: str | None = None, framework: str = "sb3"
     if framework == "sb3":
         return config
     sizing = {k: v for k, v in JAX_SIZING.items() if k != "n_envs"}
+    if algo == "ppo" and JAX_POLICY_LAG.get(env_id, 0):
+        sizing["policy_lag"] = JAX_POLICY_LAG[env_id]
     return config.replace(
         framework=framework,
         n_envs=JAX_SIZING["n_envs"],

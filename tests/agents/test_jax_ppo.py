@@ -271,6 +271,7 @@ def test_one_update_is_sb3s_update():
     steps, envs = 16, 4
     overrides = {"n_steps": steps, "batch_size": steps * envs, "n_epochs": 3}
     config = hyperparams_for("ppo", ENV_ID, "jax")
+    config = config.replace(algo_kwargs={k: v for k, v in config.algo_kwargs.items() if k != "policy_lag"})
     ours = make_model(config, make_train_env(ENV_ID, envs, 0, normalize=True), 0, overrides=overrides)
     sb3 = make_model(
         config.replace(framework="sb3"), make_train_env(ENV_ID, envs, 0, normalize=True), 0, overrides=overrides
@@ -324,3 +325,10 @@ def test_a_callers_xla_flags_keep_xla_on_one_thread():
     assert xla_flags(one_thread) == one_thread  # the flags of a second build are not added twice
     mine = "--xla_cpu_multi_thread_eigen=true"
     assert xla_flags(mine) == mine + " intra_op_parallelism_threads=1"
+
+
+def test_train_py_runs_the_lagged_learner_on_the_hard_level_only():
+    assert hyperparams_for("ppo", ENV_ID, "jax").algo_kwargs["policy_lag"] == 1
+    assert "policy_lag" not in hyperparams_for("ppo", "CoopGym/SitToStand-v0", "jax").algo_kwargs
+    assert "policy_lag" not in hyperparams_for("recurrent_ppo", ENV_ID, "jax").algo_kwargs  # it has none
+    assert "policy_lag" not in hyperparams_for("ppo", ENV_ID, "sb3").algo_kwargs
