@@ -441,7 +441,9 @@ def learners_across_cpus(results: Results) -> str:
                 continue
             runs = row["per_seed"]
             first = {run["training_seed"]: run["success_rate"] for run in reference[name]["per_seed"]}
-            moved = [abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first]
+            moved = [
+                abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first
+            ]
             validation = [run["validation_success_rate"] for run in runs if "validation_success_rate" in run]
             scripted = report["scripted"]
             rows.append(
