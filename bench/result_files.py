@@ -63,7 +63,7 @@ def _version(package: str) -> str | None:
 def cpu(cpuinfo: Path = Path("/proc/cpuinfo")) -> str | None:
     """The CPU's model name and its widest vector extension (``"... (avx512f)"``), from ``cpuinfo``.
 
-    The vector extension decides which kernels NumPy's BLAS, torch and XLA run, so a training
+    The vector extension decides which kernels NumPy's BLAS, MKL and XLA run, so a training
     seed's weights (docs/agents.md, "Reproducibility"); None where ``cpuinfo`` is missing.
     """
     try:
