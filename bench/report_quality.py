@@ -434,13 +434,14 @@ def learners_across_cpus(results: Results) -> str:
     ordered = ["learners", *sorted(stem for stem in records if stem != "learners")]
     rows = []
     for name in reference:
-        for stem in ordered:
+        holders = [stem for stem in ordered if name in records[stem]["results"]["rows"]]
+        if len(holders) < 2:  # a row on the first machine only
+            continue
+        first = {run["training_seed"]: run["success_rate"] for run in reference[name]["per_seed"]}
+        for stem in holders:
             report = records[stem]["results"]
-            row = report["rows"].get(name)
-            if row is None or not any(name in records[other]["results"]["rows"] for other in ordered if other != stem):
-                continue
+            row = report["rows"][name]
             runs = row["per_seed"]
-            first = {run["training_seed"]: run["success_rate"] for run in reference[name]["per_seed"]}
             moved = [
                 abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first
             ]
@@ -451,7 +452,7 @@ def learners_across_cpus(results: Results) -> str:
                     f"`{name}`",
                     records[stem]["machine"].get("cpu") or "not recorded",
                     str(len(runs)),
-                    _pct(sum(validation) / len(validation)) if validation else "—",
+                    _pct(statistics.mean(validation)) if validation else "—",
                     _pct(min(validation)) if validation else "—",
                     f"{_pct(row['success']['iqm'])} {_ci(row['success']['ci95'])}",
                     _pct(min(run["success_rate"] for run in runs)),
