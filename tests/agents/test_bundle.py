@@ -141,7 +141,7 @@ def _tiny_model(folder, env_id):
 
 def test_compare_without_env_plays_scripted_agents_on_the_models_env(tmp_path, capsys):
     # A hard-level model compared with the handbook: the handbook must play the hard level
-    # too, not the default id (it once scored 100 % there beside a hard-level model).
+    # too, not the default id (where it plays far better, which would hide the mix-up).
     from agents.evaluate.cli import main
 
     folder = _tiny_model(tmp_path / "hard", HARD)

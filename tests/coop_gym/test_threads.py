@@ -253,7 +253,7 @@ def test_a_worker_that_starts_after_its_step_is_over_changes_nothing() -> None:
 
 @pytest.mark.usefixtures("parallel_for_small_batches")
 def test_an_interrupted_threaded_step_leaves_no_worker_running(monkeypatch: pytest.MonkeyPatch) -> None:
-    # Ctrl-C while the calling thread resets envs, before the worker has woken (~0.1 ms): when
+    # Ctrl-C while the calling thread resets envs, before the worker has woken: when
     # the exception leaves step_commands, no worker may go on to step the envs behind its back.
     core = _stepped_core(TWO_THREADS)
     active = np.ones(300, dtype=bool)

@@ -96,8 +96,8 @@ def test_default_noise_25_labelled_trials() -> None:
     # Gains of the cue responses and the sensor noise: within 10%.
     for name in ("push_gain_m_per_s_n", "verbal_gain_m_per_s", "position_noise_std_m"):
         assert abs(errors[name]) < 0.10, (name, errors[name])
-    # Every field within 3 standard errors; the Cramer-Rao standard errors themselves are
-    # 1-15% here (velocity process noise is the hardest), so 10% everywhere needs more data.
+    # Every field within 3 standard errors: on these trials some fields' Cramer-Rao standard
+    # errors (velocity process noise's most) are wider than 10%, so 10% everywhere needs more data.
     for name in DEFAULT_FITTED_FIELDS:
         se = result.standard_errors[name]
         assert 0.0 < se < 0.2, (name, se)
