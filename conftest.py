@@ -5,7 +5,7 @@ import os
 import platform
 
 # NumPy chooses its SIMD kernels by CPU at import, and its AVX-512 exp differs from its AVX2 exp
-# in the last bit. Each episode's person is drawn through np.exp (coop_gym/envs/reset.py,
+# in the last bit. Each episode's person is drawn through np.exp (coop_gym/envs/kernels/reset.py,
 # coop_gym.model.personas.sample_person), so the recorded trajectories
 # (tests/coop_gym/test_recorded_trajectories.py, made at the AVX2 level X86_V3) replay bit for bit
 # only at that level: every test runs NumPy there, on any x86 CPU. NumPy is not imported yet here.

@@ -2,14 +2,12 @@
 
 ``python train.py`` trains PPO on ``CoopGym/SitToStandHard-v2`` (training personas only), keeps
 the policy that scores best on validation episodes (docs/agents.md, "Which policy is saved"),
-scores it and every scripted baseline on the same 1000 seeded episodes of the held-out personas,
-prints the comparison (with each agent's mind-reading score) and saves one run folder
-``runs/{env}__{algo}__{seed}__{time}/`` (its files: :mod:`agents.trainer.run_folder`). Ctrl-C stops at a
-checkpoint; ``--resume RUN`` continues to the same weights (:mod:`agents.trainer.training_run`).
+scores it and every scripted baseline on the same 1000 seeded episodes of the held-out personas, prints
+the comparison (with each agent's mind-reading score) and saves ``runs/{env}__{algo}__{seed}__{time}/``
+(:mod:`agents.trainer.run_folder`). Ctrl-C stops at a checkpoint; ``--resume RUN`` continues it.
 
-Read top to bottom: the typed :class:`Args` (parsed by tyro, as CleanRL does: the field docstrings
-are the ``--help``; checked by :mod:`agents.trainer.train_args`), then train (:mod:`agents.rl.run`), then
-evaluate and report (:mod:`agents.trainer.run_report`).
+Read top to bottom: the typed :class:`Args` (tyro; each field's docstring is its ``--help``; checked by
+:mod:`agents.trainer.train_args`), then train (:mod:`agents.rl.run`), then report (:mod:`agents.trainer.run_report`).
 """
 
 from __future__ import annotations
@@ -70,9 +68,8 @@ class Args:
     framework: Literal["jax", "sb3", "rllib"] | None = None
     """jax (SB3's PPO with its update compiled by JAX; ppo only), sb3 or rllib (Ray RLlib PPO); None: jax for ppo"""
     policy_lag: Literal[0, 1] | None = None
-    """--framework jax, ppo: 1 runs each update on a second core while the next rollout plays with the weights
-    before it (faster; docs/agents.md, "Policy lag"); None: the env's (1 on CoopGym/SitToStandHard-v2, else 0:
-    agents/trainer/hyperparams.py JAX_POLICY_LAG; a model continued with --resume keeps its own)"""
+    """--framework jax, ppo: 1 runs each update on a second core while the next rollout plays (docs/agents.md,
+    "Policy lag"); None: the env's (hyperparams.py JAX_POLICY_LAG: 1 on the hard level; --resume: the run's own)"""
     num_env_runners: int = 0
     """--framework rllib: sampling actors (0: in the driver, no episodes between processes; cluster: 1+ per node)"""
     address: str | None = None

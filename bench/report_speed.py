@@ -145,7 +145,7 @@ Every kernel is compiled with NumPy's error model (no `ZeroDivisionError` checks
 message formatting in each division), the reset kernel copies element by element (no
 shape-mismatch formatting), and the filter's rarely used covariance repair has its own 4{TIMES}4
 Jacobi eigensolver instead of LAPACK's `eigh`. `--kernels` lists what compiles and for how long:
-most of it is the one step kernel (`coop_gym/envs/step.py`). The goal of ≤ {goal_s:.0f} s to the cold
+most of it is the one step kernel (`coop_gym/envs/kernels/step.py`). The goal of ≤ {goal_s:.0f} s to the cold
 first step (the median) is {", ".join(verdicts)}.
 """
 
@@ -185,7 +185,7 @@ that claims blocks of envs from an atomic counter (`estimator/compiled/atomics.p
 left, each env drawing only from its own generator, so the results are bit-identical whatever the
 thread count (`tests/coop_gym/test_threads.py`). The calling thread does the step's autoresets
 while the worker wakes, and it waits for the worker's last block by reading the counter in a
-kernel, not on a lock. Small batches step on one thread (`coop_gym/envs/threads.py`). Several
+kernel, not on a lock. Small batches step on one thread (`coop_gym/envs/kernels/threads.py`). Several
 processes that each step large batches on one machine (say, RLlib runners) should pass
 `threads=1`: each would otherwise take every core. Numba's own `parallel=True`/`prange` is not
 used: next to torch's OpenMP runtime its spinning threads slow the step down.

@@ -218,8 +218,9 @@ def test_no_module_imports_a_higher_package() -> None:
 MAX_MODULES_PER_FOLDER = 12
 """STYLE.md "Rooms with names on the doors": a folder of more modules is split into named subpackages."""
 
-CROWDED_FOLDERS: dict[str, int] = {"bench": 17, "coop_gym/envs": 18}
-"""Folders not yet split, each held to the modules it has now: it may shrink, never grow."""
+CROWDED_FOLDERS: dict[str, int] = {"bench": 17}
+"""Folders not yet split, each held to the modules it has now: it may shrink, never grow (``bench/`` holds
+scripts, each run by its path, not a package)."""
 
 
 def test_no_folder_holds_more_than_a_dozen_modules() -> None:

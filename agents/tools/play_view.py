@@ -1,6 +1,6 @@
 """The window of :mod:`agents.tools.play`: the env's rgb frame with a control panel below it.
 
-The scene itself is the env's own ``rgb_array`` frame (:mod:`coop_gym.envs.rendering`);
+The scene itself is the env's own ``rgb_array`` frame (:mod:`coop_gym.envs.render.renderer`);
 this module only draws around it, on one off-screen surface that the window shows and a
 recorder can copy (:meth:`PlayView.pixels`). While an episode runs the frame's "true
 cooperativeness" face is covered, so the player reads the person as an agent must (from
@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from coop_gym.envs.contract import PUSH_BY_NAME, PUSH_FIRM, VERBAL_BACK, VERBAL_FORWARD
-from coop_gym.envs.rendering import SitToStandRenderer
+from coop_gym.envs.render.renderer import SitToStandRenderer
 
 __all__ = ["KEY_HELP", "PlayView", "Summary"]
 

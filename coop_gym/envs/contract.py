@@ -2,18 +2,19 @@
 
 Each name is defined once, in the module that owns it: actions in :mod:`coop_gym.envs.actions`,
 arguments in :mod:`coop_gym.envs.arguments`, infos in :mod:`coop_gym.envs.info`, observations in
-:mod:`coop_gym.envs.observation`, the report row and the episode end in :mod:`coop_gym.envs.report`.
+:mod:`coop_gym.envs.observation`, the report row and the episode end in :mod:`coop_gym.envs.kernels.report`.
 """
 
 from __future__ import annotations
 
-from coop_gym.envs import actions, arguments, info, observation, report
+from coop_gym.envs import actions, arguments, info, observation
 from coop_gym.envs.actions import *  # noqa: F403
 from coop_gym.envs.arguments import *  # noqa: F403
 from coop_gym.envs.config import INFO_MODES
 from coop_gym.envs.info import *  # noqa: F403
+from coop_gym.envs.kernels import report
+from coop_gym.envs.kernels.report import *  # noqa: F403
 from coop_gym.envs.observation import *  # noqa: F403
-from coop_gym.envs.report import *  # noqa: F403
 
 __all__ = [
     "INFO_MODES",

@@ -1,23 +1,23 @@
 """The batched simulation shared by the single env and the vector env: ``N`` episodes as arrays.
 
 :class:`SitToStandCore` holds ``N`` independent episodes and advances them one agent action at a
-time with one compiled call (:func:`coop_gym.envs.step.step_env` per env) that writes the reward
+time with one compiled call (:func:`coop_gym.envs.kernels.step.step_env` per env) that writes the reward
 terms, the info values (:data:`~coop_gym.envs.contract.REPORT_COLUMNS`) and the clipped float32
 observation into preallocated arrays; another call resets any set of envs
-(:mod:`coop_gym.envs.reset`). The single env is this core with ``N = 1``; the vector env is the
+(:mod:`coop_gym.envs.kernels.reset`). The single env is this core with ``N = 1``; the vector env is the
 same core with ``N`` envs, so the two cannot drift. Per-env state lives in one packed float row
-(:mod:`coop_gym.envs.layout`; ``m``, ``P``, ``params`` ... are views into it).
+(:mod:`coop_gym.envs.kernels.layout`; ``m``, ``P``, ``params`` ... are views into it).
 
 Randomness: env ``i`` draws only from its own ``numpy.random.Generator`` -- at reset in the
-order of :func:`coop_gym.envs.reset.draw_reset`, then ``substeps x NORMALS_PER_SUBSTEP``
+order of :func:`coop_gym.envs.kernels.reset.draw_reset`, then ``substeps x NORMALS_PER_SUBSTEP``
 standard normals per non-lift step. So env ``i`` of a vector env seeded ``s`` and a single env
 seeded ``s + i`` see identical streams. The kernels draw through the generator's own C
 functions with NumPy's algorithms (:mod:`estimator.compiled.rng`), so the ``Generator`` object stays the
 single source of truth. Envs seeded together (:meth:`SitToStandCore.seed_envs`, the vector
 env's ``reset(seed=...)``) keep that ``Generator``'s PCG64 state in arrays instead
 (:mod:`estimator.compiled.seeding`) until ``rngs[i]`` asks for the object. A batch of at least 2 x
-:data:`~coop_gym.envs.threads.MIN_ENVS_PER_THREAD` envs steps on several threads
-(:mod:`coop_gym.envs.threads`), with the same numbers.
+:data:`~coop_gym.envs.kernels.threads.MIN_ENVS_PER_THREAD` envs steps on several threads
+(:mod:`coop_gym.envs.kernels.threads`), with the same numbers.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from coop_gym.envs.actions import CMD, CMD_COLUMNS
 from coop_gym.envs.config import LiftCriteria, RewardWeights
-from coop_gym.envs.layout import (
+from coop_gym.envs.kernels.layout import (
     BLOCKS,
     CONSTS,
     CUE_COLUMNS,
@@ -41,11 +41,11 @@ from coop_gym.envs.layout import (
     pack_consts,
     pack_personas,
 )
+from coop_gym.envs.kernels.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
+from coop_gym.envs.kernels.reset import draw_reset, start_episodes
+from coop_gym.envs.kernels.step import first_unready, observe, step_all
+from coop_gym.envs.kernels.threads import available_threads, check_threads, plan_threads, step_threaded
 from coop_gym.envs.observation import FEATURES
-from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
-from coop_gym.envs.reset import draw_reset, start_episodes
-from coop_gym.envs.step import first_unready, observe, step_all
-from coop_gym.envs.threads import available_threads, check_threads, plan_threads, step_threaded
 from coop_gym.model.dynamics import DELAY_LINE_LENGTH, PARAM_COLUMNS, STATE_COLUMNS
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona
@@ -62,9 +62,9 @@ __all__ = [
     "REPORT_COLUMNS",
     "REWARD_TERMS",
     "SitToStandCore",
-    "available_threads",  # the threaded step's (coop_gym.envs.threads), for the importers of this module
+    "available_threads",  # the threaded step's (coop_gym.envs.kernels.threads), for the importers of this module
     "check_threads",
-    "nominal_model_for",  # the packing's (coop_gym.envs.layout), for the importers of this module
+    "nominal_model_for",  # the packing's (coop_gym.envs.kernels.layout), for the importers of this module
 ]
 
 
@@ -199,7 +199,7 @@ class SitToStandCore:
         self._chunks = 0
 
     def _plan_chunks(self) -> int:
-        """How many threads a step uses (:func:`~coop_gym.envs.threads.plan_threads`), kept until it may change."""
+        """Threads per step (:func:`~coop_gym.envs.kernels.threads.plan_threads`), kept until they may change."""
         self._chunks = plan_threads(self.threads, self.n_envs, self.generators)
         return self._chunks
 

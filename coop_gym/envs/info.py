@@ -13,9 +13,9 @@ from coop_gym.envs.arguments import SitToStandConfig
 from coop_gym.envs.config import (
     Outcome,
 )
+from coop_gym.envs.kernels.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
+from coop_gym.envs.kernels.step import select_and_clip
 from coop_gym.envs.observation import PROBABILITY_FEATURES
-from coop_gym.envs.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
-from coop_gym.envs.step import select_and_clip
 from estimator.compiled.cache import guard_kernel_cache
 
 __all__ = [
@@ -46,7 +46,7 @@ _INFO_ENTRIES: tuple[tuple[str, int, str], ...] = (
 """The one list of the info's keys, in order: (key, report column, kind). A ``"label"`` is a name
 looked up by the column's integer (the persona's, the outcome's); its number is the key of
 :data:`_CODE_KEYS` in the numeric info and beside the label in the vector info. Every info adds
-the reward terms (:data:`~coop_gym.envs.report.REWARD_TERMS`) and, with a multiple-model
+the reward terms (:data:`~coop_gym.envs.kernels.report.REWARD_TERMS`) and, with a multiple-model
 estimator, the mode probabilities."""
 
 _CODE_KEYS = {"persona": "persona_index", "outcome": "outcome_code"}

@@ -15,8 +15,8 @@ from coop_gym.envs.arguments import EnvArguments, SitToStandConfig, parse_reset_
 from coop_gym.envs.config import Outcome
 from coop_gym.envs.core import SitToStandCore
 from coop_gym.envs.info import InfoBuilder
+from coop_gym.envs.kernels.report import REPORT, episode_end
 from coop_gym.envs.observation import FEATURES, observation_features
-from coop_gym.envs.report import REPORT, episode_end
 from coop_gym.model.params import Cues, Timing
 from coop_gym.model.personas import Persona
 
@@ -55,7 +55,7 @@ def make_core(config: SitToStandConfig, n_envs: int) -> SitToStandCore:
 
 
 def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, stepped: bool) -> Any:
-    """A :class:`coop_gym.envs.rendering.RenderState` of env ``i`` of ``core``.
+    """A :class:`coop_gym.envs.render.renderer.RenderState` of env ``i`` of ``core``.
 
     Args:
         core: The simulation.
@@ -64,7 +64,7 @@ def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, ste
         lift: Whether the env's last action lifted.
         stepped: False right after a reset (no push is drawn then).
     """
-    from coop_gym.envs.rendering import RenderState
+    from coop_gym.envs.render.renderer import RenderState
 
     r = core.report[i]
     probs = None
@@ -350,7 +350,7 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
         if self.render_mode is None:
             gym.logger.warn('render() called without a render_mode; e.g. gym.make(id, render_mode="rgb_array")')
             return None
-        from coop_gym.envs.rendering import SitToStandRenderer
+        from coop_gym.envs.render.renderer import SitToStandRenderer
 
         if self._renderer is None:
             self._renderer = SitToStandRenderer()
@@ -382,5 +382,5 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
     # --- helpers ----------------------------------------------------------------
 
     def render_state(self) -> Any:
-        """A :class:`coop_gym.envs.rendering.RenderState` snapshot of the current step."""
+        """A :class:`coop_gym.envs.render.renderer.RenderState` snapshot of the current step."""
         return render_state_for(self.core, 0, self._outcome, self._last_lift, self._stepped)

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import check_threads
-from coop_gym.envs.report import REPORT, count_steps_and_end_episodes
+from coop_gym.envs.kernels.report import REPORT, count_steps_and_end_episodes
 from coop_gym.envs.sit_to_stand import ConfiguredEnv, render_state_for
 from estimator.compiled.checks import is_integer
 from estimator.compiled.rng import G_STATE
@@ -192,7 +192,7 @@ class SitToStandVectorEnv(ConfiguredEnv, VectorEnv):
 
         Returns:
             ``(obs, rewards, terminated, truncated, final)``; the infos' values are the rows
-            of ``self.core.report`` (:data:`~coop_gym.envs.report.REPORT_COLUMNS`). ``final`` is
+            of ``self.core.report`` (:data:`~coop_gym.envs.kernels.report.REPORT_COLUMNS`). ``final`` is
             None unless envs ended and were reset on this step (``SAME_STEP``); then it is
             ``(done, last_obs, last_report)``, observations and report rows from before the
             reset (rows of other envs are stale).
@@ -256,7 +256,7 @@ class SitToStandVectorEnv(ConfiguredEnv, VectorEnv):
         if self.render_mode is None:
             gym.logger.warn('render() called without a render_mode; e.g. gym.make_vec(id, render_mode="rgb_array")')
             return None
-        from coop_gym.envs.rendering import SitToStandRenderer
+        from coop_gym.envs.render.renderer import SitToStandRenderer
 
         if self._renderer is None:
             self._renderer = SitToStandRenderer()

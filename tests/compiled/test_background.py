@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from coop_gym.envs.core import SitToStandCore
-from coop_gym.envs.reset import draw_reset, start_episodes
-from coop_gym.envs.step import step_all
+from coop_gym.envs.kernels.reset import draw_reset, start_episodes
+from coop_gym.envs.kernels.step import step_all
 from coop_gym.envs.vector import SitToStandVectorEnv
 from estimator.compiled.background import ENV_SWITCH, python_twin
 from estimator.compiled.cache import guard_kernel_cache
@@ -51,7 +51,7 @@ def test_the_python_twins_of_the_reset_and_step_kernels_give_the_compiled_number
 ROLLOUT_AS_PYTHON = ROLLOUT + textwrap.dedent(
     """
     from estimator.compiled import background
-    from coop_gym.envs.step import step_all
+    from coop_gym.envs.kernels.step import step_all
     out["ran_as_python"] = not step_all.signatures
     if background._compiler is not None:
         background._compiler.process.kill()  # the test needs no compiled kernels

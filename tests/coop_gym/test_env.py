@@ -14,7 +14,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 
 import coop_gym
 from coop_gym.envs.core import FEATURES, REWARD_TERMS
-from coop_gym.envs.report import REPORT, TERMINATES
+from coop_gym.envs.kernels.report import REPORT, TERMINATES
 
 ALL_IDS = sorted(coop_gym.ENV_IDS)
 

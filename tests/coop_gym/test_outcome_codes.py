@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from coop_gym.envs import contract, core
-from coop_gym.envs import step as step_module
 from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
+from coop_gym.envs.kernels import step as step_module
 from coop_gym.model.dynamics import STATE
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import PERSONAS
@@ -59,7 +59,8 @@ def test_outcome_codes_that_are_not_consecutive_are_refused() -> None:
 
 def test_the_package_imports_and_checks_under_python_optimize() -> None:
     code = (
-        "import coop_gym.envs.step as c, coop_gym.envs.report as k; k.check_outcome_codes(k.Outcome); print(c._SUCCESS)"
+        "import coop_gym.envs.kernels.step as c, coop_gym.envs.kernels.report as k; "
+        "k.check_outcome_codes(k.Outcome); print(c._SUCCESS)"
     )
     out = subprocess.run([sys.executable, "-O", "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr

@@ -1,4 +1,4 @@
-"""Tests for coop_gym.envs.rendering: frame format, and that each element shows up where documented."""
+"""Tests for coop_gym.envs.render.renderer: frame format, and that each element shows up where documented."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("pygame")
 
-from coop_gym.envs.rendering import OUTCOMES, RenderState, SitToStandRenderer
+from coop_gym.envs.render.renderer import OUTCOMES, RenderState, SitToStandRenderer
 
 BASE = RenderState(
     time_s=1.0,

@@ -6,7 +6,7 @@ import numpy as np
 
 from coop_gym.envs import SitToStandEnv
 from coop_gym.envs.contract import REPORT, REPORT_COLUMNS
-from coop_gym.envs.layout import BLOCKS, CONST_COLUMNS, CONSTS, CUE_COLUMNS, PERSONA_BLOCKS
+from coop_gym.envs.kernels.layout import BLOCKS, CONST_COLUMNS, CONSTS, CUE_COLUMNS, PERSONA_BLOCKS
 from coop_gym.model.dynamics import PARAM_COLUMNS, STATE_COLUMNS
 from estimator.judgment import JUDGMENT_COLUMNS
 from estimator.kalman import NOMINAL_COLUMNS

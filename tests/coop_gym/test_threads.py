@@ -13,8 +13,8 @@ from gymnasium.vector import AutoresetMode
 from numpy.typing import NDArray
 
 import coop_gym
-from coop_gym.envs import threads as threads_module
 from coop_gym.envs.contract import CMD
+from coop_gym.envs.kernels import threads as threads_module
 from coop_gym.envs.vector import SitToStandVectorEnv
 from coop_gym.model.params import Timing
 from estimator.compiled.rng import G_STATE

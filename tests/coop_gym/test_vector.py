@@ -13,7 +13,7 @@ from gymnasium.vector import AutoresetMode
 
 import coop_gym
 from coop_gym.envs.config import Outcome
-from coop_gym.envs.report import REPORT, TERMINATES
+from coop_gym.envs.kernels.report import REPORT, TERMINATES
 from coop_gym.envs.vector import SitToStandVectorEnv
 from coop_gym.model.dynamics import (
     PARAM_COLUMNS,

@@ -13,9 +13,9 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.envs.layout import BLOCKS, CONSTS, DRAWS, NO_OVERRIDE, PERSONA_BLOCKS
-from coop_gym.envs.report import REPORT, REPORT_COLUMNS
-from coop_gym.envs.step import observe_row
+from coop_gym.envs.kernels.layout import BLOCKS, CONSTS, DRAWS, NO_OVERRIDE, PERSONA_BLOCKS
+from coop_gym.envs.kernels.report import REPORT, REPORT_COLUMNS
+from coop_gym.envs.kernels.step import observe_row
 from coop_gym.model.dynamics import (
     PARAM_COLUMNS,
     PERSON,

@@ -2,7 +2,7 @@
 
 Each thread runs one ``nogil`` kernel (:func:`step_claimed`) that claims the next unclaimed
 block of about :data:`ENVS_PER_BLOCK` envs until none is left, and runs
-:func:`coop_gym.envs.step.step_envs` on it. Env ``i``'s numbers depend only on its own row and
+:func:`coop_gym.envs.kernels.step.step_envs` on it. Env ``i``'s numbers depend only on its own row and
 generator, so the results are bit-identical whatever the thread count
 (tests/coop_gym/test_threads.py).
 """
@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from coop_gym.envs.step import step_envs
+from coop_gym.envs.kernels.step import step_envs
 from estimator.compiled.atomics import atomic_add, atomic_cas, atomic_load
 from estimator.compiled.cache import guard_kernel_cache
 from estimator.compiled.checks import is_integer
@@ -195,7 +195,7 @@ def step_threaded(
     Args:
         chunks: Threads to use (at least 2).
         control: The core's two control words (claim, done).
-        arrays: ``(cmd, state, generators, obs, consts)`` of :func:`~coop_gym.envs.step.step_envs`.
+        arrays: ``(cmd, state, generators, obs, consts)`` of :func:`~coop_gym.envs.kernels.step.step_envs`.
         meanwhile: Work for this thread before it claims blocks.
     """
     n = arrays[0].shape[0]

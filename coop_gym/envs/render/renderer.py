@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.envs.canvas import (
+from coop_gym.envs.render.canvas import (
     ARC,
     ARC_RADIUS,
     BANNERS,
@@ -77,7 +77,7 @@ from coop_gym.envs.canvas import (
     polygon,
     rounded_rect,
 )
-from coop_gym.envs.render_state import OUTCOMES, RenderState
+from coop_gym.envs.render.state import OUTCOMES, RenderState
 from estimator.compiled.checks import is_integer
 
 if TYPE_CHECKING:  # pragma: no cover - typing only

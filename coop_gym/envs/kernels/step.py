@@ -2,8 +2,8 @@ r"""One env step, compiled: :func:`step_env` takes one agent action from command
 
 The maths it sequences lives elsewhere -- the person in :mod:`coop_gym.model.dynamics`, the
 filter in :mod:`estimator.kalman`, the judgment in :mod:`estimator.judgment`; the layout of the
-rows it reads in :mod:`coop_gym.envs.layout`. :func:`step_envs` runs it over a range of envs;
-the core calls that on one thread or, through :mod:`coop_gym.envs.threads`, on several.
+rows it reads in :mod:`coop_gym.envs.kernels.layout`. :func:`step_envs` runs it over a range of envs;
+the core calls that on one thread or, through :mod:`coop_gym.envs.kernels.threads`, on several.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from numpy.typing import NDArray
 
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.config import Outcome
-from coop_gym.envs.layout import BLOCKS, CONSTS, CUE_COLUMNS, CUES
-from coop_gym.envs.report import REPORT, REPORT_COLUMNS
+from coop_gym.envs.kernels.layout import BLOCKS, CONSTS, CUE_COLUMNS, CUES
+from coop_gym.envs.kernels.report import REPORT, REPORT_COLUMNS
 from coop_gym.model.dynamics import (
     DELAY_LINE_LENGTH,
     NORMALS_PER_SUBSTEP,
@@ -56,7 +56,7 @@ def step_env(
 
     A lift ends the episode, judged on the true state (§II); else the cues play for ``substeps``
     filter steps and the episode times out at ``episode_s``. The reward is the sum of the named
-    terms (:func:`_write_reward`). ``row`` is the env's packed state (:data:`~coop_gym.envs.layout.BLOCKS`).
+    terms (:func:`_write_reward`). ``row`` is the env's packed state (:data:`~coop_gym.envs.kernels.layout.BLOCKS`).
     """
     substeps = int(consts[CONSTS.substeps])
     person = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]

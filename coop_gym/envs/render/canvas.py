@@ -1,7 +1,7 @@
 """The renderer's canvas: the fixed 600x400 layout, the palette, the labels and pygame's drawing primitives.
 
 Everything is drawn at the base size and letterboxed into other sizes by
-:class:`~coop_gym.envs.rendering.SitToStandRenderer`; pygame is imported lazily
+:class:`~coop_gym.envs.render.renderer.SitToStandRenderer`; pygame is imported lazily
 (:func:`import_pygame`), so the package imports without it.
 """
 

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from coop_gym.envs.config import LiftCriteria, RewardWeights
-from coop_gym.envs.report import REPORT_COLUMNS
+from coop_gym.envs.kernels.report import REPORT_COLUMNS
 from coop_gym.model.dynamics import DELAY_LINE_LENGTH, PARAM_COLUMNS, STATE_COLUMNS, pack_person
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import VARIED_PARAMETERS, Persona
