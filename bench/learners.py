@@ -413,8 +413,7 @@ def aggregate(runs: list[dict[str, Any]], blind: float, oracle: float) -> dict[s
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Train and score every (row, seed) not yet in ``--runs``; print the table (and save it)."""
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python bench/learners.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--rows", type=_rows, default=list(ROWS), help=f"comma-separated, of {', '.join(ROWS)}")
     parser.add_argument("--seeds", type=seed_list, default=[0, 1, 2, 3, 4], help="training seeds, joined by ','")
@@ -429,6 +428,48 @@ def main(argv: list[str] | None = None) -> int:
         "--cleanrl-script", type=Path, default=None, help="CleanRL's ppo.py, to train the cleanrl-* rows"
     )
     add_save_argument(parser, "learners.json")
+    return parser
+
+
+def _row_runs(name: str, args: argparse.Namespace, parser: argparse.ArgumentParser) -> list[dict[str, Any]]:
+    """Row ``name``'s finished runs over ``--seeds``, each trained first unless in ``--runs`` (or ``--no-train``)."""
+    from coop_gym.io import write_json
+
+    runs = []
+    for seed in args.seeds:
+        path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
+        if not path.exists() and args.no_train:
+            continue
+        if not path.exists() and _row(name)[0].framework == "cleanrl":
+            run = train_cleanrl(
+                name, args.cleanrl_script, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes
+            )
+            write_json(path, run)
+        if not path.exists():
+            run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes)
+            write_json(path, run)
+        run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
+        if run["episodes"] != args.episodes:
+            parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
+        runs.append(run)
+        print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
+    if not runs:
+        parser.error(f"--no-train: no run of {name} in {args.runs} for --seeds {args.seeds}")
+    return runs
+
+
+def _what(name: str) -> str:
+    """Row ``name``'s description, with its sizing if it has one."""
+    row, size = _row(name)
+    found = sizing(size) if size else None
+    if found is None:
+        return row.what
+    return row.what + f", {found[0]} envs" + (f", {found[1]} epochs" if found[1] is not None else "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Train and score every (row, seed) not yet in ``--runs``; print the table (and save it)."""
+    parser = _parser()
     args = parser.parse_args(argv)
     from coop_gym.cli import output_path_problem
     from coop_gym.io import write_json
@@ -454,32 +495,8 @@ def main(argv: list[str] | None = None) -> int:
     blind, oracle = reference["blind"]["success_rate"], reference["oracle"]["success_rate"]
     table: dict[str, Any] = {}
     for name in args.rows:
-        runs = []
-        for seed in args.seeds:
-            path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
-            if not path.exists() and args.no_train:
-                continue
-            if not path.exists() and _row(name)[0].framework == "cleanrl":
-                run = train_cleanrl(
-                    name, args.cleanrl_script, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes
-                )
-                write_json(path, run)
-            if not path.exists():
-                run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes)
-                write_json(path, run)
-            run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
-            if run["episodes"] != args.episodes:
-                parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
-            runs.append(run)
-            print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
-        if not runs:
-            parser.error(f"--no-train: no run of {name} in {args.runs} for --seeds {args.seeds}")
-        row, size = _row(name)
-        what = row.what
-        found = sizing(size) if size else None
-        if found is not None:
-            what += f", {found[0]} envs" + (f", {found[1]} epochs" if found[1] is not None else "")
-        table[name] = {"what": what, **aggregate(runs, blind, oracle), "per_seed": runs}
+        runs = _row_runs(name, args, parser)
+        table[name] = {"what": _what(name), **aggregate(runs, blind, oracle), "per_seed": runs}
     for name, row in table.items():
         s, c = row["success"], row["score"]
         print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']} {c['ci95']}")

@@ -420,6 +420,28 @@ def _moved(changes: list[float]) -> str:
     return "—" if not changes else f"{100 * statistics.median(changes):.1f} / {100 * max(changes):.1f}"
 
 
+def _cpu_row(name: str, record: dict[str, Any], first: dict[int, float], is_reference: bool) -> list[str]:
+    """Row ``name`` of one machine's ``learners*.json`` ``record``; ``first``: each seed's success on the first."""
+    report = record["results"]
+    row = report["rows"][name]
+    runs = row["per_seed"]
+    moved = [abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first]
+    validation = [run["validation_success_rate"] for run in runs if "validation_success_rate" in run]
+    scripted = report["scripted"]
+    return [
+        f"`{name}`",
+        record["machine"].get("cpu") or "not recorded",
+        str(len(runs)),
+        _pct(statistics.mean(validation)) if validation else "—",
+        _pct(min(validation)) if validation else "—",
+        f"{_pct(row['success']['iqm'])} {_ci(row['success']['ci95'])}",
+        _pct(min(run["success_rate"] for run in runs)),
+        _seeds_at(runs, scripted.get("belief", {}).get("success_rate")),
+        _seeds_at(runs, scripted.get("prober", {}).get("success_rate")),
+        "(reference)" if is_reference else _moved(moved),
+    ]
+
+
 def learners_across_cpus(results: Results) -> str:
     """The same rows and seeds of ``bench/learners.py`` trained on several CPUs (``learners*.json``)."""
     head = "### The same seeds on another CPU\n"
@@ -438,29 +460,7 @@ def learners_across_cpus(results: Results) -> str:
         if len(holders) < 2:  # a row on the first machine only
             continue
         first = {run["training_seed"]: run["success_rate"] for run in reference[name]["per_seed"]}
-        for stem in holders:
-            report = records[stem]["results"]
-            row = report["rows"][name]
-            runs = row["per_seed"]
-            moved = [
-                abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first
-            ]
-            validation = [run["validation_success_rate"] for run in runs if "validation_success_rate" in run]
-            scripted = report["scripted"]
-            rows.append(
-                [
-                    f"`{name}`",
-                    records[stem]["machine"].get("cpu") or "not recorded",
-                    str(len(runs)),
-                    _pct(statistics.mean(validation)) if validation else "—",
-                    _pct(min(validation)) if validation else "—",
-                    f"{_pct(row['success']['iqm'])} {_ci(row['success']['ci95'])}",
-                    _pct(min(run["success_rate"] for run in runs)),
-                    _seeds_at(runs, scripted.get("belief", {}).get("success_rate")),
-                    _seeds_at(runs, scripted.get("prober", {}).get("success_rate")),
-                    "(reference)" if stem == "learners" else _moved(moved),
-                ]
-            )
+        rows.extend(_cpu_row(name, records[stem], first, stem == "learners") for stem in holders)
     header = [
         "row",
         "CPU (widest vector extension)",

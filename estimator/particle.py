@@ -215,6 +215,25 @@ def _checked_arrays(
     return rows, template, prior / prior.sum()
 
 
+def _seed_list(seeds: ArrayLike, n: int) -> list[int]:
+    """``seeds`` as ``n`` non-negative Python ints, element by element.
+
+    ``np.asarray`` of Python ints above 2**63 beside smaller ones makes float64 and rounds them,
+    so an env's particles would depend on the other envs' seeds.
+    """
+    values: list[Any]
+    if isinstance(seeds, np.ndarray):
+        if seeds.dtype.kind not in "iu":
+            raise ValueError(f"seeds must be {n} non-negative ints, got an array of {seeds.dtype}")
+        values = seeds.reshape(-1).tolist()
+    else:
+        values = list(seeds) if isinstance(seeds, (list, tuple)) else [seeds]
+    seed_list = [int(v) for v in values]
+    if len(seed_list) != n or min(seed_list, default=0) < 0:
+        raise ValueError(f"seeds must be {n} non-negative ints")
+    return seed_list
+
+
 class SwitchingParticleFilter:
     """``P(xi = -1, 0, +1)`` of ``N`` people, each tracked by ``M`` particles of its whole state.
 
@@ -342,19 +361,7 @@ class SwitchingParticleFilter:
                 raise ValueError(f"params must be a finite ({idx.shape[0]}, {k}, {c}) or ({idx.shape[0]}, {c}) array")
             self.params[idx] = np.repeat(rows, k // rows.shape[1], axis=1)
         if seeds is not None:
-            # Element by element: np.asarray of Python ints above 2**63 beside smaller ones makes
-            # float64 and rounds them, so an env's particles would depend on the other envs' seeds.
-            values: list[Any]
-            if isinstance(seeds, np.ndarray):
-                if seeds.dtype.kind not in "iu":
-                    raise ValueError(f"seeds must be {idx.shape[0]} non-negative ints, got an array of {seeds.dtype}")
-                values = seeds.reshape(-1).tolist()
-            else:
-                values = list(seeds) if isinstance(seeds, (list, tuple)) else [seeds]
-            seed_list = [int(v) for v in values]
-            if len(seed_list) != idx.shape[0] or min(seed_list, default=0) < 0:
-                raise ValueError(f"seeds must be {idx.shape[0]} non-negative ints")
-            for e, seed in zip(idx, seed_list, strict=True):
+            for e, seed in zip(idx, _seed_list(seeds, idx.shape[0]), strict=True):
                 bits = self.rngs[e].bit_generator
                 bits.state = type(bits)(seed).state
         m = self.n_particles

@@ -238,3 +238,27 @@ def test_no_folder_holds_more_than_a_dozen_modules() -> None:
         if count > CROWDED_FOLDERS.get(folder, MAX_MODULES_PER_FOLDER)
     }
     assert not crowded, f"more than {MAX_MODULES_PER_FOLDER} modules: split into named subpackages: {crowded}"
+
+
+MAX_MODULE_LINES = 600
+MAX_FUNCTION_LINES = 60
+MAX_TRAIN_PY_LINES = 120
+"""STYLE.md "Rooms with names on the doors": no module over 600 lines, no function over 60 (its nested
+functions included), and ``train.py`` short enough to read top to bottom."""
+
+
+def test_no_module_or_function_is_too_long() -> None:
+    long_modules, long_functions = [], []
+    for name, path in project_modules().items():
+        source = path.read_text(encoding="utf-8")
+        if source.count("\n") > MAX_MODULE_LINES:
+            long_modules.append(f"{name}: {source.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(source)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno is not None:
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long_functions.append(f"{name}.{node.name}: {lines} lines")
+    assert not long_modules, f"modules over {MAX_MODULE_LINES} lines: {long_modules}"
+    assert not long_functions, f"functions over {MAX_FUNCTION_LINES} lines: {long_functions}"
+    train_lines = (ROOT / "train.py").read_text(encoding="utf-8").count("\n")
+    assert train_lines <= MAX_TRAIN_PY_LINES, f"train.py has {train_lines} lines"

@@ -29,6 +29,7 @@ they had when the rollout began; the loss is the one above over its samples.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import os
 from collections.abc import Sequence
@@ -56,6 +57,103 @@ def _jax() -> tuple[Any, Any, Any]:
     return jax, jnp, optax
 
 
+class _Loss:
+    """PPO's loss (the formulas above) over SB3's networks: ``loss(params, batch, clip_range) -> (L, stats)``."""
+
+    def __init__(
+        self, nvec: Sequence[int], relu: bool, ent_coef: float, vf_coef: float, normalize_advantage: bool, lstm: bool
+    ) -> None:
+        self.jax, self.jnp, _ = _jax()
+        self.activation = self.jax.nn.relu if relu else self.jnp.tanh
+        splits = [int(n) for n in nvec]
+        self.bounds = [sum(splits[:i]) for i in range(len(splits) + 1)]
+        self.ent_coef, self.vf_coef = ent_coef, vf_coef
+        self.normalize_advantage, self.lstm = normalize_advantage, lstm
+
+    def mlp(self, layers: list[tuple[Any, Any]], x: Any) -> Any:
+        for weight, bias in layers[:-1]:
+            x = self.activation(x @ weight + bias)
+        weight, bias = layers[-1]
+        return x @ weight + bias
+
+    def log_softmaxes(self, logits: Any) -> list[Any]:
+        return [self.jax.nn.log_softmax(logits[:, lo:hi]) for lo, hi in itertools.pairwise(self.bounds)]
+
+    def forward(self, params: Any, batch: tuple[Any, ...]) -> tuple[Any, Any, tuple[Any, ...]]:
+        """``(logits, values, (actions, old_log_prob, advantages, returns))`` of a minibatch, one row per sample."""
+        if not self.lstm:
+            obs, *rest = batch
+            return self.mlp(params["pi"], obs), self.mlp(params["vf"], obs)[:, 0], tuple(rest)
+        obs, actions, old_log_prob, advantages, returns, starts, *state = batch
+        latent_pi, latent_vf = self.sequences((params["lstm_pi"], params["lstm_vf"]), obs, starts, state)
+        flat = (actions, old_log_prob, advantages, returns)
+        rows = latent_pi.shape[0] * latent_pi.shape[1]
+        flat = tuple(column.reshape(rows, *column.shape[2:]) for column in flat)
+        values = self.mlp(params["vf"], latent_vf.reshape(rows, -1))[:, 0]
+        return self.mlp(params["pi"], latent_pi.reshape(rows, -1)), values, flat
+
+    def cell(self, weights: Any, x: Any, h: Any, c: Any) -> tuple[Any, Any]:
+        """One LSTM step (torch's gate order)."""
+        jax, jnp = self.jax, self.jnp
+        w_ih, w_hh, b_ih, b_hh = weights
+        i, f, g, o = jnp.split(x @ w_ih.T + b_ih + h @ w_hh.T + b_hh, 4, axis=1)
+        c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
+        return jax.nn.sigmoid(o) * jnp.tanh(c), c
+
+    def sequences(self, weights: tuple[Any, Any], obs: Any, starts: Any, state: list[Any]) -> tuple[Any, Any]:
+        """Both LSTMs' outputs (T, E, hidden) over (T, E, features) from ``state``, zeroed where an episode starts."""
+
+        def step(carry: Any, inputs: Any) -> Any:
+            x, start = inputs
+            keep = (1.0 - start)[:, None]
+            h_pi, c_pi = self.cell(weights[0], x, carry[0] * keep, carry[1] * keep)
+            h_vf, c_vf = self.cell(weights[1], x, carry[2] * keep, carry[3] * keep)
+            return (h_pi, c_pi, h_vf, c_vf), (h_pi, h_vf)
+
+        return self.jax.lax.scan(step, tuple(state), (obs, starts))[1]
+
+    def __call__(self, params: Any, batch: tuple[Any, ...], clip_range: Any) -> tuple[Any, dict[str, Any]]:
+        jnp = self.jnp
+        logits, values, (actions, old_log_prob, advantages, returns) = self.forward(params, batch)
+        heads = self.log_softmaxes(logits)
+        log_prob = sum(jnp.take_along_axis(h, actions[:, i : i + 1], 1)[:, 0] for i, h in enumerate(heads))
+        entropy = sum(-(jnp.exp(h) * h).sum(axis=1) for h in heads)
+        if self.normalize_advantage:
+            advantages = (advantages - advantages.mean()) / (advantages.std(ddof=1) + 1e-8)
+        log_ratio = log_prob - old_log_prob
+        ratio = jnp.exp(log_ratio)
+        policy_loss = -jnp.minimum(
+            advantages * ratio, advantages * jnp.clip(ratio, 1 - clip_range, 1 + clip_range)
+        ).mean()
+        value_loss = ((returns - values) ** 2).mean()
+        entropy_loss = -entropy.mean()
+        total = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
+        stats = {
+            "policy_gradient_loss": policy_loss,
+            "value_loss": value_loss,
+            "entropy_loss": entropy_loss,
+            "approx_kl": ((ratio - 1) - log_ratio).mean(),
+            "clip_fraction": (jnp.abs(ratio - 1) > clip_range).mean(),
+            "loss": total,
+        }
+        return total, stats
+
+
+def _optimizer(max_grad_norm: float) -> Any:
+    """SB3's optimiser: Adam (eps 1e-5) after clipping by global norm; the learning rate set per update."""
+    _, _, optax = _jax()
+    return optax.inject_hyperparams(
+        lambda learning_rate: optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate, eps=1e-5))
+    )(learning_rate=3e-4)
+
+
+def _unflatten_opt(optimizer: Any, params: Any, leaves: list[Any]) -> Any:
+    """``optimizer``'s state over ``params`` from its saved leaves."""
+    jax, jnp, _ = _jax()
+    treedef = jax.tree_util.tree_structure(optimizer.init(params))
+    return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(leaf) for leaf in leaves])
+
+
 def build(
     *,
     nvec: Sequence[int],
@@ -73,89 +171,17 @@ def build(
     """The jitted functions for a policy over ``len(nvec)`` categorical action dimensions.
 
     Returns:
-        ``{"update", "init", "unflatten_opt", "nvec", "relu"}``: ``update(params, opt_state, key,
-        obs, actions, old_log_probs, advantages, returns, learning_rate, clip_range) -> (params,
-        opt_state, key, stats)``; with ``lstm=True`` the rollout columns are ``(n_steps, n_envs,
-        ...)`` and ``episode_starts`` and the four ``(n_envs, hidden)`` LSTM states the rollout
-        began with (policy ``h, c``, value ``h, c``) follow ``returns``;
-        ``init(params)`` the optimiser state; ``unflatten_opt(params, leaves)`` it from saved leaves.
+        ``{"update", "init", "unflatten_opt", "nvec", "relu"}``: ``update(params, opt_state, key, obs,
+        actions, old_log_probs, advantages, returns, learning_rate, clip_range) -> (params, opt_state, key,
+        stats)``; with ``lstm=True`` the rollout columns are ``(n_steps, n_envs, ...)`` and ``episode_starts``
+        and the four ``(n_envs, hidden)`` LSTM states the rollout began with (policy ``h, c``, value ``h, c``)
+        follow ``returns``; ``init(params)`` the optimiser state; ``unflatten_opt(params, leaves)`` it from
+        saved leaves.
     """
-    jax, jnp, optax = _jax()
-    activation = jax.nn.relu if relu else jnp.tanh
-    splits = [int(n) for n in nvec]
-    bounds = [sum(splits[:i]) for i in range(len(splits) + 1)]
-
-    def mlp(layers: list[tuple[Any, Any]], x: Any) -> Any:
-        for weight, bias in layers[:-1]:
-            x = activation(x @ weight + bias)
-        weight, bias = layers[-1]
-        return x @ weight + bias
-
-    def log_softmaxes(logits: Any) -> list[Any]:
-        return [jax.nn.log_softmax(logits[:, lo:hi]) for lo, hi in itertools.pairwise(bounds)]
-
-    def forward(params: Any, batch: tuple[Any, ...]) -> tuple[Any, Any, tuple[Any, ...]]:
-        """``(logits, values, (actions, old_log_prob, advantages, returns))`` of a minibatch, one row per sample."""
-        if not lstm:
-            obs, *rest = batch
-            return mlp(params["pi"], obs), mlp(params["vf"], obs)[:, 0], tuple(rest)
-        obs, actions, old_log_prob, advantages, returns, starts, *state = batch
-        latent_pi, latent_vf = sequences((params["lstm_pi"], params["lstm_vf"]), obs, starts, state)
-        flat = (actions, old_log_prob, advantages, returns)
-        rows = latent_pi.shape[0] * latent_pi.shape[1]
-        flat = tuple(column.reshape(rows, *column.shape[2:]) for column in flat)
-        values = mlp(params["vf"], latent_vf.reshape(rows, -1))[:, 0]
-        return mlp(params["pi"], latent_pi.reshape(rows, -1)), values, flat
-
-    def cell(weights: Any, x: Any, h: Any, c: Any) -> tuple[Any, Any]:
-        """One LSTM step (torch's gate order)."""
-        w_ih, w_hh, b_ih, b_hh = weights
-        i, f, g, o = jnp.split(x @ w_ih.T + b_ih + h @ w_hh.T + b_hh, 4, axis=1)
-        c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
-        return jax.nn.sigmoid(o) * jnp.tanh(c), c
-
-    def sequences(weights: tuple[Any, Any], obs: Any, starts: Any, state: list[Any]) -> tuple[Any, Any]:
-        """Both LSTMs' outputs (T, E, hidden) over (T, E, features) from ``state``, zeroed where an episode starts."""
-
-        def step(carry: Any, inputs: Any) -> Any:
-            x, start = inputs
-            keep = (1.0 - start)[:, None]
-            h_pi, c_pi = cell(weights[0], x, carry[0] * keep, carry[1] * keep)
-            h_vf, c_vf = cell(weights[1], x, carry[2] * keep, carry[3] * keep)
-            return (h_pi, c_pi, h_vf, c_vf), (h_pi, h_vf)
-
-        return jax.lax.scan(step, tuple(state), (obs, starts))[1]
-
-    def loss(params: Any, batch: tuple[Any, ...], clip_range: Any) -> tuple[Any, dict[str, Any]]:
-        logits, values, (actions, old_log_prob, advantages, returns) = forward(params, batch)
-        heads = log_softmaxes(logits)
-        log_prob = sum(jnp.take_along_axis(h, actions[:, i : i + 1], 1)[:, 0] for i, h in enumerate(heads))
-        entropy = sum(-(jnp.exp(h) * h).sum(axis=1) for h in heads)
-        if normalize_advantage:
-            advantages = (advantages - advantages.mean()) / (advantages.std(ddof=1) + 1e-8)
-        log_ratio = log_prob - old_log_prob
-        ratio = jnp.exp(log_ratio)
-        policy_loss = -jnp.minimum(
-            advantages * ratio, advantages * jnp.clip(ratio, 1 - clip_range, 1 + clip_range)
-        ).mean()
-        value_loss = ((returns - values) ** 2).mean()
-        entropy_loss = -entropy.mean()
-        total = policy_loss + ent_coef * entropy_loss + vf_coef * value_loss
-        stats = {
-            "policy_gradient_loss": policy_loss,
-            "value_loss": value_loss,
-            "entropy_loss": entropy_loss,
-            "approx_kl": ((ratio - 1) - log_ratio).mean(),
-            "clip_fraction": (jnp.abs(ratio - 1) > clip_range).mean(),
-            "loss": total,
-        }
-        return total, stats
-
-    optimizer = optax.inject_hyperparams(
-        lambda learning_rate: optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate, eps=1e-5))
-    )(learning_rate=3e-4)
-    minibatches = samples // batch_size
-    # What a minibatch draws from: samples; with an LSTM, whole env rollouts.
+    jax, _, optax = _jax()
+    loss = _Loss(nvec, relu, ent_coef, vf_coef, normalize_advantage, lstm)
+    optimizer = _optimizer(max_grad_norm)
+    minibatches = samples // batch_size  # each of samples, or with an LSTM of whole env rollouts:
     units, per_minibatch = (samples, batch_size) if not lstm else (samples // n_steps, batch_size // n_steps)
 
     def update(params: Any, opt_state: Any, key: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any, Any]:
@@ -181,14 +207,10 @@ def build(
         (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), jax.random.split(sub, n_epochs))
         return params, opt_state, key, {name: values.mean() for name, values in stats.items()}
 
-    def unflatten_opt(params: Any, leaves: list[Any]) -> Any:
-        treedef = jax.tree_util.tree_structure(optimizer.init(params))
-        return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(leaf) for leaf in leaves])
-
     return {
         "update": jax.jit(update),
         "init": optimizer.init,
-        "unflatten_opt": unflatten_opt,
-        "nvec": splits,
+        "unflatten_opt": functools.partial(_unflatten_opt, optimizer),
+        "nvec": [int(n) for n in nvec],
         "relu": relu,
     }

@@ -306,6 +306,32 @@ def make_sb3_vec_env(
     return adapter
 
 
+def _monitor_step(
+    monitor: VecMonitor, rewards: NDArray[Any], dones: NDArray[Any], infos: list[dict[str, Any]]
+) -> list[int]:
+    """``VecMonitor.step_wait``'s bookkeeping of one step, ``infos`` updated in place; the finished envs."""
+    monitor.episode_returns += rewards
+    monitor.episode_lengths += 1
+    finished = np.flatnonzero(dones).tolist()
+    for i in finished:
+        info = infos[i].copy()
+        episode = {
+            "r": monitor.episode_returns[i],
+            "l": monitor.episode_lengths[i],
+            "t": round(time.time() - monitor.t_start, 6),
+        }
+        for key in monitor.info_keywords:
+            episode[key] = info[key]
+        info["episode"] = episode
+        monitor.episode_count += 1
+        monitor.episode_returns[i] = 0
+        monitor.episode_lengths[i] = 0
+        if monitor.results_writer:
+            monitor.results_writer.write_row(episode)
+        infos[i] = info
+    return finished
+
+
 def fused_step(env: VecEnv) -> Callable[[NDArray[Any]], VecEnvStepReturn] | None:
     """``env.step`` of the training stack :func:`agents.rl.make_train_env` builds, in one function.
 
@@ -336,26 +362,7 @@ def fused_step(env: VecEnv) -> Callable[[NDArray[Any]], VecEnvStepReturn] | None
             return env.step(actions)
         adapter.step_async(actions)
         obs, rewards, dones, infos = adapter.step_wait()
-        # VecMonitor.step_wait
-        monitor.episode_returns += rewards
-        monitor.episode_lengths += 1
-        finished = np.flatnonzero(dones).tolist()
-        for i in finished:
-            info = infos[i].copy()
-            episode = {
-                "r": monitor.episode_returns[i],
-                "l": monitor.episode_lengths[i],
-                "t": round(time.time() - monitor.t_start, 6),
-            }
-            for key in monitor.info_keywords:
-                episode[key] = info[key]
-            info["episode"] = episode
-            monitor.episode_count += 1
-            monitor.episode_returns[i] = 0
-            monitor.episode_lengths[i] = 0
-            if monitor.results_writer:
-                monitor.results_writer.write_row(episode)
-            infos[i] = info
+        finished = _monitor_step(monitor, rewards, dones, infos)
         # VecNormalize.step_wait (observations only)
         norm.old_obs, norm.old_reward = obs, rewards
         normalized = update_and_normalize(norm, obs)
