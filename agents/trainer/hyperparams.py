@@ -105,6 +105,11 @@ class TrainingConfig:
                 f"TrainingConfig.framework must be one of {list(FRAMEWORKS)} ('jax' for {', '.join(JAX_ALGORITHMS)}), "
                 f"got {self.framework!r} for {self.algo!r}"
             )
+        if self.framework != "jax" and "policy_lag" in self.algo_kwargs:
+            raise ValueError(
+                f"TrainingConfig.algo_kwargs: policy_lag is JaxPPO's (framework='jax'); framework={self.framework!r} "
+                "has no such setting (drop it from algo_kwargs)"
+            )
         check_integer("TrainingConfig.n_envs", self.n_envs, 1, SEED_LIMIT)  # envs seeded seed .. seed + n_envs - 1
         check_integer("TrainingConfig.total_timesteps", self.total_timesteps, 1, sys.maxsize)
         held_out = {p.name for p in resolve_personas(self.personas)} & set(TEST_PERSONAS)

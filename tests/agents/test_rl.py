@@ -122,6 +122,10 @@ def test_hyperparams_are_consistent():
         TrainingConfig("ppo", "CoopGym/SitToStand-v0", 0, 10, "MlpPolicy", False)
     with pytest.raises(ValueError, match=r"must not include held-out personas.*frail"):
         TrainingConfig("ppo", "CoopGym/SitToStand-v0", 8, 10, "MlpPolicy", False, personas=["typical", "frail"])
+    lagged = hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax")
+    assert lagged.algo_kwargs["policy_lag"] == 1
+    with pytest.raises(ValueError, match=r"policy_lag is JaxPPO's \(framework='jax'\); framework='sb3'"):
+        lagged.replace(framework="sb3")
 
 
 def test_zoo_files_are_generated_from_hyperparams():
