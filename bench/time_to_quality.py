@@ -1,7 +1,7 @@
 """Time to a good caregiver: held-out success against training wall-clock seconds, learner against learner.
 
-    python bench/time_to_quality.py [--env ID] [--budget-s S] [--eval-every-s S] [--episodes N]
-                                    [--seeds 0,1,2] [--jobs J] [--targets prober,belief]
+    python bench/time_to_quality.py [--env ID] [--budget-s S] [--budget-steps N] [--eval-every-s S]
+                                    [--episodes N] [--seeds 0,1,2] [--jobs J] [--targets prober,belief]
                                     [--out DIR] [--contenders a,b] [--stop-at-target] [--save [PATH]]
 
 What a user waits for is wall-clock time from starting to train to a policy that plays as
@@ -10,8 +10,9 @@ other (or ``--jobs`` at a time, each in its own process):
 
 - ``default``: ``train.py``'s configuration for ``--env`` (``agents/trainer/hyperparams.py``: its
   env count, persona set, batched env adapter, ``VecNormalize``, tuned SB3 PPO; training is
-  cut by the clock, not a step budget, so a linearly decaying learning rate stays at its
-  start value);
+  cut by the clock, so a linearly decaying learning rate stays at its start value, unless
+  ``--budget-steps N`` also ends it after ``N`` steps, the learning rate decaying over them as
+  ``train.py``'s does over its budget);
 - ``jax``: the same PPO as :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --policy-lag 0``), on
   its own sizing (``hyperparams_for(..., framework="jax")``), each update between two rollouts;
 - ``jax-lag``: ``jax`` with ``policy_lag=1`` (each update runs on its own thread while the
@@ -162,18 +163,19 @@ def _clock(
             self.since = time.perf_counter()
             self.next_eval = every_s
             self.reached: dict[str, float | None] = dict.fromkeys(targets)
+            self.final = False  # set once training has stopped: score where it stopped
 
         def _on_step(self) -> bool:
             return True
 
         def _on_rollout_end(self) -> None:
             now = time.perf_counter()
-            if self.train_s + now - self.since >= min(self.next_eval, budget_s):
+            if self.final or self.train_s + now - self.since >= min(self.next_eval, budget_s):
                 # A lagged JaxPPO's update may still run: training time, not the evaluation's.
                 getattr(self.model, "wait_for_update", lambda: None)()
                 now = time.perf_counter()
             self.train_s += now - self.since
-            if self.train_s >= self.next_eval or self.train_s >= budget_s:
+            if self.final or self.train_s >= self.next_eval or self.train_s >= budget_s:
                 self.next_eval = self.train_s + every_s
                 point = {"train_s": self.train_s, "timesteps": int(self.num_timesteps), **score()}
                 points.append(point)
@@ -203,8 +205,9 @@ def _train_with_clock(
     eval_seed: int,
     targets: dict[str, float],
     stop_at_target: bool,
+    budget_steps: int | None = None,
 ) -> dict[str, Any]:
-    """Train ``contender`` for ``budget_s`` seconds of training time, evaluating on the way."""
+    """Train ``contender`` for ``budget_s`` seconds of training (at most ``budget_steps`` steps), scoring on the way."""
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -232,8 +235,9 @@ def _train_with_clock(
             return elapsed < budget_s and not done
 
     load_before = os.getloadavg()
-    model.learn(total_timesteps=10**12, callback=[clock, Budget()])
+    model.learn(total_timesteps=budget_steps or 10**12, callback=[clock, Budget()])
     if not points or points[-1]["timesteps"] != int(model.num_timesteps):
+        clock.final = True
         clock._on_rollout_end()  # a final point where training stopped
     return {
         "contender": contender,
@@ -341,6 +345,7 @@ def run(
     targets: tuple[str, ...] = ("handbook",),
     stop_at_target: bool = False,
     jobs: int = 1,
+    budget_steps: int | None = None,
 ) -> dict[str, Any]:
     """Measure every contender on every seed; returns the report (see the module docstring)."""
     from concurrent.futures import ProcessPoolExecutor
@@ -358,7 +363,7 @@ def run(
             flush=True,
         )
     tasks = [
-        (c, env_id, seed, budget_s, every_s, episodes, eval_seed, levels, stop_at_target)
+        (c, env_id, seed, budget_s, every_s, episodes, eval_seed, levels, stop_at_target, budget_steps)
         for seed in seeds
         for c in contenders
     ]
@@ -373,6 +378,7 @@ def run(
         "eval_seed": eval_seed,
         "seeds": seeds,
         "budget_s": budget_s,
+        "budget_steps": budget_steps,
         "jobs": jobs,
         "targets": {
             name: {"success": ref.success_rate, "unsafe": ref.unsafe_rate, "level": levels[name]}
@@ -439,6 +445,12 @@ def _parser(default_env: str) -> argparse.ArgumentParser:
         "(the config on N envs, the same samples per update)",
     )
     parser.add_argument("--stop-at-target", action="store_true", help="stop a run once it reaches every target")
+    parser.add_argument(
+        "--budget-steps",
+        type=positive_int,
+        default=None,
+        help="train at most N env steps, the learning rate decaying over them as train.py's (default: the clock alone)",
+    )
     add_save_argument(parser, "time_to_quality_<env>.json")
     return parser
 
@@ -467,6 +479,7 @@ def main(argv: list[str] | None = None) -> int:
         targets,
         args.stop_at_target,
         args.jobs,
+        args.budget_steps,
     )
     stem = args.env.replace("/", "-")
     write_json(out / f"time_to_quality_{stem}.json", report)

@@ -246,6 +246,32 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     assert ttq._build("jax", "CoopGym/SitToStandHard-v2", 0).policy_lag == 0
 
 
+def test_time_to_quality_budget_steps_end_a_run_and_decay_its_learning_rate(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--budget-steps``: training stops after that many steps, its learning rate decayed over them."""
+    pytest.importorskip("jax")
+    ttq = _bench("time_to_quality")
+    rates: list[float] = []
+    build = ttq._build
+
+    def recording_build(*args: Any) -> Any:
+        model = build(*args)
+        learn = model.learn
+
+        def learn_and_record(*learn_args: Any, **kwargs: Any) -> Any:
+            result = learn(*learn_args, **kwargs)
+            rates.append(model.lr_schedule(model._current_progress_remaining))
+            return result
+
+        model.learn = learn_and_record
+        return model
+
+    monkeypatch.setattr(ttq, "_build", recording_build)
+    rollout = 4096  # the jax sizing's 16 envs x 256 steps
+    run = ttq._train_with_clock("jax", "CoopGym/SitToStand-v0", 0, 600.0, 600.0, 2, 0, {}, False, 2 * rollout)
+    assert run["timesteps"] == 2 * rollout and run["curve"][-1]["timesteps"] == 2 * rollout
+    assert rates == [pytest.approx(0.0, abs=1e-12)]  # linear decay to 0 at the budget's end
+
+
 def test_cleanrl_rows_flags_are_train_pys_settings() -> None:
     """``TRAINPY_FLAGS`` say, in CleanRL's flags, what ``train.py`` trains the hard level with."""
     from agents.trainer.hyperparams import hyperparams_for

@@ -244,6 +244,7 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("bench/cleanrl_defaults.py", "missing script", ["--script", "/nonexistent/ppo.py"], r"--script: no such file"),
     ("bench/cleanrl_defaults.py", "timesteps 0", ["--script", __file__, "--total-timesteps", "0"], r"positive"),
     ("bench/time_to_quality.py", "budget 0", ["--budget-s", "0"], r"--budget-s: must be a positive number, got '0'"),
+    ("bench/time_to_quality.py", "steps 0", ["--budget-steps", "0"], r"--budget-steps: expected a positive integer"),
     ("bench/time_to_quality.py", "budget nan", ["--budget-s", "nan"], r"--budget-s: must be a positive number"),
     ("bench/time_to_quality.py", "episodes 0", ["--episodes", "0"], r"--episodes: expected a positive integer, got 0"),
     ("bench/time_to_quality.py", "unknown contender", ["--contenders", "x"], r"--contenders: unknown contender 'x'"),
