@@ -194,7 +194,7 @@ used: next to torch's OpenMP runtime its spinning threads slow the step down.
 
 def time_to_quality(results: Results) -> str:
     head = "### Time to a good caregiver\n"
-    records = [r for stem, r in sorted(results.items()) if stem.startswith("time_to_quality_")]
+    records = [(stem, r) for stem, r in sorted(results.items()) if stem.startswith("time_to_quality_")]
     intro = """
 `python bench/time_to_quality.py --env ID` trains learners one after another (or two at a time,
 each in its own process, with `--jobs 2`), scoring held-out success on the same episodes at
@@ -211,15 +211,18 @@ between runs moves the ratios (the results file holds the load average before an
     if not records:
         return head + intro + "\n" + _missing("python bench/time_to_quality.py") + "\n"
     sections = [head + intro]
-    for record in records:
+    for stem, record in records:
         report = record["results"]
-        body = _ttq_seeds(report) if "contenders" in report else _ttq_one_seed(report)
+        body = _ttq_seeds(report, f"img/{stem}.png") if "contenders" in report else _ttq_one_seed(report)
         sections.append(f"{_provenance(record)}\n\n{body}")
     return "\n".join(sections)
 
 
-def _ttq_seeds(report: dict[str, Any]) -> str:
-    """A record of several seeds and targets: per contender, steps/s, ratio, time to each target per seed, IQM."""
+def _ttq_seeds(report: dict[str, Any], image: str) -> str:
+    """A record of several seeds and targets: per contender, steps/s, ratio, time to each target per seed, IQM.
+
+    ``image``: the bench's PNG of the record, copied into ``docs/img`` under the record's name.
+    """
     import statistics
 
     targets = report["targets"]
@@ -255,9 +258,14 @@ def _ttq_seeds(report: dict[str, Any]) -> str:
     header += ["held-out success at the last score, IQM over seeds"]
     levels = ", ".join(f"{name} {_pct(t['success'])} (target {_pct(t['level'])})" for name, t in targets.items())
     seeds = ", ".join(str(s) for s in report["seeds"])
-    image = f"img/time_to_quality_{report['env_id'].replace('/', '-')}.png"  # the bench's PNG, copied here
+    steps = report.get("budget_steps")
+    budget = f"{report['budget_s']:.0f} s of training per run" + (
+        f" and at most {_count(steps)} env steps, the learning rate decaying to 0 over them as in `train.py`"
+        if steps
+        else " (the learning rate at its start value: no step budget)"
+    )
     return f"""`{report["env_id"]}`, training seeds {seeds}, {report["episodes"]} held-out
-episodes per score, a budget of {report["budget_s"]:.0f} s of training per run, {report.get("jobs", 1)} run(s) at a
+episodes per score, a budget of {budget}, {report.get("jobs", 1)} run(s) at a
 time; on those episodes: {levels}:
 
 {_table(header, rows)}
