@@ -29,6 +29,7 @@ from report_quality import (
     test_command,
     the_levels,
     train_py,
+    training_budget,
 )
 from report_speed import against_gymnasium, cold_start, rendering, reset, soak, threads, time_to_quality
 from result_files import RESULTS, ROOT, load_all
@@ -62,6 +63,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     train_py,
     learners,
     learners_across_cpus,
+    training_budget,
     library_defaults,
     rllib,
     papers_experiment,

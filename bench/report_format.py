@@ -14,7 +14,9 @@ def _pct(rate: float | None) -> str:
 
 
 def _ci(interval: Sequence[float] | None) -> str:
-    return "" if interval is None else f"[{100 * interval[0]:.1f}, {100 * interval[1]:.1f}]"
+    if interval is None or None in interval:  # no interval (one run)
+        return ""
+    return f"[{100 * interval[0]:.1f}, {100 * interval[1]:.1f}]"
 
 
 def _rate(row: dict[str, Any], outcome: str, interval: bool = True) -> str:

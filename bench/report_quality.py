@@ -445,7 +445,11 @@ def _cpu_row(name: str, record: dict[str, Any], first: dict[int, float], is_refe
 def learners_across_cpus(results: Results) -> str:
     """The same rows and seeds of ``bench/learners.py`` trained on several CPUs (``learners*.json``)."""
     head = "### The same seeds on another CPU\n"
-    records = {stem: record for stem, record in results.items() if stem == "learners" or stem.startswith("learners_")}
+    records = {
+        stem: record
+        for stem, record in results.items()
+        if stem == "learners" or (stem.startswith("learners_") and not stem.startswith(BUDGET_PREFIX))
+    }
     if "learners" not in records or len(records) < 2:
         return (
             f"{head}\nNo second machine yet: on a CPU other than `bench/results/learners.json`'s, `python"
@@ -483,6 +487,76 @@ MKL and XLA pick their kernels by the CPU's vector extensions and add in another
 same seeds on each machine and scored on the same held-out episodes; the first machine's rows
 are those of the table above (`bench/results/learners.json`), and the last column compares each
 seed's held-out success with that seed's there.
+
+{_table(header, rows)}
+"""
+
+
+BUDGET_PREFIX = "learners_budget_"
+"""``bench/results/learners_budget_<steps>.json``: the default learner on another budget (:func:`training_budget`)."""
+
+
+def training_budget(results: Results) -> str:
+    """``train.py``'s learner on several budgets, the same seeds on one CPU (``learners_budget_*.json``)."""
+    head = "### Training budget\n"
+    budgets = [record for stem, record in sorted(results.items()) if stem.startswith(BUDGET_PREFIX)]
+    command = (
+        "`python bench/learners.py --rows jax-kalman-lag --seeds 0,1,...,15 --timesteps T --save "
+        "bench/results/learners_budget_T.json`"
+    )
+    if not budgets:
+        return f"{head}\nNo results file yet: {command}, then `python bench/report.py`.\n"
+    from agents.trainer.hyperparams import hyperparams_for
+
+    train_steps = hyperparams_for("ppo").total_timesteps
+    cpu = budgets[0]["machine"].get("cpu")
+    same_cpu = [
+        record
+        for stem, record in sorted(results.items())
+        if (stem == "learners" or stem.startswith("learners_")) and record["machine"].get("cpu") == cpu
+    ]
+    rows = []
+    for record in sorted(same_cpu, key=lambda r: r["results"]["timesteps"]):
+        report = record["results"]
+        row = report["rows"].get("jax-kalman-lag")
+        if row is None:
+            continue
+        runs = row["per_seed"]
+        validation = [run["validation_success_rate"] for run in runs]
+        scripted = report["scripted"]
+        steps = report["timesteps"]
+        rows.append(
+            [
+                f"**{_count(steps)}**" if steps == train_steps else _count(steps),
+                str(len(runs)),
+                _pct(statistics.mean(validation)),
+                _pct(min(validation)),
+                f"{_pct(row['success']['iqm'])} {_ci(row['success']['ci95'])}",
+                _pct(min(run["success_rate"] for run in runs)),
+                _seeds_at(runs, scripted["belief"]["success_rate"]),
+                _seeds_at(runs, scripted["prober"]["success_rate"]),
+            ]
+        )
+    header = [
+        "budget (env steps)",
+        "seeds",
+        "validation: mean",
+        "validation: lowest",
+        "held-out success, IQM [95 % CI]",
+        "held-out: lowest seed",
+        "seeds ≥ belief",
+        "seeds ≥ prober",
+    ]
+    provenance = "\n\n".join(_provenance(record) for record in budgets)
+    return f"""{head}
+{provenance}
+
+`train.py`'s learner (`jax-kalman-lag`) on other budgets, its learning rate decaying to 0 over
+each, the same sixteen seeds on one CPU ({cpu or "not recorded"}), each run keeping its
+best-validated policy of the last half and scored on the held-out episodes of [Learners and
+observations](#learners-and-observations-on-the-hard-level); the {_count(train_steps)}-step row is
+that section's on this CPU ([The same seeds on another CPU](#the-same-seeds-on-another-cpu)).
+Trained by {command}.
 
 {_table(header, rows)}
 """

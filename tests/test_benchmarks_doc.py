@@ -118,6 +118,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "learners",
         ),
         (
+            "learners",
+            [
+                *["--rows", "jax-kalman-lag", "--seeds", "0", "--timesteps", "4096", "--episodes", "4"],
+                *["--validation-episodes", "4", "--runs", str(tmp / "learners")],
+            ],
+            "learners_budget_4096.json",
+            "learners_budget_4096",
+        ),
+        (
             "cleanrl_defaults",
             [
                 "--script",
@@ -351,3 +360,18 @@ def test_the_same_seeds_on_another_cpu_are_rendered_seed_by_seed(tmp_path: Path)
     assert len(lines) == 2, page  # one row per machine, the reference first
     assert "(reference)" in lines[0] and "Another CPU (avx2)" in lines[1]
     assert lines[1].endswith(" | 0.0 / 10.0 |"), lines[1]  # median and largest change per seed, in points
+
+
+def test_training_budget_rows_are_one_cpus_budgets_and_not_another_cpu() -> None:
+    """``learners_budget_*.json`` make the budget table with the same CPU's default row, and no CPU row."""
+    report = _bench("report_quality")
+    results = {
+        stem: json.loads((BENCH / "results" / f"{stem}.json").read_text(encoding="utf-8"))
+        for stem in ("learners", "learners_avx512", "learners_budget_2000000")
+    }
+    assert "No results file yet" in report.training_budget({"learners": results["learners"]})
+    page = report.training_budget(results)
+    rows = [line for line in page.splitlines() if line.startswith("| ") and "budget" not in line and "---" not in line]
+    assert [row.split(" | ")[0] for row in rows] == ["| **1,000,000**", "| 2,000,000"], page
+    cpus = report.learners_across_cpus(results)
+    assert "2,000,000" not in cpus and cpus.count("| `jax-kalman-lag` |") == 2  # the two CPUs' 1M rows only
