@@ -426,11 +426,31 @@ def _cpu_row(name: str, record: dict[str, Any], first: dict[int, float], is_refe
     row = report["rows"][name]
     runs = row["per_seed"]
     moved = [abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first]
-    validation = [run["validation_success_rate"] for run in runs if "validation_success_rate" in run]
-    scripted = report["scripted"]
     return [
         f"`{name}`",
         record["machine"].get("cpu") or "not recorded",
+        *_seed_cells(row, report["scripted"]),
+        "(reference)" if is_reference else _moved(moved),
+    ]
+
+
+_SEED_COLUMNS = [
+    "seeds",
+    "validation: mean",
+    "validation: lowest",
+    "held-out success, IQM [95 % CI]",
+    "held-out: lowest seed",
+    "seeds ≥ belief",
+    "seeds ≥ prober",
+]
+"""The columns of :func:`_seed_cells`."""
+
+
+def _seed_cells(row: dict[str, Any], scripted: dict[str, Any]) -> list[str]:
+    """A ``learners.json`` row over its seeds: validation, held-out, and the seeds at the scripted levels."""
+    runs = row["per_seed"]
+    validation = [run["validation_success_rate"] for run in runs if "validation_success_rate" in run]
+    return [
         str(len(runs)),
         _pct(statistics.mean(validation)) if validation else "—",
         _pct(min(validation)) if validation else "—",
@@ -438,7 +458,6 @@ def _cpu_row(name: str, record: dict[str, Any], first: dict[int, float], is_refe
         _pct(min(run["success_rate"] for run in runs)),
         _seeds_at(runs, scripted.get("belief", {}).get("success_rate")),
         _seeds_at(runs, scripted.get("prober", {}).get("success_rate")),
-        "(reference)" if is_reference else _moved(moved),
     ]
 
 
@@ -468,13 +487,7 @@ def learners_across_cpus(results: Results) -> str:
     header = [
         "row",
         "CPU (widest vector extension)",
-        "seeds",
-        "validation: mean",
-        "validation: lowest",
-        "held-out success, IQM [95 % CI]",
-        "held-out: lowest seed",
-        "seeds ≥ belief",
-        "seeds ≥ prober",
+        *_SEED_COLUMNS,
         "held-out change per seed: median / largest (points)",
     ]
     provenance = "\n\n".join(_provenance(records[stem]) for stem in ordered if stem != "learners")
@@ -521,32 +534,10 @@ def training_budget(results: Results) -> str:
         row = report["rows"].get("jax-kalman-lag")
         if row is None:
             continue
-        runs = row["per_seed"]
-        validation = [run["validation_success_rate"] for run in runs]
-        scripted = report["scripted"]
         steps = report["timesteps"]
-        rows.append(
-            [
-                f"**{_count(steps)}**" if steps == train_steps else _count(steps),
-                str(len(runs)),
-                _pct(statistics.mean(validation)),
-                _pct(min(validation)),
-                f"{_pct(row['success']['iqm'])} {_ci(row['success']['ci95'])}",
-                _pct(min(run["success_rate"] for run in runs)),
-                _seeds_at(runs, scripted["belief"]["success_rate"]),
-                _seeds_at(runs, scripted["prober"]["success_rate"]),
-            ]
-        )
-    header = [
-        "budget (env steps)",
-        "seeds",
-        "validation: mean",
-        "validation: lowest",
-        "held-out success, IQM [95 % CI]",
-        "held-out: lowest seed",
-        "seeds ≥ belief",
-        "seeds ≥ prober",
-    ]
+        budget = f"**{_count(steps)}**" if steps == train_steps else _count(steps)
+        rows.append([budget, *_seed_cells(row, report["scripted"])])
+    header = ["budget (env steps)", *_SEED_COLUMNS]
     provenance = "\n\n".join(_provenance(record) for record in budgets)
     return f"""{head}
 {provenance}
