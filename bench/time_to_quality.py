@@ -428,9 +428,11 @@ def _targets(parser: argparse.ArgumentParser, env_id: str, text: str | None) -> 
     return names
 
 
-def _parser(default_env: str) -> argparse.ArgumentParser:
+def _parser() -> argparse.ArgumentParser:
+    from coop_gym.registration import HARD_ENV_ID
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--env", default=default_env, help=f"env id (default: the hard level, {default_env})")
+    parser.add_argument("--env", default=HARD_ENV_ID, help=f"env id (default: the hard level, {HARD_ENV_ID})")
     parser.add_argument("--budget-s", type=_positive_float, default=300.0, help="training seconds per contender")
     parser.add_argument("--eval-every-s", type=_positive_float, default=15.0, help="training seconds between scores")
     parser.add_argument("--episodes", type=positive_int, default=500, help="held-out episodes per score")
@@ -458,9 +460,8 @@ def _parser(default_env: str) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Parse the flags, measure, write the JSON and the PNG."""
     from coop_gym.io import write_json
-    from coop_gym.registration import HARD_ENV_ID
 
-    parser = _parser(HARD_ENV_ID)
+    parser = _parser()
     args = parser.parse_args(argv)
     contenders = _checked_contenders(parser, args.env, args.contenders)
     targets = _targets(parser, args.env, args.targets)
