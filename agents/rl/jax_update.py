@@ -12,7 +12,9 @@ the activation between layers. The update is SB3's ``PPO.train`` written as form
     theta     <- Adam(clip_by_global_norm(grad L, max_grad_norm), lr, eps=1e-5)
 
 for ``n_epochs`` passes, each over a fresh random permutation of the rollout cut into
-minibatches of ``batch_size``.
+minibatches of ``batch_size``. The permutations are ``jax.random.permutation``'s: JAX draws
+their sort keys and NumPy sorts them (:func:`permutations`), which XLA's sort on the CPU does
+several times slower.
 
 With ``lstm=True`` (:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`) the networks are
 sb3-contrib's ``MlpLstmPolicy``: an LSTM for the policy and another for the value, each
@@ -35,7 +37,9 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["build", "xla_flags"]
+import numpy as np
+
+__all__ = ["build", "permutations", "xla_flags"]
 
 _XLA_ONE_THREAD = ("--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1")
 
@@ -57,6 +61,30 @@ def _jax() -> tuple[Any, Any, Any]:
     return jax, jnp, optax
 
 
+def _dense(jax: Any) -> Any:
+    """``dense(x, w, b) = x @ w + b``, its weight gradient ``x^T g`` computed as a plain matrix product.
+
+    Autodiff writes ``x^T g`` as one product contracting both operands' first axis, which XLA's
+    CPU backend hands to a slower kernel than ``a @ b``; ``x^T`` made an array of its own behind an
+    optimization barrier (so XLA cannot fold it back) turns it into ``a @ b``. The sums run in
+    another order than autodiff's, so the gradient can differ from it in the last bits.
+    """
+
+    @jax.custom_vjp
+    def dense(x: Any, w: Any, b: Any) -> Any:
+        return x @ w + b
+
+    def forward(x: Any, w: Any, b: Any) -> tuple[Any, tuple[Any, Any]]:
+        return x @ w + b, (x, w)
+
+    def backward(residuals: tuple[Any, Any], g: Any) -> tuple[Any, Any, Any]:
+        x, w = residuals
+        return g @ w.T, jax.lax.optimization_barrier(x.T) @ g, g.sum(axis=0)
+
+    dense.defvjp(forward, backward)
+    return dense
+
+
 class _Loss:
     """PPO's loss (the formulas above) over SB3's networks: ``loss(params, batch, clip_range) -> (L, stats)``."""
 
@@ -65,6 +93,7 @@ class _Loss:
     ) -> None:
         self.jax, self.jnp, _ = _jax()
         self.activation = self.jax.nn.relu if relu else self.jnp.tanh
+        self.dense = _dense(self.jax)
         splits = [int(n) for n in nvec]
         self.bounds = [sum(splits[:i]) for i in range(len(splits) + 1)]
         self.ent_coef, self.vf_coef = ent_coef, vf_coef
@@ -72,9 +101,9 @@ class _Loss:
 
     def mlp(self, layers: list[tuple[Any, Any]], x: Any) -> Any:
         for weight, bias in layers[:-1]:
-            x = self.activation(x @ weight + bias)
+            x = self.activation(self.dense(x, weight, bias))
         weight, bias = layers[-1]
-        return x @ weight + bias
+        return self.dense(x, weight, bias)
 
     def log_softmaxes(self, logits: Any) -> list[Any]:
         return [self.jax.nn.log_softmax(logits[:, lo:hi]) for lo, hi in itertools.pairwise(self.bounds)]
@@ -147,6 +176,54 @@ def _optimizer(max_grad_norm: float) -> Any:
     )(learning_rate=3e-4)
 
 
+def _shuffle_rounds(n: int) -> int:
+    """How many sorts ``jax.random.permutation`` makes of ``n`` items: each sorts by fresh 32-bit keys."""
+    return int(np.ceil(3 * np.log(max(1, n)) / np.log(np.iinfo(np.uint32).max)))
+
+
+def _sort_keys(n: int, n_epochs: int) -> Any:
+    """Jitted ``keys(key) -> (key, bits)``: the next key, and the sort keys of ``n_epochs`` permutations.
+
+    ``bits`` is ``(n_epochs, rounds, n)`` uint32: ``jax.random.permutation``'s sort keys for ``n``
+    items, each permutation drawn from its own key of ``jax.random.split(sub, n_epochs)``, ``sub``
+    split from ``key``.
+    """
+    jax, jnp, _ = _jax()
+    rounds = _shuffle_rounds(n)
+
+    def one(key: Any) -> Any:
+        bits = []
+        for _ in range(rounds):
+            key, sub = jax.random.split(key)
+            bits.append(jax.random.bits(sub, (n,), jnp.uint32))
+        return jnp.stack(bits) if bits else jnp.zeros((0, n), jnp.uint32)
+
+    def keys(key: Any) -> tuple[Any, Any]:
+        key, sub = jax.random.split(key)
+        return key, jax.vmap(one)(jax.random.split(sub, n_epochs))
+
+    return jax.jit(keys)
+
+
+def permutations(bits: np.ndarray) -> np.ndarray:
+    """The permutations ``(n_epochs, n)`` int32 that ``jax.random.permutation`` makes of sort keys ``bits``.
+
+    Each round sorts the items by that round's keys, ties kept in order (a stable sort): an item's
+    key above its position in one uint64 makes every value distinct, so an unstable sort of those
+    values orders them as the stable sort of the keys.
+    """
+    n_epochs, rounds, n = bits.shape
+    position = np.arange(n, dtype=np.uint64)
+    orders = np.empty((n_epochs, n), dtype=np.int32)
+    for epoch in range(n_epochs):
+        order = np.arange(n, dtype=np.int32)
+        for r in range(rounds):
+            packed = (bits[epoch, r].astype(np.uint64) << np.uint64(32)) | position
+            order = order[(np.sort(packed) & np.uint64(0xFFFFFFFF)).astype(np.intp)]
+        orders[epoch] = order
+    return orders
+
+
 def _unflatten_opt(optimizer: Any, params: Any, leaves: list[Any]) -> Any:
     """``optimizer``'s state over ``params`` from its saved leaves."""
     jax, jnp, _ = _jax()
@@ -168,7 +245,10 @@ def build(
     lstm: bool = False,
     n_steps: int = 0,
 ) -> dict[str, Any]:
-    """The jitted functions for a policy over ``len(nvec)`` categorical action dimensions.
+    """The update and what goes with it for a policy over ``len(nvec)`` categorical action dimensions.
+
+    ``update`` draws the epochs' permutations from ``key`` (:func:`permutations`) and runs every epoch
+    and minibatch in one jitted call, which it does not wait for.
 
     Returns:
         ``{"update", "init", "unflatten_opt", "nvec", "relu"}``: ``update(params, opt_state, key, obs,
@@ -184,7 +264,7 @@ def build(
     minibatches = samples // batch_size  # each of samples, or with an LSTM of whole env rollouts:
     units, per_minibatch = (samples, batch_size) if not lstm else (samples // n_steps, batch_size // n_steps)
 
-    def update(params: Any, opt_state: Any, key: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any, Any]:
+    def epochs(params: Any, opt_state: Any, orders: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any]:
         *rollout, learning_rate, clip_range = rollout_and_rates
         opt_state.hyperparams["learning_rate"] = learning_rate
         grad = jax.value_and_grad(loss, has_aux=True)
@@ -199,16 +279,21 @@ def build(
             updates, opt_state = optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), stats
 
-        def epoch(carry: Any, epoch_key: Any) -> Any:
-            order = jax.random.permutation(epoch_key, units).reshape(minibatches, per_minibatch)
-            return jax.lax.scan(minibatch, carry, order)
+        def epoch(carry: Any, order: Any) -> Any:
+            return jax.lax.scan(minibatch, carry, order.reshape(minibatches, per_minibatch))
 
-        key, sub = jax.random.split(key)
-        (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), jax.random.split(sub, n_epochs))
-        return params, opt_state, key, {name: values.mean() for name, values in stats.items()}
+        (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), orders)
+        return params, opt_state, {name: values.mean() for name, values in stats.items()}
+
+    compiled, sort_keys = jax.jit(epochs), _sort_keys(units, n_epochs)
+
+    def update(params: Any, opt_state: Any, key: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any, Any]:
+        key, bits = sort_keys(key)
+        params, opt_state, stats = compiled(params, opt_state, permutations(np.asarray(bits)), *rollout_and_rates)
+        return params, opt_state, key, stats
 
     return {
-        "update": jax.jit(update),
+        "update": update,
         "init": optimizer.init,
         "unflatten_opt": functools.partial(_unflatten_opt, optimizer),
         "nvec": [int(n) for n in nvec],

@@ -315,6 +315,38 @@ def _initial_state(config, envs: int, overrides: dict) -> dict:
     return {k: v.clone() for k, v in model.policy.state_dict().items()}
 
 
+@pytest.mark.parametrize("n", [1, 16, 1000, 4096])
+def test_the_epochs_permutations_are_jax_random_permutations(n):
+    """The update's minibatch orders, sorted by NumPy, are ``jax.random.permutation``'s of the same keys."""
+    import jax
+
+    from agents.rl.jax_update import _sort_keys, permutations
+
+    for seed in range(3):
+        key = jax.random.PRNGKey(seed)
+        next_key, bits = _sort_keys(n, 4)(key)
+        expected_key, sub = jax.random.split(key)
+        expected = [np.asarray(jax.random.permutation(k, n)) for k in jax.random.split(sub, 4)]
+        np.testing.assert_array_equal(permutations(np.asarray(bits)), np.stack(expected))
+        np.testing.assert_array_equal(np.asarray(next_key), np.asarray(expected_key))
+
+
+def test_the_dense_layers_gradient_is_autodiffs():
+    """The layer whose weight gradient runs as a plain product has autodiff's gradients (to rounding)."""
+    import jax
+
+    from agents.rl.jax_update import _dense
+
+    dense = _dense(jax)
+    rng = np.random.default_rng(0)
+    x, w, b = (rng.standard_normal(shape).astype(np.float32) for shape in ((512, 11), (11, 64), (64,)))
+    ours = jax.grad(lambda x, w, b: (jax.numpy.tanh(dense(x, w, b)) ** 2).sum(), argnums=(0, 1, 2))(x, w, b)
+    autodiff = jax.grad(lambda x, w, b: (jax.numpy.tanh(x @ w + b) ** 2).sum(), argnums=(0, 1, 2))(x, w, b)
+    for mine, theirs in zip(ours, autodiff, strict=True):
+        np.testing.assert_allclose(mine, theirs, rtol=1e-5, atol=1e-4)
+    np.testing.assert_array_equal(dense(x, w, b), jax.numpy.asarray(x) @ w + b)  # the forward pass is unchanged
+
+
 def test_a_callers_xla_flags_keep_xla_on_one_thread():
     """The caller's ``XLA_FLAGS`` (say, a pinned instruction set) are kept and the one-thread flags added."""
     from agents.rl.jax_update import xla_flags
