@@ -281,9 +281,9 @@ class JaxTraining:
         if self._jax is None:
             self._check_supported()
             nvec = (
-                [int(self.action_space.n)]
+                (int(self.action_space.n),)
                 if isinstance(self.action_space, spaces.Discrete)
-                else [int(n) for n in self.action_space.nvec]  # type: ignore[attr-defined]
+                else tuple(int(n) for n in self.action_space.nvec)  # type: ignore[attr-defined]
             )
             relu = self.policy.activation_fn is torch.nn.ReLU  # type: ignore[union-attr]
             self._jax = build(

@@ -231,9 +231,10 @@ def _unflatten_opt(optimizer: Any, params: Any, leaves: list[Any]) -> Any:
     return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(leaf) for leaf in leaves])
 
 
+@functools.cache
 def build(
     *,
-    nvec: Sequence[int],
+    nvec: tuple[int, ...],
     relu: bool,
     samples: int,
     batch_size: int,
@@ -246,6 +247,9 @@ def build(
     n_steps: int = 0,
 ) -> dict[str, Any]:
     """The update and what goes with it for a policy over ``len(nvec)`` categorical action dimensions.
+
+    Built once per process for each set of arguments: models of one configuration (seeds of a
+    sweep, a resumed run) share the compiled functions, which hold no model's state.
 
     ``update`` draws the epochs' permutations from ``key`` (:func:`permutations`) and runs every epoch
     and minibatch in one jitted call, which it does not wait for.

@@ -331,6 +331,34 @@ def test_the_epochs_permutations_are_jax_random_permutations(n):
         np.testing.assert_array_equal(np.asarray(next_key), np.asarray(expected_key))
 
 
+def test_models_of_one_configuration_share_the_compiled_update():
+    """A second seed compiles nothing: it trains on the first one's functions, to the weights it trains alone."""
+    first, second = _model(seed=0), _model(seed=1)
+    first.learn(256)
+    second.learn(256)
+    assert second._compiled() is first._compiled()
+    assert _model(seed=0, n_envs=2)._compiled() is not first._compiled()  # another rollout size
+    alone = subprocess.run(
+        [sys.executable, "-c", _SEED_ONE_ALONE],
+        cwd=Path(__file__).resolve().parents[2],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()[-1]
+    assert hashlib.sha256(_weights(second)).hexdigest() == alone
+
+
+_SEED_ONE_ALONE = """
+import hashlib, sys, torch
+torch.set_num_threads(1)
+sys.path.insert(0, "tests/agents")
+from test_jax_ppo import _model, _weights
+model = _model(seed=1)
+model.learn(256)
+print(hashlib.sha256(_weights(model)).hexdigest())
+"""
+
+
 def test_the_dense_layers_gradient_is_autodiffs():
     """The layer whose weight gradient runs as a plain product has autodiff's gradients (to rounding)."""
     import jax
