@@ -367,9 +367,11 @@ def fused_step(env: VecEnv) -> Callable[[NDArray[Any]], VecEnvStepReturn] | None
         norm.old_obs, norm.old_reward = obs, rewards
         normalized = update_and_normalize(norm, obs)
         norm._update_reward(rewards)
-        for i in finished:
-            if "terminal_observation" in infos[i]:
-                infos[i]["terminal_observation"] = norm.normalize_obs(infos[i]["terminal_observation"])
+        ended = [i for i in finished if "terminal_observation" in infos[i]]
+        if ended:  # normalize_obs row by row is elementwise: all rows at once are the same numbers
+            finals = norm.normalize_obs(np.stack([infos[i]["terminal_observation"] for i in ended]))
+            for i, final in zip(ended, finals, strict=True):
+                infos[i]["terminal_observation"] = final
         norm.returns[dones] = 0
         return normalized, rewards.astype(np.float32), dones, infos
 
