@@ -12,9 +12,8 @@ the activation between layers. The update is SB3's ``PPO.train`` written as form
     theta     <- Adam(clip_by_global_norm(grad L, max_grad_norm), lr, eps=1e-5)
 
 for ``n_epochs`` passes, each over a fresh random permutation of the rollout cut into
-minibatches of ``batch_size``. The permutations are ``jax.random.permutation``'s: JAX draws
-their sort keys and NumPy sorts them (:func:`permutations`), which XLA's sort on the CPU does
-several times slower.
+minibatches of ``batch_size``. NumPy draws the permutations from the update's key
+(:func:`epoch_orders`) before the compiled epochs run.
 
 With ``lstm=True`` (:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`) the networks are
 sb3-contrib's ``MlpLstmPolicy``: an LSTM for the policy and another for the value, each
@@ -39,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["build", "permutations", "xla_flags"]
+__all__ = ["build", "epoch_orders", "xla_flags"]
 
 _XLA_ONE_THREAD = ("--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1")
 
@@ -176,52 +175,16 @@ def _optimizer(max_grad_norm: float) -> Any:
     )(learning_rate=3e-4)
 
 
-def _shuffle_rounds(n: int) -> int:
-    """How many sorts ``jax.random.permutation`` makes of ``n`` items: each sorts by fresh 32-bit keys."""
-    return int(np.ceil(3 * np.log(max(1, n)) / np.log(np.iinfo(np.uint32).max)))
+def epoch_orders(key: Any, n: int, n_epochs: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(next key, orders)``: ``n_epochs`` random permutations of ``n`` items and the next update's key.
 
-
-def _sort_keys(n: int, n_epochs: int) -> Any:
-    """Jitted ``keys(key) -> (key, bits)``: the next key, and the sort keys of ``n_epochs`` permutations.
-
-    ``bits`` is ``(n_epochs, rounds, n)`` uint32: ``jax.random.permutation``'s sort keys for ``n``
-    items, each permutation drawn from its own key of ``jax.random.split(sub, n_epochs)``, ``sub``
-    split from ``key``.
+    ``key`` is two uint32 words (a fresh run's is ``jax.random.PRNGKey(seed)``); they seed NumPy's
+    PCG64, which draws the permutations, ``(n_epochs, n)`` int32, then the next key's two words.
     """
-    jax, jnp, _ = _jax()
-    rounds = _shuffle_rounds(n)
-
-    def one(key: Any) -> Any:
-        bits = []
-        for _ in range(rounds):
-            key, sub = jax.random.split(key)
-            bits.append(jax.random.bits(sub, (n,), jnp.uint32))
-        return jnp.stack(bits) if bits else jnp.zeros((0, n), jnp.uint32)
-
-    def keys(key: Any) -> tuple[Any, Any]:
-        key, sub = jax.random.split(key)
-        return key, jax.vmap(one)(jax.random.split(sub, n_epochs))
-
-    return jax.jit(keys)
-
-
-def permutations(bits: np.ndarray) -> np.ndarray:
-    """The permutations ``(n_epochs, n)`` int32 that ``jax.random.permutation`` makes of sort keys ``bits``.
-
-    Each round sorts the items by that round's keys, ties kept in order (a stable sort): an item's
-    key above its position in one uint64 makes every value distinct, so an unstable sort of those
-    values orders them as the stable sort of the keys.
-    """
-    n_epochs, rounds, n = bits.shape
-    position = np.arange(n, dtype=np.uint64)
-    orders = np.empty((n_epochs, n), dtype=np.int32)
-    for epoch in range(n_epochs):
-        order = np.arange(n, dtype=np.int32)
-        for r in range(rounds):
-            packed = (bits[epoch, r].astype(np.uint64) << np.uint64(32)) | position
-            order = order[(np.sort(packed) & np.uint64(0xFFFFFFFF)).astype(np.intp)]
-        orders[epoch] = order
-    return orders
+    words = [int(word) for word in np.asarray(key, dtype=np.uint32).ravel()]
+    rng = np.random.Generator(np.random.PCG64(words))
+    orders = np.stack([rng.permutation(n).astype(np.int32) for _ in range(n_epochs)])
+    return rng.integers(0, 2**32, size=2, dtype=np.uint32), orders
 
 
 def _unflatten_opt(optimizer: Any, params: Any, leaves: list[Any]) -> Any:
@@ -251,7 +214,7 @@ def build(
     Built once per process for each set of arguments: models of one configuration (seeds of a
     sweep, a resumed run) share the compiled functions, which hold no model's state.
 
-    ``update`` draws the epochs' permutations from ``key`` (:func:`permutations`) and runs every epoch
+    ``update`` draws the epochs' permutations from ``key`` (:func:`epoch_orders`) and runs every epoch
     and minibatch in one jitted call, which it does not wait for.
 
     Returns:
@@ -289,11 +252,11 @@ def build(
         (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), orders)
         return params, opt_state, {name: values.mean() for name, values in stats.items()}
 
-    compiled, sort_keys = jax.jit(epochs), _sort_keys(units, n_epochs)
+    compiled = jax.jit(epochs)
 
     def update(params: Any, opt_state: Any, key: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any, Any]:
-        key, bits = sort_keys(key)
-        params, opt_state, stats = compiled(params, opt_state, permutations(np.asarray(bits)), *rollout_and_rates)
+        key, orders = epoch_orders(key, units, n_epochs)
+        params, opt_state, stats = compiled(params, opt_state, orders, *rollout_and_rates)
         return params, opt_state, key, stats
 
     return {
