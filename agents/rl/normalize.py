@@ -8,7 +8,8 @@ training wrapper ran, so an evaluated agent sees exactly the observations it tra
 Neither library is imported here: the statistics are read from the objects.
 
 :func:`update_and_normalize` is the training side: ``VecNormalize``'s running-statistics update
-and normalisation of one batch in one compiled call, with the same numbers.
+and normalisation of one batch in one compiled call, with the same numbers; :func:`update_returns`
+its discounted returns' statistics.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from numpy.typing import NDArray
 
 from estimator.compiled import guard_kernel_cache
 
-__all__ = ["ObsNormalizer", "update_and_normalize"]
+__all__ = ["ObsNormalizer", "update_and_normalize", "update_returns"]
 
 
 @dataclass(frozen=True)
@@ -130,6 +131,89 @@ def update_and_normalize(vec_normalize: Any, obs: NDArray[np.float32]) -> NDArra
         obs, rms.mean, rms.var, float(rms.count), float(vec_normalize.epsilon), float(vec_normalize.clip_obs)
     )
     return normalized  # type: ignore[no-any-return]
+
+
+_PAIRWISE_BLOCK = 128
+"""NumPy sums up to this many values in one block (``PW_BLOCKSIZE``); more, it splits them in two."""
+
+
+@njit(cache=True, error_model="numpy")
+def _block_sum(values: NDArray[np.float64]) -> float:
+    """NumPy's sum of a contiguous float64 vector of at most :data:`_PAIRWISE_BLOCK` values.
+
+    0 plus ``pairwise_sum`` (NumPy's ``loops_utils``): under 8 values one by one, else eight
+    running sums over the whole groups of eight, added as a tree, then the rest one by one.
+    """
+    n = values.shape[0]
+    if n < 8:
+        total = 0.0
+        for i in range(n):
+            total += values[i]
+        return 0.0 + total
+    r0, r1, r2, r3 = values[0], values[1], values[2], values[3]
+    r4, r5, r6, r7 = values[4], values[5], values[6], values[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += values[i]
+        r1 += values[i + 1]
+        r2 += values[i + 2]
+        r3 += values[i + 3]
+        r4 += values[i + 4]
+        r5 += values[i + 5]
+        r6 += values[i + 6]
+        r7 += values[i + 7]
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        total += values[i]
+        i += 1
+    return 0.0 + total
+
+
+@njit(cache=True, error_model="numpy")
+def _update_returns(
+    returns: NDArray[np.float64], rewards: NDArray[Any], gamma: float, mean: float, var: float, count: float
+) -> tuple[NDArray[np.float64], float, float, float]:
+    n = returns.shape[0]
+    new_returns = np.empty(n)
+    for i in range(n):
+        new_returns[i] = returns[i] * gamma + np.float64(rewards[i])
+    # np.mean and np.var of a contiguous float64 vector: its sum divided by n.
+    batch_mean = _block_sum(new_returns) / n
+    squares = np.empty(n)
+    for i in range(n):
+        squares[i] = (new_returns[i] - batch_mean) * (new_returns[i] - batch_mean)
+    batch_var = _block_sum(squares) / n
+    # RunningMeanStd.update_from_moments, term by term.
+    delta = batch_mean - mean
+    total = count + n
+    new_mean = mean + delta * n / total
+    m_2 = var * count + batch_var * n + delta * delta * count * n / (count + n)
+    return new_returns, new_mean, m_2 / (count + n), n + count
+
+
+def update_returns(vec_normalize: Any, rewards: NDArray[Any]) -> None:
+    """``VecNormalize._update_reward``: the discounted returns and their running statistics, in one compiled call.
+
+    ``returns = returns * gamma + rewards``, then ``ret_rms.update(returns)`` with the same numbers
+    (``tests/agents/test_sb3_vec.py``); SB3 keeps them even when rewards are not normalised.
+    """
+    rms, returns = vec_normalize.ret_rms, vec_normalize.returns
+    if (
+        np.shape(rms.mean) != ()
+        or not isinstance(returns, np.ndarray)
+        or returns.ndim != 1
+        or not 0 < returns.shape[0] <= _PAIRWISE_BLOCK
+        or returns.dtype != np.float64
+        or np.shape(rewards) != returns.shape
+        or np.asarray(rewards).dtype not in (np.float32, np.float64)
+    ):
+        vec_normalize._update_reward(rewards)
+        return
+    vec_normalize.returns, mean, var, count = _update_returns(
+        returns, np.asarray(rewards), float(vec_normalize.gamma), float(rms.mean), float(rms.var), float(rms.count)
+    )
+    rms.mean, rms.var, rms.count = np.float64(mean), np.float64(var), count
 
 
 guard_kernel_cache(__name__)

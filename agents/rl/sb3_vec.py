@@ -28,7 +28,7 @@ from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from agents.rl.normalize import update_and_normalize
+from agents.rl.normalize import update_and_normalize, update_returns
 from coop_gym.cli import SEED_LIMIT
 from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
@@ -336,13 +336,13 @@ def fused_step(env: VecEnv) -> Callable[[NDArray[Any]], VecEnvStepReturn] | None
     """``env.step`` of the training stack :func:`agents.rl.make_train_env` builds, in one function.
 
     The stack: ``VecNormalize`` (observations, not rewards) over ``VecMonitor`` over
-    :class:`SB3VecEnvAdapter` on coop_gym's batched env with ``step_infos="finished"``. The
-    adapter steps as always; the monitor's episode sums and records and the normaliser's update
-    (:func:`agents.rl.normalize.update_and_normalize`), discounted returns and terminal
-    observations are done here, with the wrappers' numbers, state and infos, without their
-    per-step layers and copies (``tests/agents/test_sb3_vec.py`` holds a run to the wrappers'
-    bit for bit). While the normaliser is not training, the step is ``env.step``. None for any
-    other stack.
+    :class:`SB3VecEnvAdapter` on coop_gym's batched env with ``step_infos="finished"``. The adapter
+    steps as always; the monitor's episode sums and records and the normaliser's update
+    (:func:`agents.rl.normalize.update_and_normalize`), discounted returns
+    (:func:`agents.rl.normalize.update_returns`) and terminal observations are done here, with the
+    wrappers' numbers, state and infos, without their per-step layers and copies
+    (``tests/agents/test_sb3_vec.py`` holds a run to the wrappers' bit for bit). While the
+    normaliser is not training, the step is ``env.step``. None for any other stack.
     """
     norm, monitor = env, getattr(env, "venv", None)
     adapter = getattr(monitor, "venv", None)
@@ -366,7 +366,7 @@ def fused_step(env: VecEnv) -> Callable[[NDArray[Any]], VecEnvStepReturn] | None
         # VecNormalize.step_wait (observations only)
         norm.old_obs, norm.old_reward = obs, rewards
         normalized = update_and_normalize(norm, obs)
-        norm._update_reward(rewards)
+        update_returns(norm, rewards)
         ended = [i for i in finished if "terminal_observation" in infos[i]]
         if ended:  # normalize_obs row by row is elementwise: all rows at once are the same numbers
             finals = norm.normalize_obs(np.stack([infos[i]["terminal_observation"] for i in ended]))

@@ -331,3 +331,34 @@ def test_the_compiled_normaliser_update_is_vec_normalizes(shape: tuple[int, int]
         for name in ("mean", "var"):
             assert np.array_equal(getattr(ours.obs_rms, name), getattr(theirs.obs_rms, name)), name
         assert ours.obs_rms.count == theirs.obs_rms.count
+
+
+@pytest.mark.parametrize("n_envs", [1, 7, 8, 16, 17, 128, 129])
+def test_the_compiled_returns_update_is_vec_normalizes_bit_for_bit(n_envs: int) -> None:
+    """``update_returns``: ``VecNormalize._update_reward``'s returns and running statistics, their types too."""
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    from agents.rl.normalize import update_returns
+
+    class Norm:
+        gamma = 0.995
+
+        def __init__(self) -> None:
+            self.ret_rms, self.returns = RunningMeanStd(shape=()), np.zeros(n_envs)
+
+        def _update_reward(self, reward: Any) -> None:  # VecNormalize's
+            self.returns = self.returns * self.gamma + reward
+            self.ret_rms.update(self.returns)
+
+    sb3, ours = Norm(), Norm()
+    rng = np.random.default_rng(n_envs)
+    for _ in range(300):
+        rewards = (rng.standard_normal(n_envs) * 10 ** rng.uniform(-2, 2)).astype(np.float32)
+        sb3._update_reward(rewards)
+        update_returns(ours, rewards)
+        ended = rng.random(n_envs) < 0.1
+        sb3.returns[ended] = ours.returns[ended] = 0
+        assert np.array_equal(sb3.returns, ours.returns)
+        for name in ("mean", "var", "count"):
+            a, b = getattr(sb3.ret_rms, name), getattr(ours.ret_rms, name)
+            assert a == b and type(a) is type(b), name
