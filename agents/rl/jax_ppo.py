@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 import torch
 from gymnasium import spaces
+from numba import njit
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.utils import explained_variance
@@ -49,6 +50,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from agents.rl.jax_update import _jax, build
 from agents.rl.sb3_vec import fused_step
+from estimator.compiled import guard_kernel_cache
 
 __all__ = ["JaxPPO", "JaxTraining", "jax_available"]
 
@@ -64,7 +66,9 @@ class _RolloutPolicy:
     """The policy's forward pass in NumPy, for the rollout.
 
     On a few hundred envs the arithmetic costs less than a call into compiled code. Each
-    action dimension is sampled by its inverse CDF.
+    action dimension is sampled by its inverse CDF: NumPy's ``exp`` and ``log``, the maxima, sums and
+    comparisons between them compiled in NumPy's order (:func:`_shifted_blocks`, :func:`_block_sums`,
+    :func:`_pick`).
     """
 
     def __init__(self, params: dict[str, list[tuple[Any, Any]]], nvec: list[int], relu: bool) -> None:
@@ -110,18 +114,87 @@ class _RolloutPolicy:
         """
         n, heads = logits.shape[0], len(self.last)
         uniform = rng.random((n, heads), dtype=np.float32)
-        padded = np.empty((n, logits.shape[1] + 1), dtype=logits.dtype)
-        padded[:, :-1], padded[:, -1] = logits, -np.inf
-        block = np.take(padded, self.columns, axis=1).reshape(n, heads, -1)
-        shifted = block - block.max(axis=2, keepdims=True)
-        log_p = shifted - np.log(np.exp(shifted).sum(axis=2, keepdims=True))
-        cdf = np.cumsum(np.exp(log_p), axis=2)
-        choice = np.minimum((uniform[:, :, None] > cdf).sum(axis=2), self.last)
-        picked = np.take_along_axis(log_p, choice[:, :, None], axis=2)[:, :, 0]
-        log_prob = np.zeros(n, dtype=np.float32)
+        if logits.dtype != np.float32:
+            raise ValueError(f"the rollout policy's logits must be float32, got {logits.dtype}")
+        # exp and log stay NumPy's: numba's round some values to other last bits.
+        shifted = _shifted_blocks(np.ascontiguousarray(logits), self.columns.reshape(heads, -1))
+        log_p = shifted - np.log(_block_sums(np.exp(shifted)))
+        return _pick(np.exp(log_p), log_p, uniform, self.last)
+
+
+@njit(cache=True, error_model="numpy")
+def _shifted_blocks(logits: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """``block - block.max(axis=2)``: each head's logits in row ``head`` of a ``(n, heads, widest)`` block.
+
+    ``columns[head]`` are the head's logit columns; column ``logits.shape[1]`` is the padding, -inf.
+    """
+    n, total = logits.shape
+    heads, widest = columns.shape
+    shifted = np.empty((n, heads, widest), dtype=np.float32)
+    for row in range(n):
         for head in range(heads):
-            log_prob += picked[:, head]
-        return choice.astype(np.int32), log_prob
+            top = np.float32(-np.inf)
+            for k in range(widest):
+                column = columns[head, k]
+                value = logits[row, column] if column < total else np.float32(-np.inf)
+                shifted[row, head, k] = value
+                if value > top:
+                    top = value
+            for k in range(widest):
+                shifted[row, head, k] = shifted[row, head, k] - top
+    return shifted
+
+
+@njit(cache=True, error_model="numpy")
+def _block_sums(values: np.ndarray) -> np.ndarray:
+    """``values.sum(axis=2, keepdims=True)`` of a contiguous float32 block, NumPy's pairwise order.
+
+    Per block of at most 128 values: 0 plus, under 8 values, one by one; else eight running sums
+    over the whole groups of eight, added as a tree, then the rest one by one.
+    """
+    n, heads, widest = values.shape
+    sums = np.empty((n, heads, 1), dtype=np.float32)
+    for row in range(n):
+        for head in range(heads):
+            block = values[row, head]
+            if widest < 8:
+                total = np.float32(0.0)
+                for k in range(widest):
+                    total += block[k]
+            else:
+                r = block[:8].copy()
+                k = 8
+                while k < widest - widest % 8:
+                    for j in range(8):
+                        r[j] += block[k + j]
+                    k += 8
+                total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+                while k < widest:
+                    total += block[k]
+                    k += 1
+            sums[row, head, 0] = np.float32(0.0) + total
+    return sums
+
+
+@njit(cache=True, error_model="numpy")
+def _pick(
+    probabilities: np.ndarray, log_p: np.ndarray, uniform: np.ndarray, last: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each head's action by its inverse CDF (the cumulative sum one by one) and the sum of their log-probabilities."""
+    n, heads, widest = probabilities.shape
+    choice = np.empty((n, heads), dtype=np.int32)
+    log_prob = np.zeros(n, dtype=np.float32)
+    for row in range(n):
+        for head in range(heads):
+            cdf = np.float32(0.0)
+            above = 0
+            for k in range(widest):
+                cdf = probabilities[row, head, k] if k == 0 else cdf + probabilities[row, head, k]
+                if uniform[row, head] > cdf:
+                    above += 1
+            choice[row, head] = min(above, last[head])
+            log_prob[row] += log_p[row, head, choice[row, head]]
+    return choice, log_prob
 
 
 class JaxTraining:
@@ -508,3 +581,6 @@ class JaxTraining:
 
 class JaxPPO(JaxTraining, PPO):
     """SB3's PPO with the update compiled by JAX and the rollout policy in NumPy (see the module docstring)."""
+
+
+guard_kernel_cache(__name__)

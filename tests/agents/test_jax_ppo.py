@@ -93,7 +93,7 @@ def _head_by_head(logits, nvec, rng):
     return actions, log_prob
 
 
-@pytest.mark.parametrize("nvec", [[3, 3, 2], [18], [2, 5, 3, 4]])
+@pytest.mark.parametrize("nvec", [[3, 3, 2], [18], [2, 5, 3, 4], [40], [2, 9]])
 def test_all_heads_sample_as_each_head_alone_bit_for_bit(nvec):
     from agents.rl.jax_ppo import _RolloutPolicy
 
@@ -108,6 +108,8 @@ def test_all_heads_sample_as_each_head_alone_bit_for_bit(nvec):
         assert actions.dtype == expected_actions.dtype and log_prob.dtype == expected_log_prob.dtype
         np.testing.assert_array_equal(actions, expected_actions)
         np.testing.assert_array_equal(log_prob.view(np.int32), expected_log_prob.view(np.int32))
+    with pytest.raises(ValueError, match="float32"):
+        policy.sample(np.zeros((2, sum(nvec))), np.random.default_rng(0))
 
 
 def test_a_saved_model_loads_plays_and_continues(tmp_path):
