@@ -149,8 +149,9 @@ def _shifted_blocks(logits: np.ndarray, columns: np.ndarray) -> np.ndarray:
 def _block_sums(values: np.ndarray) -> np.ndarray:
     """``values.sum(axis=2, keepdims=True)`` of a contiguous float32 block, NumPy's pairwise order.
 
-    Per block of at most 128 values: 0 plus, under 8 values, one by one; else eight running sums
-    over the whole groups of eight, added as a tree, then the rest one by one.
+    0 plus, under 8 values, one by one; else eight running sums over the whole groups of eight,
+    added as a tree, then the rest one by one. NumPy splits a block of over 128 values in two
+    first, so an action dimension that wide sums to the last bits of another order.
     """
     n, heads, widest = values.shape
     sums = np.empty((n, heads, 1), dtype=np.float32)
