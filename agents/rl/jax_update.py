@@ -194,6 +194,39 @@ def _unflatten_opt(optimizer: Any, params: Any, leaves: list[Any]) -> Any:
     return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(leaf) for leaf in leaves])
 
 
+def _epochs(loss: _Loss, optimizer: Any, lstm: bool, shape: tuple[int, int]) -> Any:
+    """``epochs(params, opt_state, orders, *rollout, learning_rate, clip_range) -> (params, opt_state, stats)``.
+
+    Every epoch (a row of ``orders``, cut into ``shape`` = (minibatches, units per minibatch)) and
+    minibatch of one update, as one function for ``jax.jit``.
+    """
+    jax, _, optax = _jax()
+    minibatches, per_minibatch = shape
+
+    def epochs(params: Any, opt_state: Any, orders: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any]:
+        *rollout, learning_rate, clip_range = rollout_and_rates
+        opt_state.hyperparams["learning_rate"] = learning_rate
+        grad = jax.value_and_grad(loss, has_aux=True)
+
+        def minibatch(carry: Any, index: Any) -> Any:
+            params, opt_state = carry
+            if lstm:  # six (T, N, ...) columns, then the four (N, hidden) starting states
+                batch = tuple(column[:, index] for column in rollout[:6]) + tuple(s[index] for s in rollout[6:])
+            else:
+                batch = tuple(column[index] for column in rollout)
+            (_, stats), grads = grad(params, batch, clip_range)
+            updates, opt_state = optimizer.update(grads, opt_state, params)
+            return (optax.apply_updates(params, updates), opt_state), stats
+
+        def epoch(carry: Any, order: Any) -> Any:
+            return jax.lax.scan(minibatch, carry, order.reshape(minibatches, per_minibatch))
+
+        (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), orders)
+        return params, opt_state, {name: values.mean() for name, values in stats.items()}
+
+    return epochs
+
+
 @functools.cache
 def build(
     *,
@@ -225,34 +258,12 @@ def build(
         follow ``returns``; ``init(params)`` the optimiser state; ``unflatten_opt(params, leaves)`` it from
         saved leaves.
     """
-    jax, _, optax = _jax()
+    jax, _, _ = _jax()
     loss = _Loss(nvec, relu, ent_coef, vf_coef, normalize_advantage, lstm)
     optimizer = _optimizer(max_grad_norm)
     minibatches = samples // batch_size  # each of samples, or with an LSTM of whole env rollouts:
     units, per_minibatch = (samples, batch_size) if not lstm else (samples // n_steps, batch_size // n_steps)
-
-    def epochs(params: Any, opt_state: Any, orders: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any]:
-        *rollout, learning_rate, clip_range = rollout_and_rates
-        opt_state.hyperparams["learning_rate"] = learning_rate
-        grad = jax.value_and_grad(loss, has_aux=True)
-
-        def minibatch(carry: Any, index: Any) -> Any:
-            params, opt_state = carry
-            if lstm:  # six (T, N, ...) columns, then the four (N, hidden) starting states
-                batch = tuple(column[:, index] for column in rollout[:6]) + tuple(s[index] for s in rollout[6:])
-            else:
-                batch = tuple(column[index] for column in rollout)
-            (_, stats), grads = grad(params, batch, clip_range)
-            updates, opt_state = optimizer.update(grads, opt_state, params)
-            return (optax.apply_updates(params, updates), opt_state), stats
-
-        def epoch(carry: Any, order: Any) -> Any:
-            return jax.lax.scan(minibatch, carry, order.reshape(minibatches, per_minibatch))
-
-        (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), orders)
-        return params, opt_state, {name: values.mean() for name, values in stats.items()}
-
-    compiled = jax.jit(epochs)
+    compiled = jax.jit(_epochs(loss, optimizer, lstm, (minibatches, per_minibatch)))
 
     def update(params: Any, opt_state: Any, key: Any, *rollout_and_rates: Any) -> tuple[Any, Any, Any, Any]:
         key, orders = epoch_orders(key, units, n_epochs)
