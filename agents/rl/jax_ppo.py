@@ -49,6 +49,7 @@ from stable_baselines3.common.utils import explained_variance
 from stable_baselines3.common.vec_env import VecEnv
 
 from agents.rl.jax_update import _jax, build
+from agents.rl.normalize import numpy_sum
 from agents.rl.sb3_vec import fused_step
 from estimator.compiled import guard_kernel_cache
 
@@ -147,33 +148,16 @@ def _shifted_blocks(logits: np.ndarray, columns: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def _block_sums(values: np.ndarray) -> np.ndarray:
-    """``values.sum(axis=2, keepdims=True)`` of a contiguous float32 block, NumPy's pairwise order.
+    """``values.sum(axis=2, keepdims=True)`` of a contiguous float32 block, in NumPy's order (:func:`numpy_sum`).
 
-    0 plus, under 8 values, one by one; else eight running sums over the whole groups of eight,
-    added as a tree, then the rest one by one. NumPy splits a block of over 128 values in two
-    first, so an action dimension that wide sums to the last bits of another order.
+    NumPy splits a block of over :data:`~agents.rl.normalize.PAIRWISE_BLOCK` values in two first, so an action dimension
+    that wide sums to the last bits of another order.
     """
-    n, heads, widest = values.shape
+    n, heads, _ = values.shape
     sums = np.empty((n, heads, 1), dtype=np.float32)
     for row in range(n):
         for head in range(heads):
-            block = values[row, head]
-            if widest < 8:
-                total = np.float32(0.0)
-                for k in range(widest):
-                    total += block[k]
-            else:
-                r = block[:8].copy()
-                k = 8
-                while k < widest - widest % 8:
-                    for j in range(8):
-                        r[j] += block[k + j]
-                    k += 8
-                total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-                while k < widest:
-                    total += block[k]
-                    k += 1
-            sums[row, head, 0] = np.float32(0.0) + total
+            sums[row, head, 0] = numpy_sum(values[row, head], np.float32(0.0))
     return sums
 
 

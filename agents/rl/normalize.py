@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from estimator.compiled import guard_kernel_cache
 
-__all__ = ["ObsNormalizer", "update_and_normalize", "update_returns"]
+__all__ = ["PAIRWISE_BLOCK", "ObsNormalizer", "numpy_sum", "update_and_normalize", "update_returns"]
 
 
 @dataclass(frozen=True)
@@ -133,41 +133,37 @@ def update_and_normalize(vec_normalize: Any, obs: NDArray[np.float32]) -> NDArra
     return normalized  # type: ignore[no-any-return]
 
 
-_PAIRWISE_BLOCK = 128
+PAIRWISE_BLOCK = 128
 """NumPy sums up to this many values in one block (``PW_BLOCKSIZE``); more, it splits them in two."""
 
 
 @njit(cache=True, error_model="numpy")
-def _block_sum(values: NDArray[np.float64]) -> float:
-    """NumPy's sum of a contiguous float64 vector of at most :data:`_PAIRWISE_BLOCK` values.
+def numpy_sum(values: NDArray[Any], zero: Any) -> Any:
+    """NumPy's sum of a contiguous vector of at most :data:`PAIRWISE_BLOCK` values, in its order and dtype.
 
-    0 plus ``pairwise_sum`` (NumPy's ``loops_utils``): under 8 values one by one, else eight
-    running sums over the whole groups of eight, added as a tree, then the rest one by one.
+    ``zero`` is 0 of the values' dtype (the sum stays in it). 0 plus ``pairwise_sum`` (NumPy's
+    ``loops_utils``): under 8 values one by one, else eight running sums over the whole groups
+    of eight, added as a tree, then the rest one by one.
     """
     n = values.shape[0]
     if n < 8:
-        total = 0.0
+        total = zero
         for i in range(n):
             total += values[i]
-        return 0.0 + total
-    r0, r1, r2, r3 = values[0], values[1], values[2], values[3]
-    r4, r5, r6, r7 = values[4], values[5], values[6], values[7]
+        return zero + total
+    running = values[:8].copy()
     i = 8
     while i < n - n % 8:
-        r0 += values[i]
-        r1 += values[i + 1]
-        r2 += values[i + 2]
-        r3 += values[i + 3]
-        r4 += values[i + 4]
-        r5 += values[i + 5]
-        r6 += values[i + 6]
-        r7 += values[i + 7]
+        for j in range(8):
+            running[j] += values[i + j]
         i += 8
-    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    total = ((running[0] + running[1]) + (running[2] + running[3])) + (
+        (running[4] + running[5]) + (running[6] + running[7])
+    )
     while i < n:
         total += values[i]
         i += 1
-    return 0.0 + total
+    return zero + total
 
 
 @njit(cache=True, error_model="numpy")
@@ -179,11 +175,11 @@ def _update_returns(
     for i in range(n):
         new_returns[i] = returns[i] * gamma + np.float64(rewards[i])
     # np.mean and np.var of a contiguous float64 vector: its sum divided by n.
-    batch_mean = _block_sum(new_returns) / n
+    batch_mean = numpy_sum(new_returns, 0.0) / n
     squares = np.empty(n)
     for i in range(n):
         squares[i] = (new_returns[i] - batch_mean) * (new_returns[i] - batch_mean)
-    batch_var = _block_sum(squares) / n
+    batch_var = numpy_sum(squares, 0.0) / n
     # RunningMeanStd.update_from_moments, term by term.
     delta = batch_mean - mean
     total = count + n
@@ -203,7 +199,7 @@ def update_returns(vec_normalize: Any, rewards: NDArray[Any]) -> None:
         np.shape(rms.mean) != ()
         or not isinstance(returns, np.ndarray)
         or returns.ndim != 1
-        or not 0 < returns.shape[0] <= _PAIRWISE_BLOCK
+        or not 0 < returns.shape[0] <= PAIRWISE_BLOCK
         or returns.dtype != np.float64
         or np.shape(rewards) != returns.shape
         or np.asarray(rewards).dtype not in (np.float32, np.float64)
