@@ -76,15 +76,14 @@ class _RolloutPolicy:
         self.pi = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["pi"]]
         self.vf = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["vf"]]
         self.activation = (lambda x: np.maximum(x, 0.0)) if relu else np.tanh
-        # All heads at once: head h's logits in row h of a (heads, widest) block, padded with a
-        # -inf logit (column `total` of the logits with one -inf column appended), whose
-        # probability is exactly 0.
+        # All heads at once: head h's logit columns in row h of a (heads, widest) table, padded
+        # with column `total`, which _shifted_blocks reads as a -inf logit: probability exactly 0.
         total, widest = sum(nvec), max(nvec)
         bounds = np.cumsum([0, *nvec])
         columns = np.full((len(nvec), widest), total)
         for head, n in enumerate(nvec):
             columns[head, :n] = np.arange(bounds[head], bounds[head] + n)
-        self.columns = columns.ravel()
+        self.columns = columns
         self.last = np.asarray(nvec) - 1
 
     def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
@@ -118,7 +117,7 @@ class _RolloutPolicy:
         if logits.dtype != np.float32:
             raise ValueError(f"the rollout policy's logits must be float32, got {logits.dtype}")
         # exp and log stay NumPy's: numba's round some values to other last bits.
-        shifted = _shifted_blocks(np.ascontiguousarray(logits), self.columns.reshape(heads, -1))
+        shifted = _shifted_blocks(np.ascontiguousarray(logits), self.columns)
         log_p = shifted - np.log(_block_sums(np.exp(shifted)))
         return _pick(np.exp(log_p), log_p, uniform, self.last)
 
