@@ -41,6 +41,7 @@ __all__ = [
     "BUNDLE_VECNORMALIZE",
     "GreedyActor",
     "SB3Agent",
+    "bundle_problem",
     "load_agent",
     "load_model",
     "load_to_continue",
@@ -74,6 +75,7 @@ def save_model_bundle(
         "env_id": env_id,
         "features": observation_features(env_id, model.get_env()),
         "num_timesteps": int(model.num_timesteps),
+        "n_envs": int(model.n_envs),
         "coop_gym_version": coop_gym.__version__,
         "normalized": vec_normalize is not None,
         "framework": getattr(model, "framework", "sb3"),
@@ -165,6 +167,34 @@ def resolve_saved(path: str | Path) -> tuple[Path, dict[str, Any]]:
     return path, info
 
 
+def bundle_problem(
+    model_path: str | Path, info: dict[str, Any], expected: dict[str, Any] | None = None, source: str = "expected"
+) -> str | None:
+    """Where a model zip's metadata contradicts what the zip holds, or what ``source`` expects; None if nowhere.
+
+    ``info`` is what the bundle says about itself (``coop_gym/agent.json``, or the ``agent.json``
+    beside it): its step count, envs and algorithm are checked against SB3's own record in the
+    zip (a foreign ``model.zip`` under a run's metadata), then every key of ``expected`` (e.g. a
+    checkpoint's step count, a run's framework and envs; ``source`` names who expects them)
+    against ``info``. A key one side does not record (an older bundle) is not checked.
+    """
+    model_path = Path(model_path)
+    try:
+        with zipfile.ZipFile(model_path) as archive:
+            data = json.loads(archive.read("data"))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return None  # unreadable: the loader names that itself
+    held = {"num_timesteps": data.get("num_timesteps"), "n_envs": data.get("n_envs")}
+    held["algo"] = _algo_from_zip(model_path)
+    for key, value in held.items():
+        if value is not None and info.get(key) is not None and info[key] != value:
+            return f"{model_path}: its metadata says {key} {info[key]!r}, but the model it holds has {value!r}"
+    for key, value in (expected or {}).items():
+        if value is not None and info.get(key) is not None and info[key] != value:
+            return f"{model_path} holds a model of {key} {info[key]!r}, but {source} has {value!r}"
+    return None
+
+
 def _algo_from_zip(model_path: Path) -> str | None:
     """The algorithm of an SB3 zip without ``agent.json`` (e.g. RL Zoo's), from its policy class's module.
 
@@ -188,6 +218,8 @@ def _algo_from_zip(model_path: Path) -> str | None:
 def load_model(path: str | Path, env: VecEnv | None = None, **kwargs: Any) -> tuple[BaseAlgorithm, dict[str, Any]]:
     """Load a saved model (algorithm from ``agent.json``, else tried in turn) and its metadata."""
     model_path, info = resolve_saved(path)
+    if problem := bundle_problem(model_path, info):
+        raise ValueError(problem)
     guess = info.get("algo") or _algo_from_zip(model_path)
     algos = [guess] if guess else list(ALGORITHMS)
     framework = "jax" if info.get("framework") == "jax" else "sb3"
@@ -419,6 +451,11 @@ def load_agent(path: str | Path) -> SB3Agent:
             if candidate.exists():
                 normalizer = ObsNormalizer.from_vec_normalize(_load_vec_normalize(candidate))
                 break
+    if normalizer is None and saved_info.get("normalized"):  # it would score observations it never saw
+        raise ValueError(
+            f"{model_path} was trained on normalised observations (its metadata says so), but neither "
+            f"{BUNDLE_VECNORMALIZE} inside it nor {VECNORMALIZE_FILE} beside it holds the statistics; restore one"
+        )
     features = info.get("features")
     frame_stack = info.get("frame_stack", 1)
     return SB3Agent(

@@ -21,7 +21,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
-from agents.rl.bundle import load_model, read_bundle, save_model_bundle
+from agents.rl.bundle import bundle_problem, load_model, read_bundle, save_model_bundle
 from agents.rl.training import find_vec_normalize
 from agents.trainer.run_folder import CHECKPOINTS_DIR, MODEL_FILE
 from coop_gym.io import atomic_path
@@ -124,16 +124,23 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
     return found[-1] if found else None
 
 
-def restore_checkpoint(checkpoint: str | Path, env: VecEnv) -> tuple[BaseAlgorithm, dict[str, Any]]:
+def restore_checkpoint(
+    checkpoint: str | Path, env: VecEnv, expected: dict[str, Any] | None = None
+) -> tuple[BaseAlgorithm, dict[str, Any]]:
     """Load a :func:`save_checkpoint` folder onto a freshly built training ``env`` (``VecMonitor`` inside).
 
     The model continues exactly where it stopped: same envs mid-episode, same normaliser,
     same optimiser, same RNG streams. ``monitor.csv`` (if ``env`` writes one, in append
     mode) is cut back to its size at the checkpoint, dropping episodes logged after it.
+    Before anything is touched, the model zip must be the checkpoint's own (its step count
+    that of ``state.pkl``) and of the run (``expected``: e.g. ``algo``, ``framework``, ``n_envs``).
 
     Returns:
         ``(model, extra)``: the model on ``env`` (wrapped in the saved ``VecNormalize`` if
         there was one) and the caller's ``extra`` state.
+
+    Raises:
+        ValueError: an unreadable checkpoint, or a model zip foreign to it or to the run.
     """
     import torch
 
@@ -142,7 +149,12 @@ def restore_checkpoint(checkpoint: str | Path, env: VecEnv) -> tuple[BaseAlgorit
         state = pickle.loads((folder / "state.pkl").read_bytes())
     except (OSError, EOFError, pickle.UnpicklingError) as exc:
         raise ValueError(f"{folder}: unreadable checkpoint state ({exc})") from None
-    _, stats = read_bundle(folder / MODEL_FILE)
+    info, stats = read_bundle(folder / MODEL_FILE)
+    steps = {"num_timesteps": state.get("num_timesteps")}
+    problem = bundle_problem(folder / MODEL_FILE, info, steps, "its checkpoint's state.pkl")
+    problem = problem or bundle_problem(folder / MODEL_FILE, info, expected, "the run")
+    if problem:
+        raise ValueError(f"{problem}: the model is not this checkpoint's")
     monitor = _monitor_of(env)
     if monitor is not None and state["monitor"] is not None:
         writer = monitor.results_writer
