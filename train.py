@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Literal
 
-from agents.trainer.train_args import BadArgs, RunProblem, args_problem, parse_train_args, read_training, usage_error
-from agents.trainer.training_run import Stopped, StopSignals, write_failed, write_interrupted
+from agents.trainer.train_args import BadArgs, RunProblem, args_problem, parse_train_args, read_training, run_problem
+from agents.trainer.training_run import Stopped, StopSignals, run_folder_of, write_failed, write_interrupted
+from coop_gym.cli import exit_status
 
 __all__ = ["Args", "main", "parse_args"]
 
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     from agents.rl.run import plan_run, train
     from agents.trainer.run_report import evaluate_and_report
 
-    stop, folder = StopSignals(), Path(args.out)
+    stop, folder = StopSignals(), run_folder_of(args)
     try:
         plan = plan_run(args)  # the algorithm's settings overridden by the flags; the run folder
         folder = plan.run_dir
@@ -110,11 +110,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except Stopped:
         return write_interrupted(folder, stop)
-    except RunProblem as exc:  # a damaged model or checkpoint
-        return usage_error(str(exc))
+    except RunProblem as exc:  # a damaged model or checkpoint: exit status 2, or 1 for a run that cannot continue
+        return run_problem(exc)
     except OSError as exc:  # e.g. a full disk
         return write_failed(exc, folder)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(exit_status(main))

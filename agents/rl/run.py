@@ -14,6 +14,7 @@ What happens after training (the evaluation against the baselines, the report) i
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -41,7 +42,14 @@ from agents.rl import (
 from agents.trainer.hyperparams import hyperparams_for
 from agents.trainer.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
 from agents.trainer.run_report import new_run_folder
-from agents.trainer.train_args import RunProblem, personas_arg, recorded_settings, settings_framework
+from agents.trainer.train_args import (
+    PROG,
+    RunCannotContinue,
+    RunProblem,
+    personas_arg,
+    recorded_settings,
+    settings_framework,
+)
 from agents.trainer.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
 from coop_gym.io import write_json
 
@@ -87,6 +95,11 @@ def _open_run_folder(args: Any, plan: Plan, in_place: bool) -> Plan:
     if in_place:
         run_dir = Path(args.resume)
         source_model = recorded_settings(run_dir, type(args)).get("resume")  # the model this run continued
+        if not os.access(run_dir, os.W_OK | os.X_OK):  # e.g. a read-only mount: say so before any work
+            raise RunCannotContinue(
+                f"--resume {run_dir}: the run folder is not writable; copy it to a writable place "
+                f"(cp -a {run_dir} COPY), then {PROG} --resume COPY"
+            )
         clean_leftovers(run_dir)
         print(f"resuming run folder: {run_dir}")
         return dataclasses.replace(plan, run_dir=run_dir, source_model=source_model)
@@ -113,7 +126,8 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     Raises:
         agents.trainer.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last
             rollout.
-        RunProblem: a damaged checkpoint or saved model (the message names it).
+        RunProblem: a damaged saved model (the message names it).
+        RunCannotContinue: a damaged or foreign checkpoint (the message names it).
     """
     run_dir, config = plan.run_dir, plan.config
     checkpoint = latest_checkpoint(run_dir)
@@ -163,10 +177,13 @@ def _model_to_train(args: Any, plan: Plan, env: Any, checkpoint: Path | None) ->
         RunProblem: a damaged checkpoint or saved model (the message names it).
     """
     if checkpoint is not None:
+        framework = settings_framework(args, plan.algo)
+        expected = {"algo": plan.algo, "env_id": plan.env_id, "framework": framework, "n_envs": plan.n_envs}
         try:
-            model, state = restore_checkpoint(checkpoint, env)
+            model, state = restore_checkpoint(checkpoint, env, expected)
         except (OSError, ValueError) as exc:
-            raise RunProblem(f"--resume: checkpoint {checkpoint}: {exc}") from exc
+            remedy = f"remove {checkpoint} to resume from the checkpoint before it (or from the start)"
+            raise RunCannotContinue(f"--resume {plan.run_dir}: {exc}; {remedy}") from exc
         print(f"continuing from {checkpoint} at {model.num_timesteps} steps")
         return model, env, state, state["start_steps"]
     if plan.source_model is not None:

@@ -24,7 +24,7 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
-from agents.trainer.run_folder import ARGS_FILE, TRAINING_FILE, is_unfinished_run
+from agents.trainer.run_folder import ARGS_FILE, MODEL_FILE, TRAINING_FILE, is_unfinished_run
 from coop_gym.cli import BadArgs, fail, parse
 
 if TYPE_CHECKING:
@@ -34,6 +34,7 @@ __all__ = [
     "PROG",
     "RUN_FIELDS",
     "BadArgs",
+    "RunCannotContinue",
     "RunProblem",
     "args_problem",
     "baseline_names",
@@ -43,6 +44,7 @@ __all__ = [
     "read_training",
     "recorded_settings",
     "resume_settings",
+    "run_problem",
     "settings_framework",
     "usage_error",
 ]
@@ -75,7 +77,18 @@ may be null: the algorithm's own); a file without them is not a run's settings."
 
 
 class RunProblem(ValueError):
-    """A saved file that cannot be used (a damaged model, checkpoint or summary): exit status 2, one line."""
+    """A saved file that cannot be used (a damaged model or summary): exit status 2, one line."""
+
+    status = 2
+
+
+class RunCannotContinue(RunProblem):
+    """A run folder that cannot go on as it is (its model gone, a foreign checkpoint, not writable): exit status 1.
+
+    Raised before the folder is changed, so its ``INTERRUPTED`` marker still says how it stopped.
+    """
+
+    status = 1
 
 
 def learner_framework(args: Any) -> str:
@@ -142,6 +155,8 @@ def _problem_with_numbers(args: Any) -> str | None:
         value = getattr(args, name)
         if value is not None and value < 1:
             return f"--{name.replace('_', '-')} must be >= 1, got {value}"
+        if value is not None and value > sys.maxsize:  # TrainingConfig's own bound: a run that would never end
+            return f"--{name.replace('_', '-')} must be <= {sys.maxsize}, got {value}"
     if args.eval_episodes < 1:
         return f"--eval-episodes must be >= 1, got {args.eval_episodes}"
     if args.seed < 0 or args.eval_seed < 0:
@@ -173,9 +188,13 @@ def _problem_with_names(args: Any) -> str | None:
         resolve_personas(personas_arg(args.eval_personas))
     except ValueError as exc:
         return f"--eval-personas: {exc}"
-    unknown = [b for b in baseline_names(args.baselines) if b not in SCRIPTED_AGENTS]
+    names = baseline_names(args.baselines)
+    unknown = [b for b in names if b not in SCRIPTED_AGENTS]
     if unknown:
         return f"--baselines: unknown agent(s) {unknown}; known: {', '.join(SCRIPTED_AGENTS)}"
+    twice = sorted({b for b in names if names.count(b) > 1})
+    if twice:  # two rows of one agent, and one result would overwrite the other in results.json
+        return f"--baselines: {', '.join(repr(b) for b in twice)} given twice; list each agent once"
     return None
 
 
@@ -183,6 +202,9 @@ def _problem_with_framework(args: Any) -> str | None:
     """What ``--framework rllib`` (and the flags that go with it) cannot do (None if it can)."""
     if args.framework == "rllib" and (args.algo != "ppo" or args.eval_only or args.resume or args.num_env_runners < 0):
         return "--framework rllib trains ppo only (no --eval-only/--resume) with --num-env-runners >= 0"
+    if args.framework != "rllib" and (args.num_env_runners != 0 or args.address is not None):
+        flags = "--num-env-runners" if args.num_env_runners != 0 else "--address"
+        return f"{flags} is for --framework rllib; the {learner_framework(args)} learner trains in this process"
     if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
         return '--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"'
     from agents.trainer.hyperparams import JAX_ALGORITHMS
@@ -248,6 +270,8 @@ def parse_train_args(args_type: type[ArgsT], argv: list[str] | None, description
     try:
         saved = resume_settings(Path(resume), args_type)
         defaults = dataclasses.replace(args_type(), **saved)
+    except RunCannotContinue as exc:
+        sys.exit(run_problem(exc))
     except (BadArgs, ValueError) as exc:
         fail(PROG, str(exc))
     resumed = parse(args_type, argv, PROG, description, default=defaults)
@@ -265,6 +289,12 @@ def usage_error(message: str) -> int:
     """A problem found after parsing (e.g. a damaged model): one line on stderr; exit status 2."""
     print(f"{PROG}: error: {message}", file=sys.stderr)
     return 2
+
+
+def run_problem(exc: RunProblem) -> int:
+    """A saved file a run cannot use: one line on stderr; exit status 2, or 1 for a run that cannot continue."""
+    print(f"{PROG}: error: {exc}", file=sys.stderr)
+    return exc.status
 
 
 # --- what --resume continues ------------------------------------------------------
@@ -351,6 +381,7 @@ def read_training(run_dir: Path) -> dict[str, Any] | None:
 
     Raises:
         RunProblem: the file is there but damaged; the message names it.
+        RunCannotContinue: training finished but the model it saved is gone.
     """
     file = run_dir / TRAINING_FILE
     if not file.exists():
@@ -361,4 +392,9 @@ def read_training(run_dir: Path) -> dict[str, Any] | None:
             raise ValueError("not a training summary")
     except (OSError, ValueError) as exc:
         raise RunProblem(f"--resume: {file} is unreadable ({exc}); remove it to train this run again") from None
+    if not (run_dir / MODEL_FILE).exists():  # nothing to evaluate: say so before the folder is touched
+        raise RunCannotContinue(
+            f"--resume {run_dir}: training finished ({TRAINING_FILE}) but its {MODEL_FILE} is missing; "
+            f"put the model back to evaluate it, or remove {TRAINING_FILE} to train the run again"
+        )
     return finished

@@ -15,6 +15,7 @@ No torch at import: ``train.py`` parses its arguments before it loads SB3.
 
 from __future__ import annotations
 
+import errno
 import shutil
 import signal
 import sys
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from agents.trainer.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE
+from agents.trainer.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE, is_unfinished_run
 from agents.trainer.train_args import PROG
 from coop_gym.io import TEMP_MARKER, write_text
 
@@ -36,6 +37,7 @@ __all__ = [
     "Stopped",
     "clean_leftovers",
     "remove_checkpoints",
+    "run_folder_of",
     "write_failed",
     "write_interrupted",
 ]
@@ -123,16 +125,38 @@ def write_interrupted(run_dir: Path, stop: StopSignals) -> int:
     return 128 + (stop.signum or signal.SIGINT)
 
 
+def run_folder_of(args: Any) -> Path:
+    """The folder a run writes into: the unfinished run ``--resume`` continues in place, else ``--out``."""
+    if args.resume is not None and is_unfinished_run(args.resume):
+        return Path(args.resume)
+    return Path(args.out)
+
+
+_NOT_WRITABLE = (errno.EROFS, errno.EACCES, errno.EPERM)
+
+
 def write_failed(exc: OSError, run_dir: Path) -> int:
-    """A file could not be written (e.g. a full disk): it is not there, never half-written; exit status 1."""
+    """A file could not be written (e.g. a full disk): it is not there, never half-written; exit status 1.
+
+    The remedy follows the cause: space for a full disk, a writable copy for a read-only folder.
+    """
     print(f"{PROG}: error: could not write {exc.filename or 'output'}: {exc.strerror or exc}", file=sys.stderr)
-    print(f"{run_dir} keeps what was complete: free space, then {PROG} --resume {run_dir}", file=sys.stderr)
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        remedy = f"free space, then {PROG} --resume {run_dir}"
+    elif exc.errno in _NOT_WRITABLE:
+        remedy = f"it is not writable here: copy it to a writable place (cp -a), then {PROG} --resume THE_COPY"
+    else:
+        remedy = f"fix the cause above, then {PROG} --resume {run_dir}"
+    print(f"{run_dir} keeps what was complete; {remedy}", file=sys.stderr)
     return 1
 
 
 def clean_leftovers(run_dir: Path) -> None:
-    """Before resuming: drop the marker and any temporary file a killed process left behind."""
-    (run_dir / INTERRUPTED_FILE).unlink(missing_ok=True)
+    """Before resuming: drop any temporary file a killed process left behind.
+
+    The ``INTERRUPTED`` marker stays until the run writes what replaces it (a new marker, or
+    ``COMPLETE``): a resume that fails leaves the folder saying how it stopped.
+    """
     for leftover in list(run_dir.rglob(f"*{TEMP_MARKER}*")):
         if leftover.is_dir():
             shutil.rmtree(leftover, ignore_errors=True)
