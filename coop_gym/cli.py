@@ -35,6 +35,7 @@ __all__ = [
     "PositiveInt",
     "PositiveIntOrNone",
     "Seed",
+    "exit_status",
     "fail",
     "one_of",
     "output_path_problem",
@@ -214,3 +215,19 @@ def output_path_problem(path: str | Path, folder: bool = False) -> str | None:
     if not os.access(ancestor, os.W_OK | os.X_OK):
         return f"cannot create {target}: {ancestor} is not writable"
     return None
+
+
+def exit_status(main: Callable[[], int | None]) -> int:
+    """``main()``'s exit status, with a reader that closed the pipe early (``... --json | head``) a quiet stop.
+
+    What was printed before reached the reader; the rest has nowhere to go. Standard output is
+    pointed at ``os.devnull`` so that Python's flush at exit raises no second ``BrokenPipeError``
+    (the Python docs' recipe, "Note on SIGPIPE"); the status is 1, as for any output not written.
+    """
+    try:
+        status = main()
+        sys.stdout.flush()
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    return int(status or 0)

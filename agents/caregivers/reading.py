@@ -37,7 +37,7 @@ from scipy.special import erfc
 
 import coop_gym  # noqa: F401  (registers the ids)
 from agents.caregivers.scripted import make_scripted
-from coop_gym.cli import BadArgs, parse
+from coop_gym.cli import BadArgs, exit_status, parse
 from coop_gym.envs.switching import SwitchingEstimator, SwitchingOptions
 from coop_gym.registration import HARD_ENV_ID
 from estimator.multiple_model import IMMEstimator
@@ -228,4 +228,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(exit_status(main))

@@ -76,7 +76,7 @@ from agents.caregivers.scripted import (
     ScriptedAgent,
 )
 from agents.evaluate import evaluate
-from coop_gym.cli import one_of, parse
+from coop_gym.cli import exit_status, one_of, parse
 from coop_gym.envs.config import Outcome
 from coop_gym.registration import LEVEL_ENV_IDS
 
@@ -437,4 +437,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(exit_status(main))

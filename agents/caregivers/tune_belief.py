@@ -34,7 +34,7 @@ import tyro
 from agents.caregivers.belief import BeliefCaregiver, BeliefSettings
 from agents.caregivers.tune_baselines import TUNING_SEED
 from agents.evaluate import evaluate
-from coop_gym.cli import BadArgs, one_of, parse
+from coop_gym.cli import BadArgs, exit_status, one_of, parse
 from coop_gym.envs.contract import observation_features
 from coop_gym.model.personas import TRAIN_PERSONAS, resolve_personas
 from coop_gym.registration import HARD_ENV_ID
@@ -168,4 +168,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(exit_status(main))

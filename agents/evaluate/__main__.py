@@ -1,5 +1,6 @@
 """``python -m agents.evaluate``: the command line of :mod:`agents.evaluate.cli`."""
 
 from agents.evaluate.cli import main
+from coop_gym.cli import exit_status
 
-raise SystemExit(main())
+raise SystemExit(exit_status(main))

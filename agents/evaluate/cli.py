@@ -43,9 +43,16 @@ from agents.evaluate import (
     write_csv,
     write_json,
 )
-from agents.evaluate.runs import RunScore, aggregate_runs, finished_run_score, is_run_folder, run_folders_in
+from agents.evaluate.runs import (
+    RunScore,
+    aggregate_runs,
+    finished_run_score,
+    is_run_folder,
+    run_folders_in,
+    training_seed,
+)
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
-from agents.trainer.run_folder import is_rllib_run
+from agents.trainer.run_folder import MODEL_FILE, is_rllib_run
 from coop_gym.cli import BadArgs, fail, output_path_problem, parse, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 
@@ -247,7 +254,7 @@ def _entries_problem(entries: list[str]) -> str | None:
     """The first agent given twice, or neither a scripted agent nor a saved model (None if all are fine)."""
     given: dict[str, str] = {}
     for entry in entries:
-        same = entry if entry in SCRIPTED_AGENTS or is_pretrained(entry) else str(Path(entry).resolve())
+        same = entry if entry in SCRIPTED_AGENTS or is_pretrained(entry) else _model_file(entry)
         if same in given:  # two rows of one agent, and one score would overwrite the other
             first = given[same]
             twice = f"{entry!r} is given twice" if first == entry else f"{first!r} and {entry!r} are one model"
@@ -258,6 +265,16 @@ def _entries_problem(entries: list[str]) -> str | None:
         if entry not in SCRIPTED_AGENTS and not is_pretrained(entry) and not Path(entry).exists():
             return f"{entry!r} is neither a scripted agent ({', '.join(SCRIPTED_AGENTS)}) nor an existing model file"
     return None
+
+
+def _model_file(entry: str) -> str:
+    """The model file a saved-model entry names, resolved: a run folder's ``model.zip``, ``x`` for ``x.zip``."""
+    path = Path(entry)
+    if path.is_dir() and not is_rllib_run(path):
+        path = path / MODEL_FILE
+    elif not path.exists() and path.with_suffix(".zip").exists():
+        path = path.with_suffix(".zip")
+    return str(path.resolve())
 
 
 def _model_names(entries: list[str]) -> dict[str, str]:
@@ -390,7 +407,29 @@ def _run_scores(folders: list[str]) -> dict[Path, RunScore]:
                 runs[run] = finished_run_score(run)
             except ValueError as exc:
                 fail(PROG, f"--runs: {run}: {exc}; finish it or leave it out")
+    _one_run_per_seed(runs)
     return runs
+
+
+def _one_run_per_seed(runs: dict[Path, RunScore]) -> None:
+    """A usage error where two runs are one training seed (copies, or one seed trained twice).
+
+    The IQM and its bootstrap are across training seeds: a seed counted twice weighs double and
+    narrows the interval as if it were another seed.
+    """
+    by_seed: dict[tuple[str, str, int], list[Path]] = {}
+    for run, (env_id, algo, _, _) in runs.items():
+        seed = training_seed(run)
+        if seed is not None:
+            by_seed.setdefault((env_id, algo, seed), []).append(run)
+    for (env_id, algo, seed), same in by_seed.items():
+        if len(same) > 1:
+            folders = ", ".join(str(run) for run in same)
+            fail(
+                PROG,
+                f"--runs: {folders} are one training seed ({algo} seed {seed} on {env_id}); "
+                "the IQM is across training seeds: give each seed once",
+            )
 
 
 def _split_named(result: EvaluationResult) -> list[EvaluationResult]:

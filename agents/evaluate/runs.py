@@ -30,6 +30,7 @@ __all__ = [
     "run_score_of",
     "runs_in",
     "scores_by_level",
+    "training_seed",
 ]
 
 RESULTS_FILE = "results.json"
@@ -105,6 +106,15 @@ def finished_run_score(folder: str | Path) -> RunScore:
             "(scored without blind and oracle, or the score is undefined)"
         )
     return score
+
+
+def training_seed(folder: str | Path) -> int | None:
+    """The training seed a finished run's ``results.json`` records (None where it records none)."""
+    try:
+        seed = json.loads((Path(folder) / RESULTS_FILE).read_bytes()).get("seed")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return seed if isinstance(seed, int) and not isinstance(seed, bool) else None
 
 
 def read_run_score(folder: str | Path) -> RunScore | None:

@@ -58,7 +58,7 @@ from agents.base import (
 )
 from agents.evaluate import evaluate
 from agents.tools.play_log import PlayedEpisode, append_played, next_seed, read_played, score_played
-from coop_gym.cli import BadArgs, output_path_problem, parse, seed_range_problem
+from coop_gym.cli import BadArgs, exit_status, output_path_problem, parse, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 from coop_gym.registration import HARD_ENV_ID
 
@@ -433,4 +433,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(exit_status(main))

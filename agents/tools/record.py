@@ -43,7 +43,17 @@ import coop_gym
 from agents.base import Agent, action_type_of, feature_mismatch, features_of, level_of
 from agents.caregivers.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
 from agents.tools.timeline import Trace, TraceBuilder, plot_timeline
-from coop_gym.cli import SEED_LIMIT, BadArgs, PositiveIntOrNone, Seed, fail, one_of, output_path_problem, parse
+from coop_gym.cli import (
+    SEED_LIMIT,
+    BadArgs,
+    PositiveIntOrNone,
+    Seed,
+    exit_status,
+    fail,
+    one_of,
+    output_path_problem,
+    parse,
+)
 from coop_gym.io import atomic_path
 from estimator.compiled.checks import check_integer
 
@@ -483,4 +493,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(exit_status(main))

@@ -31,7 +31,7 @@ from typing import Annotated, Any
 import numpy as np
 import tyro
 
-from coop_gym.cli import BadArgs, PositiveInt, Seed, parse
+from coop_gym.cli import BadArgs, PositiveInt, Seed, exit_status, parse
 from coop_gym.experiment.protocol import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
@@ -222,4 +222,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(exit_status(main))

@@ -18,7 +18,7 @@ from typing import Annotated, Any, Literal
 
 import tyro
 
-from coop_gym.cli import BadArgs, PositiveInt, Seed, one_of, output_path_problem, parse, seed_range_problem
+from coop_gym.cli import BadArgs, PositiveInt, Seed, exit_status, one_of, output_path_problem, parse, seed_range_problem
 from coop_gym.experiment.banks import identified_banks, intention_drive
 from coop_gym.experiment.estimators import (
     ESTIMATORS,
@@ -189,4 +189,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(exit_status(main))
