@@ -286,3 +286,85 @@ def test_a_signal_whose_exception_is_swallowed_during_evaluation_still_stops_the
     monkeypatch.setattr(agents.trainer.run_report, "evaluate", evaluate)
     assert train.main(["--resume", str(run)]) == 0
     assert (run / "COMPLETE").exists() and not (run / "INTERRUPTED").exists()
+
+
+# --- a run that cannot continue: exit status 1, one line naming the folder and the cause, the marker kept ---
+
+
+def _cannot_continue(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """The one error line of ``train.main(argv)``, which must exit with status 1 and no traceback."""
+    import train
+
+    try:
+        code = train.main(argv)
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err, err
+    (line,) = [line for line in err.splitlines() if "error" in line]
+    assert line.startswith("python train.py: error: ")
+    return line
+
+
+def test_a_run_whose_model_is_gone_after_training_says_so_and_keeps_its_marker(stopped_while_evaluating, capsys):
+    run = stopped_while_evaluating
+    (run / "model.zip").unlink()
+    line = _cannot_continue(["--resume", str(run)], capsys)
+    assert f"--resume {run}: training finished (training.json) but its model.zip is missing" in line, line
+    assert "free space" not in line and (run / "INTERRUPTED").exists()
+
+
+def test_a_foreign_model_in_a_checkpoint_is_named_before_training(tmp_path, capsys):
+    """An SB3 run's model.zip (1 env) copied into a JAX run's checkpoint (2 envs) at another step count."""
+    from agents.rl import make_model, make_train_env, save_agent
+    from agents.rl.checkpoints import save_checkpoint
+    from agents.trainer.hyperparams import hyperparams_for
+
+    run = tmp_path / "runs" / "run"
+    run.mkdir(parents=True)
+    (run / "args.json").write_text(_settings(n_envs=2, timesteps=4096, framework="jax"))
+    (run / "INTERRUPTED").write_text(f"SIGINT: stopped\nresume with: python train.py --resume {run}\n")
+    config = hyperparams_for("ppo", None, "jax")
+    env = make_train_env(config.env_id, 2, 0, normalize=True, backend="dummy")
+    own = make_model(config, env, 0)
+    own.num_timesteps = 2048
+    checkpoint = save_checkpoint(own, run, algo="ppo", env_id=config.env_id)
+    foreign = tmp_path / "foreign"
+    sb3 = make_model(hyperparams_for("ppo", None, "sb3"), make_train_env(config.env_id, 1, 0, backend="dummy"), 0)
+    save_agent(sb3, foreign, algo="ppo", env_id=config.env_id)
+    (checkpoint / "model.zip").write_bytes((foreign / "model.zip").read_bytes())
+    env.close()
+    line = _cannot_continue(["--resume", str(run), "--no-progress"], capsys)
+    assert f"--resume {run}: {checkpoint / 'model.zip'} holds a model of num_timesteps 0" in line, line
+    assert "but its checkpoint's state.pkl has 2048" in line and f"remove {checkpoint}" in line
+    assert (run / "INTERRUPTED").exists() and not (run / "COMPLETE").exists()
+
+
+def test_a_read_only_run_folder_is_named_before_any_work(stopped_while_evaluating, monkeypatch, capsys):
+    """What a read-only mount gives (root writes through permission bits, so access is faked)."""
+    import os
+
+    run = stopped_while_evaluating
+    before = sorted(p.name for p in run.iterdir())
+    monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != run)
+    line = _cannot_continue(["--resume", str(run)], capsys)
+    assert f"--resume {run}: the run folder is not writable; copy it to a writable place (cp -a {run} COPY)" in line
+    assert "free space" not in line and "--resume runs" not in line
+    assert sorted(p.name for p in run.iterdir()) == before
+
+
+@pytest.mark.parametrize(
+    ("errno_name", "remedy"),
+    [("ENOSPC", "free space, then python train.py --resume RUN"), ("EROFS", "copy it to a writable place")],
+)
+def test_a_failed_write_names_the_folder_and_the_remedy_for_its_cause(errno_name, remedy, capsys):
+    import errno
+    import os
+
+    from agents.trainer.training_run import write_failed
+
+    code = errno.__dict__[errno_name]
+    assert write_failed(OSError(code, os.strerror(code), "RUN/eval.json"), Path("RUN")) == 1
+    err = capsys.readouterr().err
+    assert f"could not write RUN/eval.json: {os.strerror(code)}" in err and remedy in err, err
+    assert err.count("free space") == (errno_name == "ENOSPC")
