@@ -262,3 +262,11 @@ def test_no_module_or_function_is_too_long() -> None:
     assert not long_functions, f"functions over {MAX_FUNCTION_LINES} lines: {long_functions}"
     train_lines = (ROOT / "train.py").read_text(encoding="utf-8").count("\n")
     assert train_lines <= MAX_TRAIN_PY_LINES, f"train.py has {train_lines} lines"
+
+
+def test_the_single_and_the_vector_env_do_not_import_each_other() -> None:
+    """What both take from their config (the core, the step's helpers, a frame to draw) is in ``core.py``."""
+    graph = import_graph()
+    single, vector = "coop_gym.envs.sit_to_stand", "coop_gym.envs.vector"
+    assert single not in graph[vector] and vector not in graph[single]
+    assert "coop_gym.envs.core" in graph[single] & graph[vector]

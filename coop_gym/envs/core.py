@@ -15,9 +15,13 @@ seeded ``s + i`` see identical streams. The kernels draw through the generator's
 functions with NumPy's algorithms (:mod:`estimator.compiled.rng`), so the ``Generator`` object stays the
 single source of truth. Envs seeded together (:meth:`SitToStandCore.seed_envs`, the vector
 env's ``reset(seed=...)``) keep that ``Generator``'s PCG64 state in arrays instead
-(:mod:`estimator.compiled.seeding`) until ``rngs[i]`` asks for the object. A batch of at least 2 x
+(:mod:`coop_gym.envs.kernels.seeding`) until ``rngs[i]`` asks for the object. A batch of at least 2 x
 :data:`~coop_gym.envs.kernels.threads.MIN_ENVS_PER_THREAD` envs steps on several threads
 (:mod:`coop_gym.envs.kernels.threads`), with the same numbers.
+
+What the single and the vector env share around the core lives here too, so that neither imports
+the other: :func:`make_core` (a core of a config's envs), :class:`ConfiguredEnv` (the settings and
+step helpers both hold) and :func:`render_state_for` (one env's frame to draw).
 """
 
 from __future__ import annotations
@@ -28,8 +32,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.envs.actions import CMD, CMD_COLUMNS
-from coop_gym.envs.config import LiftCriteria, RewardWeights
+from coop_gym.envs.actions import CMD, CMD_COLUMNS, ActionDecoder
+from coop_gym.envs.arguments import SitToStandConfig
+from coop_gym.envs.config import LiftCriteria, Outcome, RewardWeights
+from coop_gym.envs.info import InfoBuilder
 from coop_gym.envs.kernels.layout import (
     BLOCKS,
     CONSTS,
@@ -43,6 +49,7 @@ from coop_gym.envs.kernels.layout import (
 )
 from coop_gym.envs.kernels.report import REPORT, REPORT_COLUMNS, REWARD_TERMS
 from coop_gym.envs.kernels.reset import draw_reset, start_episodes
+from coop_gym.envs.kernels.seeding import EnvGenerators
 from coop_gym.envs.kernels.step import first_unready, observe, step_all
 from coop_gym.envs.kernels.threads import available_threads, check_threads, plan_threads, step_threaded
 from coop_gym.envs.observation import FEATURES
@@ -51,7 +58,6 @@ from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona
 from estimator.compiled.checks import is_integer
 from estimator.compiled.rng import G_STATE
-from estimator.compiled.seeding import EnvGenerators
 from estimator.judgment import JUDGMENT_COLUMNS, ThresholdJudgment
 from estimator.kalman import NOMINAL_COLUMNS
 from estimator.nominal import STATE_DIM, NominalModel
@@ -61,10 +67,13 @@ __all__ = [
     "REPORT",
     "REPORT_COLUMNS",
     "REWARD_TERMS",
+    "ConfiguredEnv",
     "SitToStandCore",
     "available_threads",  # the threaded step's (coop_gym.envs.kernels.threads), for the importers of this module
     "check_threads",
+    "make_core",
     "nominal_model_for",  # the packing's (coop_gym.envs.kernels.layout), for the importers of this module
+    "render_state_for",
 ]
 
 
@@ -212,8 +221,8 @@ class SitToStandCore:
     def seed_envs(self, indices: NDArray[np.int64], seeds: NDArray[np.uint64]) -> None:
         """Env ``indices[r]`` draws from ``Generator(PCG64(seeds[r]))`` from now on, all seeded in one call.
 
-        The same numbers as :meth:`set_rng` with those generators (``estimator.compiled.seeding``); seeds up to
-        ``estimator.compiled.seeding.MAX_BATCH_SEED``.
+        The same numbers as :meth:`set_rng` with those generators (``coop_gym.envs.kernels.seeding``); seeds up to
+        ``coop_gym.envs.kernels.seeding.MAX_BATCH_SEED``.
         """
         self.rngs.seed(indices, seeds)
         self._chunks = 0
@@ -345,3 +354,100 @@ class SitToStandCore:
             if rng is not None:
                 self.rngs.set(i, rng)
         self._chunks = 0
+
+
+_OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)
+
+
+def make_core(config: SitToStandConfig, n_envs: int) -> SitToStandCore:
+    """The batched simulation of ``n_envs`` envs of ``config``, building its physical observation.
+
+    The core's ``obs`` holds the features in their units; the envs scale them with ``config.observer()``.
+    """
+    space = config.physical_observation_space()
+    return SitToStandCore(
+        n_envs,
+        config.personas,
+        config.timing,
+        config.cues,
+        config.realism,
+        config.lift,
+        config.reward,
+        config.judgment,
+        config.estimator,
+        config.estimator_options,
+        observation_index=tuple(FEATURES.index(f) for f in config.physical_features),
+        observation_low=space.low.astype(np.float64),
+        observation_high=space.high.astype(np.float64),
+    )
+
+
+def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, stepped: bool) -> Any:
+    """A :class:`coop_gym.envs.render.renderer.RenderState` of env ``i`` of ``core``.
+
+    Args:
+        core: The simulation.
+        i: Env index.
+        outcome: The env's current :class:`Outcome` code.
+        lift: Whether the env's last action lifted.
+        stepped: False right after a reset (no push is drawn then).
+    """
+    from coop_gym.envs.render.renderer import RenderState
+
+    r = core.report[i]
+    probs = None
+    if core.mm is not None:
+        probs = (
+            float(r[REPORT.p_uncooperative]),
+            float(r[REPORT.p_unresponsive]),
+            float(r[REPORT.p_cooperative]),
+        )
+    return RenderState(
+        time_s=float(r[REPORT.elapsed_s]),
+        shoulder_position_m=float(r[REPORT.true_x_m]),
+        push_force_n=float(r[REPORT.push_force_n]) if stepped else 0.0,
+        verbal_cue=int(r[REPORT.verbal_cue]),
+        xi_estimate=float(r[REPORT.xi_hat]),
+        xi_std=float(r[REPORT.xi_std]),
+        threshold=float(core.judgment.threshold),
+        judgment=int(r[REPORT.judgment]),
+        true_xi=int(r[REPORT.info_true_xi]),
+        outcome=_OUTCOME_LABELS[outcome] if outcome != Outcome.NONE else None,
+        probabilities=probs,
+        lift=lift,
+        success_lean_m=float(core.lift.success_lean_m),
+    )
+
+
+class ConfiguredEnv:
+    """What the single and the vector env take from their :class:`~coop_gym.envs.arguments.SitToStandConfig`.
+
+    The settings clients read (``config``, ``render_mode``, ``observation_mode``, ``action_type``,
+    ``personas``, ``timing``, ``cues``, ``features``), the simulation ``core`` of the batch, and the
+    action decoder, observer and info builder every step calls.
+    """
+
+    config: SitToStandConfig
+    render_mode: str | None
+    observation_mode: str
+    action_type: str
+    personas: tuple[Persona, ...]
+    timing: Timing
+    cues: Cues
+    features: tuple[str, ...]
+    core: SitToStandCore
+
+    def _take_config(self, config: SitToStandConfig, n_envs: int) -> None:
+        """Hold ``config``'s settings and build a core of ``n_envs`` envs and the step's helpers."""
+        self.config = config
+        self.render_mode = config.render_mode
+        self.observation_mode = config.observation_mode
+        self.action_type = config.action_type
+        self.personas = config.personas
+        self.timing = config.timing
+        self.cues = config.cues
+        self.features = config.features
+        self.core = make_core(config, n_envs)
+        self._actions = ActionDecoder(config.action_type, config.cues)
+        self._observe = config.observer()
+        self._info = InfoBuilder(config)

@@ -10,120 +10,16 @@ import numpy as np
 from gymnasium.envs.registration import EnvSpec
 from numpy.typing import NDArray
 
-from coop_gym.envs.actions import ActionDecoder
-from coop_gym.envs.arguments import EnvArguments, SitToStandConfig, parse_reset_options
+from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.config import Outcome
-from coop_gym.envs.core import SitToStandCore
-from coop_gym.envs.info import InfoBuilder
+from coop_gym.envs.core import ConfiguredEnv, render_state_for
 from coop_gym.envs.kernels.report import REPORT, episode_end
-from coop_gym.envs.observation import FEATURES, observation_features
-from coop_gym.model.params import Cues, Timing
-from coop_gym.model.personas import Persona
+from coop_gym.envs.observation import observation_features
 
 __all__ = [
-    "ConfiguredEnv",
     "SitToStandEnv",
-    "make_core",
     "observation_features",  # the contract's, for the importers of this module (agents.caregivers.scripted)
-    "render_state_for",
 ]
-
-_OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)
-
-
-def make_core(config: SitToStandConfig, n_envs: int) -> SitToStandCore:
-    """The batched simulation of ``n_envs`` envs of ``config``, building its physical observation.
-
-    The core's ``obs`` holds the features in their units; the envs scale them with ``config.observer()``.
-    """
-    space = config.physical_observation_space()
-    return SitToStandCore(
-        n_envs,
-        config.personas,
-        config.timing,
-        config.cues,
-        config.realism,
-        config.lift,
-        config.reward,
-        config.judgment,
-        config.estimator,
-        config.estimator_options,
-        observation_index=tuple(FEATURES.index(f) for f in config.physical_features),
-        observation_low=space.low.astype(np.float64),
-        observation_high=space.high.astype(np.float64),
-    )
-
-
-def render_state_for(core: SitToStandCore, i: int, outcome: int, lift: bool, stepped: bool) -> Any:
-    """A :class:`coop_gym.envs.render.renderer.RenderState` of env ``i`` of ``core``.
-
-    Args:
-        core: The simulation.
-        i: Env index.
-        outcome: The env's current :class:`Outcome` code.
-        lift: Whether the env's last action lifted.
-        stepped: False right after a reset (no push is drawn then).
-    """
-    from coop_gym.envs.render.renderer import RenderState
-
-    r = core.report[i]
-    probs = None
-    if core.mm is not None:
-        probs = (
-            float(r[REPORT.p_uncooperative]),
-            float(r[REPORT.p_unresponsive]),
-            float(r[REPORT.p_cooperative]),
-        )
-    return RenderState(
-        time_s=float(r[REPORT.elapsed_s]),
-        shoulder_position_m=float(r[REPORT.true_x_m]),
-        push_force_n=float(r[REPORT.push_force_n]) if stepped else 0.0,
-        verbal_cue=int(r[REPORT.verbal_cue]),
-        xi_estimate=float(r[REPORT.xi_hat]),
-        xi_std=float(r[REPORT.xi_std]),
-        threshold=float(core.judgment.threshold),
-        judgment=int(r[REPORT.judgment]),
-        true_xi=int(r[REPORT.info_true_xi]),
-        outcome=_OUTCOME_LABELS[outcome] if outcome != Outcome.NONE else None,
-        probabilities=probs,
-        lift=lift,
-        success_lean_m=float(core.lift.success_lean_m),
-    )
-
-
-class ConfiguredEnv:
-    """What the single and the vector env take from their :class:`~coop_gym.envs.arguments.SitToStandConfig`.
-
-    The settings clients read (``config``, ``render_mode``, ``observation_mode``, ``action_type``,
-    ``personas``, ``timing``, ``cues``, ``features``), the simulation ``core`` of the batch, and the
-    action decoder, observer and info builder every step calls.
-    """
-
-    config: SitToStandConfig
-    render_mode: str | None
-    observation_mode: str
-    action_type: str
-    personas: tuple[Persona, ...]
-    timing: Timing
-    cues: Cues
-    features: tuple[str, ...]
-    core: SitToStandCore
-
-    def _take_config(self, config: SitToStandConfig, n_envs: int) -> None:
-        """Hold ``config``'s settings and build a core of ``n_envs`` envs and the step's helpers."""
-        self.config = config
-        self.render_mode = config.render_mode
-        self.observation_mode = config.observation_mode
-        self.action_type = config.action_type
-        self.personas = config.personas
-        self.timing = config.timing
-        self.cues = config.cues
-        self.features = config.features
-        self.core = make_core(config, n_envs)
-        self._actions = ActionDecoder(config.action_type, config.cues)
-        self._observe = config.observer()
-        self._info = InfoBuilder(config)
-
 
 class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
     r"""A robot caregiver helps an older adult stand up -- once the person is cooperative.

@@ -14,12 +14,11 @@ from numpy.typing import NDArray
 
 from coop_gym.envs.actions import CMD
 from coop_gym.envs.arguments import EnvArguments, parse_reset_options
-from coop_gym.envs.core import check_threads
+from coop_gym.envs.core import ConfiguredEnv, check_threads, render_state_for
 from coop_gym.envs.kernels.report import REPORT, count_steps_and_end_episodes
-from coop_gym.envs.sit_to_stand import ConfiguredEnv, render_state_for
+from coop_gym.envs.kernels.seeding import MAX_BATCH_SEED
 from estimator.compiled.checks import is_integer
 from estimator.compiled.rng import G_STATE
-from estimator.compiled.seeding import MAX_BATCH_SEED
 
 __all__ = ["SitToStandVectorEnv"]
 
