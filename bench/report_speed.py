@@ -181,7 +181,7 @@ jobs (a ratio under 1 means the second thread found no free core).
 The vector env's compiled step runs on several threads
 (`gym.make_vec(id, n, vectorization_mode="vector_entry_point", threads=k)`; the default,
 `threads=None`, uses every core this process may run on): each thread runs one GIL-free kernel
-that claims blocks of envs from an atomic counter (`estimator/compiled/atomics.py`) until none is
+that claims blocks of envs from an atomic counter (`coop_gym/envs/kernels/atomics.py`) until none is
 left, each env drawing only from its own generator, so the results are bit-identical whatever the
 thread count (`tests/coop_gym/test_threads.py`). The calling thread does the step's autoresets
 while the worker wakes, and it waits for the worker's last block by reading the counter in a

@@ -8,10 +8,6 @@
   every validator of the project.
 - :mod:`estimator.compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
-- :mod:`estimator.compiled.seeding`: ``PCG64(seed)`` of many envs in one call (NumPy's seeding repeated
-  step for step), their states kept in arrays until a ``Generator`` object is asked for.
-- :mod:`estimator.compiled.atomics`: atomic loads, compare-and-swap and add on int64 array elements (how
-  the threaded step shares work without the GIL).
 
 Every kernel is ``@njit(cache=True, error_model="numpy")``: NumPy's error model leaves out the
 ZeroDivisionError check (and its message formatting) that Python's model compiles into every

@@ -120,7 +120,7 @@ _exp: Any = run_as_python(np.exp, math.exp)
 _log1p: Any = run_as_python(np.log1p, math.log1p)
 
 # uint64 constants (a Python int beside a uint64 would make Numba compute in int64 or float);
-# U1, U32 and LOW32 serve estimator.compiled.seeding too.
+# U1, U32 and LOW32 serve coop_gym.envs.kernels.seeding too.
 U1 = np.uint64(1)
 U32 = np.uint64(32)
 LOW32 = np.uint64(0xFFFFFFFF)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from estimator.compiled.atomics import atomic_add, atomic_cas, atomic_load
+from coop_gym.envs.kernels.atomics import atomic_add, atomic_cas, atomic_load
 
 
 @njit(nogil=True)

@@ -1,4 +1,4 @@
-"""The vector env seeds its envs in one batch (estimator.compiled.seeding): the same envs as one Generator each."""
+"""The vector env seeds its envs in one batch (coop_gym.envs.kernels.seeding): the same envs as one Generator each."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import coop_gym  # noqa: F401  (registers the ids)
-from estimator.compiled import seeding
-from estimator.compiled.seeding import MAX_BATCH_SEED
+from coop_gym.envs.kernels import seeding
+from coop_gym.envs.kernels.seeding import MAX_BATCH_SEED
 
 ENV_ID = "CoopGym/SitToStand-v0"
 

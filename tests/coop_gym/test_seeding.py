@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from numba import njit
 
-from estimator.compiled import seeding
+from coop_gym.envs.kernels import seeding
+from coop_gym.envs.kernels.seeding import LAYOUT, MAX_BATCH_SEED, EnvGenerators, seed_states
 from estimator.compiled.rng import integers, random, standard_normal
-from estimator.compiled.seeding import LAYOUT, MAX_BATCH_SEED, EnvGenerators, seed_states
 
 EDGE_SEEDS = [0, 1, 2, 5, 42, 2**31, 2**32 - 1, 2**32, 2**32 + 7, 2**40 + 3, 2**62, MAX_BATCH_SEED]
 

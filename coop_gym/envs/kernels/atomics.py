@@ -2,8 +2,8 @@
 
 A threaded step hands out blocks of envs through a counter that every thread claims from
 with a compare-and-swap, and the calling thread waits for the last block with atomic loads
-in a ``nogil`` kernel -- not through Python locks, whose wake-ups cost ~0.1 ms on the 2-core
-VM (a ``ThreadPoolExecutor`` round trip of a no-op took 96 us), a fifth of a step of 1024 envs.
+in a ``nogil`` kernel -- not through Python locks, whose wake-up on every step would be paid
+again by every small batch (``python bench/run.py`` measures the threaded step's scaling).
 
 Each operation is sequentially consistent (LLVM's ``seq_cst``). With ``NUMBA_DISABLE_JIT=1``
 the kernels run as Python and these are plain reads and writes under one lock.

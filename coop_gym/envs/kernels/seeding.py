@@ -4,7 +4,7 @@
 the bit generator object, its ctypes interface): 2-7 s for 10^5 envs, where one step of them
 costs ~0.3 s. :class:`EnvGenerators` holds the generators of ``N`` envs instead as NumPy's own
 C state structs in two arrays, seeded by :func:`seed_states` -- NumPy's ``SeedSequence`` hash and
-PCG64 seeding repeated step for step (tests/compiled/test_seeding.py holds them equal, seed by
+PCG64 seeding repeated step for step (tests/coop_gym/test_seeding.py holds them equal, seed by
 seed) -- and the kernels draw from them through NumPy's PCG64 C functions, exactly as from a
 ``Generator``'s state (:mod:`estimator.compiled.rng`). An env's ``Generator`` object is made only when one is
 asked for (``generators[i]``): it takes over the env's state where the stream stands, and the
@@ -13,7 +13,7 @@ env draws from it from then on. So the numbers are those of ``Generator(PCG64(se
 The C layout of NumPy's PCG64 state (``pcg64_state``: a pointer to the 128-bit LCG state, then
 ``has_uint32`` and ``uinteger``; the 128-bit words native or as ``{high, low}``) is read off a live
 ``PCG64`` at import; if it is not one of the two known layouts the arrays are not used and every
-generator is a ``Generator`` object, as before (:data:`LAYOUT` is None then).
+generator is a ``Generator`` object (:data:`LAYOUT` is None then).
 """
 
 from __future__ import annotations
