@@ -81,7 +81,7 @@ LEVEL_ENV_IDS: dict[str, str] = {
 
 HARD_ENV_ID = LEVEL_ENV_IDS["hard-v2"]
 """The hard level's newest id: what ``train.py``, ``agents.tools.play``, ``agents.caregivers.reading`` and
-``agents.caregivers.tune_belief`` play by default."""
+``agents.tune.belief`` play by default."""
 
 
 def register_envs() -> None:

@@ -4,9 +4,9 @@ The hard level's knobs (:class:`coop_gym.model.difficulty.Difficulty`) were chos
 one-routine blind family; a level's headroom has to be measured against the best blind policy
 *for that level*, so each candidate here gets the whole choice again, on the TRAINING personas:
 
-* the widened blind search (:func:`agents.caregivers.tune_baselines.search_blind`, ``--final-episodes``
+* the widened blind search (:func:`agents.tune.baselines.search_blind`, ``--final-episodes``
   per finalist);
-* the prober's grid (:func:`agents.caregivers.tune_baselines.tune` over ``prober_grid``, ``--prober-episodes``
+* the prober's grid (:func:`agents.tune.baselines.tune` over ``prober_grid``, ``--prober-episodes``
   per setting), beside the prober at the shipped level's settings (printed, not counted);
 
 then scores the blind winner, both probers and the belief caregiver (its shipped settings, its
@@ -65,8 +65,8 @@ def score(knobs: dict[str, Any], args: Args) -> None:
     """Choose the baselines again on the candidate level and print their held-out scores."""
     from agents.caregivers.belief import BeliefCaregiver
     from agents.caregivers.scripted import BlindAgent, ProbingCaregiver
-    from agents.caregivers.tune_baselines import describe, prober_grid, search_blind, tune
     from agents.evaluate import evaluate, headroom
+    from agents.tune.baselines import describe, prober_grid, search_blind, tune
     from coop_gym.envs.contract import observation_features
     from coop_gym.model import difficulty
 

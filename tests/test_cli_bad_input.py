@@ -271,18 +271,18 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.tools.play", "fps 0", ["--fps", "0"], r"--fps must be >= 1"),
     ("agents.tools.play", "unknown pace", ["--pace", "slow"], r"invalid choice 'slow' for argument '--pace'"),
     ("agents.caregivers.reading", "episodes 0", ["--episodes", "0"], r"--episodes must be positive, got 0"),
-    ("agents.caregivers.tune_baselines", "no family", [], r"\{blind,prober\}"),
-    ("agents.caregivers.tune_baselines", "unknown family", ["nope"], r"invalid choice 'nope' for argument 'family'"),
+    ("agents.tune.baselines", "no family", [], r"\{blind,prober\}"),
+    ("agents.tune.baselines", "unknown family", ["nope"], r"invalid choice 'nope' for argument 'family'"),
     (
-        "agents.caregivers.tune_baselines",
+        "agents.tune.baselines",
         "unknown level",
         ["blind", "--level", "x"],
         r"invalid choice 'x' for argument '--level'",
     ),
-    ("agents.caregivers.tune_belief", "episodes 0", ["--episodes", "0"], r"--episodes must be positive, got 0"),
-    ("agents.caregivers.tune_belief", "held-out -1", ["--held-out", "-1"], r"--held-out must be 0 or more, got -1"),
-    ("agents.caregivers.tune_belief", "lift-p 2", ["--lift-p", "2"], r"--lift-p: .*lift_p must be in \[0\.0, 1\.0\]"),
-    ("agents.caregivers.tune_belief", "lift-p empty", ["--lift-p"], r"--lift-p: expected at least one argument"),
+    ("agents.tune.belief", "episodes 0", ["--episodes", "0"], r"--episodes must be positive, got 0"),
+    ("agents.tune.belief", "held-out -1", ["--held-out", "-1"], r"--held-out must be 0 or more, got -1"),
+    ("agents.tune.belief", "lift-p 2", ["--lift-p", "2"], r"--lift-p: .*lift_p must be in \[0\.0, 1\.0\]"),
+    ("agents.tune.belief", "lift-p empty", ["--lift-p"], r"--lift-p: expected at least one argument"),
     (
         "bench/run.py",
         "repeats not a number",
@@ -482,8 +482,8 @@ PACKAGE_CLIS = (
     "agents.tools.record",
     "agents.tools.play",
     "agents.caregivers.reading",
-    "agents.caregivers.tune_baselines",
-    "agents.caregivers.tune_belief",
+    "agents.tune.baselines",
+    "agents.tune.belief",
 )
 """The package's ``python -m`` command lines: each parses its typed ``Args`` with :func:`coop_gym.cli.parse`."""
 
@@ -495,7 +495,7 @@ def test_package_cli_prints_its_help_and_one_line_usage_errors(cli: str) -> None
     with alarm(ALARM_S), contextlib.redirect_stdout(out), pytest.raises(SystemExit) as exc:
         _main_of(cli)(["--help"])
     assert exc.value.code == 0 and f"usage: python -m {cli}" in out.getvalue()
-    given = ["blind"] if cli == "agents.caregivers.tune_baselines" else []  # its positional family
+    given = ["blind"] if cli == "agents.tune.baselines" else []  # its positional family
     code, err = run_main(_main_of(cli), [*given, "--bogus"])
     assert_exit_2_naming(code, err, r"Unrecognized options: --bogus")
     lines = err.splitlines()

@@ -25,7 +25,7 @@ during a burst or the settle after it: there the body still moves under the push
 that has the body slightly wrong reads that motion as the answer.
 
 The settings were chosen on the TRAINING personas, each played with a filter whose hypotheses
-were drawn around the OTHER training personas (``python -m agents.caregivers.tune_belief``: meeting a kind
+were drawn around the OTHER training personas (``python -m agents.tune.belief``: meeting a kind
 of person the caregiver has not seen is what the held-out personas test), one entry of
 :data:`TUNED_BELIEF` per hard level (``agents.evaluate`` plays each level's), and are scored on
 the held-out ones by :mod:`agents.evaluate`.
@@ -98,7 +98,7 @@ class BeliefSettings:
         check_flag("BeliefSettings.hold_words", self.hold_words)
 
 
-# Winners of `python -m agents.caregivers.tune_belief --env ID` (its settings_grid, 128 episodes of each training
+# Winners of `python -m agents.tune.belief --env ID` (its settings_grid, 128 episodes of each training
 # persona from seed 1,000,000, each met by a filter drawn around the other four); the command prints every setting's
 # success, and docs/HARD_LEVEL.md ("The belief caregiver") keeps the final table. Rerun after a model change.
 TUNED_BELIEF: dict[str, BeliefSettings] = {

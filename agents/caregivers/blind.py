@@ -4,7 +4,7 @@ A blind caregiver never reads the cue-response evidence: it plays its own schedu
 phases (push, words, duration; then repeated, or a routine held to the end) and lifts once the
 shoulder estimate has shown a lean for long enough, at the times its schedule allows. It reads
 only ``elapsed_s``, ``verbal_cue`` (its own utterance) and ``x_hat_m``. The best of the family
-on each level (:data:`TUNED_BLIND`, searched by :mod:`agents.caregivers.tune_baselines`) anchors the value
+on each level (:data:`TUNED_BLIND`, searched by :mod:`agents.tune.baselines`) anchors the value
 of reading the mind and every mind-reading score.
 """
 
@@ -182,7 +182,7 @@ class _BlindTable:
         )
 
 
-# Winners of `python -m agents.caregivers.tune_baselines blind --level LEVEL` (the coarse-to-fine search of that
+# Winners of `python -m agents.tune.baselines blind --level LEVEL` (the coarse-to-fine search of that
 # module's docstring on the training personas from seed 1,000,000); the command prints the finalists' success on its
 # final 1000 episodes, and docs/HARD_LEVEL.md ("The blind family") keeps the final table. Rerun after a
 # model change.
@@ -210,7 +210,7 @@ class BlindAgent(ScriptedAgent):
     :class:`BlindSettings` for the schedule and the rule.
 
     ``settings`` is one :class:`BlindSettings` for every env, or a sequence giving env
-    ``i`` its own (how :mod:`agents.caregivers.tune_baselines` scores many candidates in one batched env).
+    ``i`` its own (how :mod:`agents.tune.baselines` scores many candidates in one batched env).
     """
 
     name = "blind"

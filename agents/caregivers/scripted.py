@@ -328,7 +328,7 @@ class ProbingSettings:
             check_number(f"ProbingSettings.{name}", getattr(self, name), 0.0, 1.0)
 
 
-# Winners of `python -m agents.caregivers.tune_baselines prober --level LEVEL` (its 36 settings, 300 episodes each
+# Winners of `python -m agents.tune.baselines prober --level LEVEL` (its 36 settings, 300 episodes each
 # of the training personas from seed 1,000,000); the command prints every setting's success, and docs/HARD_LEVEL.md
 # ("The prober") keeps the final table. Rerun after a model change.
 TUNED_PROBER: dict[str, ProbingSettings] = {

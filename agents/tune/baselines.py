@@ -9,7 +9,7 @@ and whether a lift may come in it -- played in order from the start, then either
 or followed by a final phase held to the end; and a lift rule on the shoulder estimate and
 the clock (lean threshold, hold time, earliest lift, release on lean, a last-call lift).
 It reads ``elapsed_s``, ``verbal_cue`` (its own utterance) and ``x_hat_m``, never a mind
-feature. The grid searched here (``python -m agents.caregivers.tune_baselines blind --level LEVEL``):
+feature. The grid searched here (``python -m agents.tune.baselines blind --level LEVEL``):
 
 * **schedules** (:func:`schedule_grid`, 1,605): the 5 one-routine schedules of the original
   family (push x words held from the start); openings of one or two phases followed by a
@@ -40,13 +40,13 @@ personas from :data:`TUNING_SEED` (common random numbers: candidates meet identi
 3. the winner: the best on those 1000 episodes (success, then fewer unsafe lifts).
 
 About 490,000 episodes a level, about 5 minutes of one core (the batched env's step is ~3 us
-per env and agent step; ``time python -m agents.caregivers.tune_baselines blind --level hard``).
+per env and agent step; ``time python -m agents.tune.baselines blind --level hard``).
 Candidates are scored many at a time in one natively batched vector env
 (:func:`play_population`: slot ``i`` plays candidate ``i // episodes`` on episode
 ``i % episodes``, the episodes :func:`agents.evaluate.evaluate` would play). The winners
 are kept in :data:`agents.caregivers.scripted.TUNED_BLIND` and scored by :mod:`agents.evaluate` on the
 held-out personas with fresh seeds (``--personas test``, seeds from 0).
-``python -m agents.caregivers.tune_baselines prober --level LEVEL`` searches
+``python -m agents.tune.baselines prober --level LEVEL`` searches
 :class:`agents.caregivers.scripted.ProbingCaregiver` (36 settings, 300 episodes each of the training
 personas); the winners are kept in :data:`agents.caregivers.scripted.TUNED_PROBER`. Rerun both after a model change.
 """
@@ -398,7 +398,7 @@ def describe(settings: BlindSettings) -> str:
     return f"BlindSettings({', '.join(f'{k}={v!r}' for k, v in fields.items())})"
 
 
-PROG = "python -m agents.caregivers.tune_baselines"
+PROG = "python -m agents.tune.baselines"
 
 
 @dataclass

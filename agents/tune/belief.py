@@ -1,7 +1,7 @@
 """The search behind :class:`agents.caregivers.belief.BeliefCaregiver`'s settings, on the training personas.
 
-``python -m agents.caregivers.tune_belief`` plays every setting of :func:`settings_grid` on the same
-seeded episodes of the TRAINING personas (from :data:`agents.caregivers.tune_baselines.TUNING_SEED`, far
+``python -m agents.tune.belief`` plays every setting of :func:`settings_grid` on the same
+seeded episodes of the TRAINING personas (from :data:`agents.tune.baselines.TUNING_SEED`, far
 from the evaluation seeds), with the switching particle filter in the observation, and prints
 each one's success and unsafe rates and the best (most successes, then fewest unsafe lifts).
 
@@ -32,8 +32,8 @@ import numpy as np
 import tyro
 
 from agents.caregivers.belief import BeliefCaregiver, BeliefSettings
-from agents.caregivers.tune_baselines import TUNING_SEED
 from agents.evaluate import evaluate
+from agents.tune.baselines import TUNING_SEED
 from coop_gym.cli import BadArgs, exit_status, one_of, parse
 from coop_gym.envs.contract import observation_features
 from coop_gym.model.personas import TRAIN_PERSONAS, resolve_personas
@@ -48,7 +48,7 @@ ESTIMATORS = ("switching", "imm", "multiple_model")
 def settings_grid(
     lift_ps: Sequence[float] = (BeliefSettings.lift_p,), hold_words: bool = False
 ) -> list[BeliefSettings]:
-    """The settings ``python -m agents.caregivers.tune_belief`` tries: end-of-burst gate x longest burst (x lift gate).
+    """The settings ``python -m agents.tune.belief`` tries: end-of-burst gate x longest burst (x lift gate).
 
     ``hold_words`` plays the whole grid with the probe's words held through its window
     (``--hold-words``).
@@ -107,7 +107,7 @@ def leave_one_out(
     return float(success), float(unsafe)
 
 
-PROG = "python -m agents.caregivers.tune_belief"
+PROG = "python -m agents.tune.belief"
 
 
 @dataclass

@@ -79,7 +79,7 @@ class SwitchingOptions:
         hypothesis_spread: Std of the log of each varied parameter of a drawn hypothesis.
         personas: The personas the hypotheses are drawn around (names; default the training
             personas): a caregiver's idea of the people it will meet. Leaving one out and
-            scoring on it (``python -m agents.caregivers.tune_belief``) measures what meeting an unknown
+            scoring on it (``python -m agents.tune.belief``) measures what meeting an unknown
             kind of person costs.
         compliance_range: A drawn hypothesis's effective push compliance (``k2`` times the
             stiffness factor of its mode) is further scaled by a factor log-uniform in

@@ -107,10 +107,10 @@ def test_needs_the_filter_and_checks_its_settings():
 
 
 def test_the_chosen_settings_are_the_search_grids_and_differ_only_where_chosen():
-    # TUNED_BELIEF holds winners of agents.caregivers.tune_belief's grid; the levels it was not run on keep the
+    # TUNED_BELIEF holds winners of agents.tune.belief's grid; the levels it was not run on keep the
     # defaults.
     from agents.caregivers.belief import TUNED_BELIEF
-    from agents.caregivers.tune_belief import settings_grid
+    from agents.tune.belief import settings_grid
 
     grid = settings_grid()
     assert TUNED_BELIEF["hard"] in grid and TUNED_BELIEF["hard-v2"] in grid
@@ -124,7 +124,7 @@ def test_the_chosen_settings_are_the_search_grids_and_differ_only_where_chosen()
 
 def test_the_search_can_read_another_estimator_and_score_its_winner_held_out(capsys):
     # The same grid on the IMM's P(xi = +1), with lift gates, and its winner on held-out episodes.
-    from agents.caregivers.tune_belief import leave_one_out, main, settings_grid
+    from agents.tune.belief import leave_one_out, main, settings_grid
 
     grid = settings_grid((0.8, 0.9))
     assert len(grid) == 24 and {s.lift_p for s in grid} == {0.8, 0.9}

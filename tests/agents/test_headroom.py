@@ -173,7 +173,7 @@ def test_the_blind_search_scores_candidates_as_the_evaluation_does() -> None:
     # play_population (many candidates in one batched env) gives each candidate the episodes
     # agents.evaluate gives it: same seeds, same people, same outcomes.
     from agents.caregivers.scripted import CuePhase
-    from agents.caregivers.tune_baselines import play_population
+    from agents.tune.baselines import play_population
 
     env_id = "CoopGym/SitToStandHard-v1"
     candidates = [

@@ -309,7 +309,7 @@ def _lean_walks(n_envs, steps, seed=0):
 
 def _grid_sample(every):
     """Every ``every``-th schedule of the searched grid, each under a different one of its lift rules."""
-    from agents.caregivers.tune_baselines import lift_rules, schedule_grid
+    from agents.tune.baselines import lift_rules, schedule_grid
 
     picked = []
     for k, schedule in enumerate(list(schedule_grid())[::every]):
@@ -328,7 +328,7 @@ def _blind_obs(features, now, x, silent):
 
 def test_the_original_blind_settings_are_members_and_behave_as_before():
     from agents.caregivers.scripted import BlindAgent
-    from agents.caregivers.tune_baselines import lift_rules, original_blind_grid, schedule_grid
+    from agents.tune.baselines import lift_rules, original_blind_grid, schedule_grid
 
     original = list(original_blind_grid())
     assert len(original) == 648
