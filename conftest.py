@@ -12,5 +12,6 @@ import platform
 if platform.machine().lower() in ("x86_64", "amd64"):
     os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", "X86_V4 AVX512_ICL AVX512_SPR")
 
-# agents/rl/rllib.py imports ray at module level; without the [rllib] extra its doctests are skipped.
-collect_ignore = [] if importlib.util.find_spec("ray") else ["agents/rl/rllib.py"]
+# agents/rl/rllib.py (and the run around it) import ray at module level; without the [rllib] extra
+# their doctests are skipped.
+collect_ignore = [] if importlib.util.find_spec("ray") else ["agents/rl/rllib.py", "agents/trainer/rllib_run.py"]

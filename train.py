@@ -4,10 +4,10 @@
 the policy that scores best on validation episodes (docs/agents.md, "Which policy is saved"),
 scores it and every scripted baseline on the same 1000 seeded episodes of the held-out personas, prints
 the comparison (with each agent's mind-reading score) and saves ``runs/{env}__{algo}__{seed}__{time}/``
-(:mod:`agents.trainer.run_folder`). Ctrl-C stops at a checkpoint; ``--resume RUN`` continues it.
+(:mod:`agents.run_folder`). Ctrl-C stops at a checkpoint; ``--resume RUN`` continues it.
 
-Read top to bottom: the typed :class:`Args` (tyro; each field's docstring is its ``--help``; checked by
-:mod:`agents.trainer.train_args`), then train (:mod:`agents.rl.run`), then report (:mod:`agents.trainer.run_report`).
+Read top to bottom: the typed :class:`Args` (tyro; field docstrings are the ``--help``; checked by
+:mod:`agents.trainer.train_args`), train (:mod:`agents.trainer.run`), report (:mod:`agents.trainer.run_report`).
 """
 
 from __future__ import annotations
@@ -27,14 +27,14 @@ __all__ = ["Args", "main", "parse_args"]
 class Args:
     """Command-line arguments; each field's docstring is its ``--help``."""
 
-    algo: Literal["ppo", "recurrent_ppo", "dqn"] = "ppo"  # agents.trainer.hyperparams.ALGORITHMS
+    algo: Literal["ppo", "recurrent_ppo", "dqn"] = "ppo"  # agents.hyperparams.ALGORITHMS
     """ppo (belief observation), recurrent_ppo (raw observation, LSTM) or dqn (flat Discrete actions)"""
     env: str | None = None
-    """env id to train on; None: the algorithm's own (agents/trainer/hyperparams.py; ppo: CoopGym/SitToStandHard-v2)"""
+    """env id to train on; None: the algorithm's own (agents/hyperparams.py; ppo: CoopGym/SitToStandHard-v2)"""
     timesteps: int | None = None
-    """training env steps; None: the algorithm's budget (agents/trainer/hyperparams.py); with --resume, steps added"""
+    """training env steps; None: the algorithm's budget (agents/hyperparams.py); with --resume, steps added"""
     n_envs: int | None = None
-    """parallel training envs; None: the algorithm's (agents/trainer/hyperparams.py; --framework rllib: 64 in all)"""
+    """parallel training envs; None: the algorithm's (agents/hyperparams.py; --framework rllib: 64 in all)"""
     seed: int = 0
     """seed of training (envs, network init, sampling)"""
     out: str = "runs"
@@ -90,10 +90,10 @@ def main(argv: list[str] | None = None) -> int:
     """Train (unless --eval-only), evaluate against the baselines, save the run folder; the exit status."""
     args = parse_args(argv)
     if args.framework == "rllib":  # Ray RLlib: its own training loop, the same run folder and evaluation
-        from agents.rl.rllib import run
+        from agents.trainer.rllib_run import run
 
         return run(args)
-    from agents.rl.run import plan_run, train
+    from agents.trainer.run import plan_run, train
     from agents.trainer.run_report import evaluate_and_report
 
     stop, folder = StopSignals(), run_folder_of(args)

@@ -32,7 +32,7 @@ from agents.caregivers.scripted import (
     ScriptedAgent,
     make_scripted,
 )
-from agents.trainer.hyperparams import ALGORITHMS, DEFAULT_ENV_IDS, HYPERPARAMS, TrainingConfig, hyperparams_for
+from agents.hyperparams import ALGORITHMS, DEFAULT_ENV_IDS, HYPERPARAMS, TrainingConfig, hyperparams_for
 
 # name -> module, imported on first use, so `import agents` stays cheap: agents.evaluate
 # builds envs and tables, the rest need torch / SB3.

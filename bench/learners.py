@@ -43,7 +43,7 @@ and the observation it gets (:data:`ROWS`):
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
 Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's
-settings from :mod:`agents.trainer.hyperparams` with the budget ``--timesteps`` and the wider
+settings from :mod:`agents.hyperparams` with the budget ``--timesteps`` and the wider
 training personas, the best-validated policy of the last half kept
 (:class:`agents.rl.SelectionCallback`, training personas only), then ``--episodes``
 held-out episodes (test personas, seeds ``0..N-1``: the episodes of ``bench/levels.py``).
@@ -119,7 +119,7 @@ TRAINPY_FLAGS = (
     "--learning-rate", "3e-4", "--gamma", "0.995", "--ent-coef", "0.02", "--no-clip-vloss",
 )  # fmt: skip
 """CleanRL ``ppo.py``'s flags for ``train.py``'s PPO settings on the hard level
-(:func:`agents.trainer.hyperparams.hyperparams_for` with ``JAX_SIZING``): the same rollout,
+(:func:`agents.hyperparams.hyperparams_for` with ``JAX_SIZING``): the same rollout,
 minibatch, epochs, learning rate (both decay linearly), discount, entropy bonus and no value
 clipping. What stays the script's: its personas, no observation normalisation, its final policy."""
 
@@ -335,8 +335,8 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
     from agents.evaluate import evaluate
+    from agents.hyperparams import hyperparams_for
     from agents.rl import SelectionCallback, load_agent, make_model, make_train_env, save_agent
-    from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)  # as train.py --threads
     row, size = _row(name)

@@ -105,7 +105,7 @@ def _row(level: dict[str, Any], name: str) -> dict[str, Any] | None:
 
 
 def train_py(results: Results) -> str:
-    from agents.trainer.hyperparams import DEFAULT_ENV_IDS
+    from agents.hyperparams import DEFAULT_ENV_IDS
 
     head = "### `train.py` on the hard level\n"
     record = results.get("levels")
@@ -519,7 +519,7 @@ def training_budget(results: Results) -> str:
     )
     if not budgets:
         return f"{head}\nNo results file yet: {command}, then `python bench/report.py`.\n"
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
 
     train_steps = hyperparams_for("ppo").total_timesteps
     cpu = budgets[0]["machine"].get("cpu")

@@ -8,7 +8,7 @@ What a user waits for is wall-clock time from starting to train to a policy that
 well as a scripted caregiver. For every training seed this trains, one contender after the
 other (or ``--jobs`` at a time, each in its own process):
 
-- ``default``: ``train.py``'s configuration for ``--env`` (``agents/trainer/hyperparams.py``: its
+- ``default``: ``train.py``'s configuration for ``--env`` (``agents/hyperparams.py``: its
   env count, persona set, batched env adapter, ``VecNormalize``, tuned SB3 PPO; training is
   cut by the clock, so a linearly decaying learning rate stays at its start value, unless
   ``--budget-steps N`` also ends it after ``N`` steps, the learning rate decaying over them as
@@ -116,7 +116,7 @@ def _contender(text: str) -> str:
 
 def _config(kind: str, env_id: str) -> Any:
     """``train.py``'s PPO configuration of contender kind ``kind`` (one of :data:`_CONFIGURED`)."""
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
 
     config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
     if kind != "default":

@@ -101,7 +101,7 @@ def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, An
         "n_envs": training.get("n_envs"),
         "personas": training.get("personas"),
         "wall_time_s": round(float(training["wall_time_s"]), 1),
-        "hyperparams": f"agents/trainer/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']{sizing}",
+        "hyperparams": f"agents/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']{sizing}",
     }
     if "selected" in training:  # train.py kept the best-validated policy, not the final one
         selected = training["selected"]

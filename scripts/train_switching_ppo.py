@@ -4,7 +4,7 @@
 particle filter's estimate (``p_uncooperative``, ``p_unresponsive``, ``p_cooperative``) to the
 default observation, i.e. ``gym.make("CoopGym/SitToStandHard-v1", estimator="switching",
 estimator_options=...)``. Everything else is PPO's hard-level default of
-:mod:`agents.trainer.hyperparams` (the same ``make_train_env`` / ``make_model`` as ``train.py``)::
+:mod:`agents.hyperparams` (the same ``make_train_env`` / ``make_model`` as ``train.py``)::
 
     python scripts/train_switching_ppo.py --out /tmp/pre/switching --timesteps 1000000 --seed 0
 
@@ -57,8 +57,8 @@ def main() -> None:
     args = tyro.cli(Args)
     import torch
 
+    from agents.hyperparams import hyperparams_for
     from agents.rl import make_model, make_train_env, save_agent
-    from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(args.threads)
     config = hyperparams_for("ppo", args.env)

@@ -242,7 +242,7 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     assert out_dones.tolist() == dones.tolist()
     assert [info.get("TimeLimit.truncated") for info in out_infos[:3]] == [False, False, None]
     # The same sizing names a time_to_quality contender.
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
 
     ttq = _bench("time_to_quality")
     config = ttq.resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64-e4")
@@ -283,7 +283,7 @@ def test_time_to_quality_budget_steps_end_a_run_and_decay_its_learning_rate(monk
 
 def test_cleanrl_rows_flags_are_train_pys_settings() -> None:
     """``TRAINPY_FLAGS`` say, in CleanRL's flags, what ``train.py`` trains the hard level with."""
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
 
     learners = _bench("learners")
     config = hyperparams_for("ppo", learners.ENV_ID, "jax")

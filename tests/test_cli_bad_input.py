@@ -344,8 +344,8 @@ def make_artifacts(folder: Path) -> dict[str, str]:
 
     import torch
 
+    from agents.hyperparams import hyperparams_for
     from agents.rl import make_model, make_train_env, save_agent
-    from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)
     config = hyperparams_for("ppo")
@@ -460,7 +460,7 @@ def test_read_only_check_names_the_folder(tmp_path: Path, monkeypatch: pytest.Mo
 
 # Where a command line's main(argv) lives when it is not the module ``python -m`` names (that one's
 # __main__ calls it): agents.evaluate keeps its CLI apart so that its imports run one way.
-_MAIN_MODULE = {"agents.evaluate": "agents.evaluate.cli"}
+_MAIN_MODULE = {"agents.evaluate": "agents.tools.evaluate_cli"}
 
 
 def _main_of(cli: str) -> Callable[[list[str]], Any]:

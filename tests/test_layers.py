@@ -270,3 +270,41 @@ def test_the_single_and_the_vector_env_do_not_import_each_other() -> None:
     single, vector = "coop_gym.envs.sit_to_stand", "coop_gym.envs.vector"
     assert single not in graph[vector] and vector not in graph[single]
     assert "coop_gym.envs.core" in graph[single] & graph[vector]
+
+
+AGENT_ROOMS: tuple[str, ...] = ("base", "pretrained", "caregivers", "evaluate", "rl", "tools", "trainer", "tune")
+"""The rooms of ``agents/``, lowest first: a module may import its own room and the rooms before it.
+``base`` is the modules directly in ``agents/`` (``base.py``, ``run_folder.py``). A ``__main__`` (what
+``python -m`` runs) may import any room: nothing imports it."""
+
+
+def _room(name: str) -> str:
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 and (ROOT / "agents" / parts[1]).is_dir() else "base"
+
+
+def test_the_rooms_of_agents_import_one_way() -> None:
+    rank = {room: i for i, room in enumerate(AGENT_ROOMS)}
+    graph = import_graph()
+    rooms = {_room(n) for n in graph if n.startswith("agents.")}
+    assert rooms <= set(rank), f"rooms of agents/ not in AGENT_ROOMS: {sorted(rooms - set(rank))}"
+    bad = [
+        f"{name} ({_room(name)}) imports {target} ({_room(target)})"
+        for name, imported in sorted(graph.items())
+        if name.startswith("agents.") and name != "agents" and not name.endswith("__main__")
+        for target in sorted(imported)
+        if target.startswith("agents.") and rank[_room(target)] > rank[_room(name)]
+    ]
+    assert not bad, "imports up the rooms of agents/:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("room", AGENT_ROOMS[2:-1])
+def test_importing_a_room_of_agents_loads_no_higher_one(room: str) -> None:
+    """As for the packages, in a fresh interpreter: a room's ``__init__`` runs at the import of any of its modules.
+
+    RLlib's modules need the ``[rllib]`` extra, which the default install leaves out.
+    """
+    modules = [n for n in _modules_of("agents") if _room(n) == room and "rllib" not in n]
+    loaded = {_room(n) for n in _fresh_import(modules) if n.startswith("agents.")}
+    higher = set(AGENT_ROOMS[AGENT_ROOMS.index(room) + 1 :])
+    assert modules and not loaded & higher, f"importing agents.{room} loads {sorted(loaded & higher)}"

@@ -12,7 +12,7 @@ the mind is worth and the mind-reading score of each agent (:mod:`agents.evaluat
 tables and files: :mod:`agents.evaluate.report`.
 
 Command line: ``python -m agents.evaluate --agent handbook --personas test`` (see
-:mod:`agents.evaluate.cli`, kept apart because it loads saved models through
+:mod:`agents.tools.evaluate_cli`, kept apart because it loads saved models through
 :mod:`agents.rl` and :mod:`agents.rl.rllib`, which evaluate through this module).
 
 Importing this module does not import torch.

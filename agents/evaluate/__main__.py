@@ -1,6 +1,6 @@
-"""``python -m agents.evaluate``: the command line of :mod:`agents.evaluate.cli`."""
+"""``python -m agents.evaluate``: the command line of :mod:`agents.tools.evaluate_cli`."""
 
-from agents.evaluate.cli import main
+from agents.tools.evaluate_cli import main
 from coop_gym.cli import exit_status
 
 raise SystemExit(exit_status(main))

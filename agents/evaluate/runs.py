@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.evaluate.headroom import AggregateScore, iqm_across_runs
-from agents.trainer.run_folder import ARGS_FILE, COMPLETE_FILE, INTERRUPTED_FILE, TRAINING_FILE
+from agents.run_folder import ARGS_FILE, COMPLETE_FILE, INTERRUPTED_FILE, TRAINING_FILE
 
 __all__ = [
     "RESULTS_FILE",

@@ -3,7 +3,7 @@
 One import for everything the trainer and the loaders use; each part has a module:
 
 * :mod:`agents.rl.training` -- :func:`make_train_env` (the training ``VecEnv``) and
-  :func:`make_model` (the algorithm with the defaults of :mod:`agents.trainer.hyperparams`);
+  :func:`make_model` (the algorithm with the defaults of :mod:`agents.hyperparams`);
 * :mod:`agents.rl.bundle` -- :func:`save_agent` / :func:`load_agent`: a self-contained
   ``model.zip`` that loads as an :class:`SB3Agent`, scored by :func:`agents.evaluate.evaluate`
   like any other agent;
@@ -13,7 +13,7 @@ One import for everything the trainer and the loaders use; each part has a modul
 
 Example:
     >>> from agents.rl import make_train_env, make_model
-    >>> from agents.trainer.hyperparams import hyperparams_for
+    >>> from agents.hyperparams import hyperparams_for
     >>> config = hyperparams_for("ppo")
     >>> env = make_train_env(config.env_id, n_envs=2, seed=0, normalize=True)
     >>> model = make_model(config, env, seed=0)
@@ -60,7 +60,7 @@ from agents.rl.training import (
     make_train_env,
     observation_features,
 )
-from agents.trainer.run_folder import AGENT_FILE, CHECKPOINTS_DIR, MODEL_FILE, VECNORMALIZE_FILE
+from agents.run_folder import AGENT_FILE, CHECKPOINTS_DIR, MODEL_FILE, VECNORMALIZE_FILE
 
 __all__ = [
     "AGENT_FILE",

@@ -29,11 +29,11 @@ from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 
 import coop_gym
 from agents.base import feature_mismatch
+from agents.hyperparams import ALGORITHMS
 from agents.pretrained import PREFIX, is_pretrained, pretrained_card, pretrained_model_path
 from agents.rl.normalize import ObsNormalizer
 from agents.rl.training import algorithm_class, find_frame_stack, find_vec_normalize, observation_features
-from agents.trainer.hyperparams import ALGORITHMS
-from agents.trainer.run_folder import AGENT_FILE, MODEL_FILE, VECNORMALIZE_FILE
+from agents.run_folder import AGENT_FILE, MODEL_FILE, VECNORMALIZE_FILE
 from coop_gym.io import atomic_path, write_bytes, write_json
 
 __all__ = [

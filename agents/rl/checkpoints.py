@@ -23,7 +23,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
 from agents.rl.bundle import bundle_problem, load_model, read_bundle, save_model_bundle
 from agents.rl.training import find_vec_normalize
-from agents.trainer.run_folder import CHECKPOINTS_DIR, MODEL_FILE
+from agents.run_folder import CHECKPOINTS_DIR, MODEL_FILE
 from coop_gym.io import atomic_path
 
 __all__ = ["CheckpointCallback", "TrainingInterrupted", "latest_checkpoint", "restore_checkpoint", "save_checkpoint"]

@@ -1,7 +1,7 @@
 """Ray RLlib PPO (new API stack) on the coop_gym envs: the way to scale training out.
 
 * :func:`ppo_config` -- an RLlib ``PPOConfig`` mirroring the SB3 PPO defaults of
-  :mod:`agents.trainer.hyperparams` (batch, minibatch, epochs, gamma, lambda, clip, entropy, net,
+  :mod:`agents.hyperparams` (batch, minibatch, epochs, gamma, lambda, clip, entropy, net,
   the learning rate decaying linearly to 0, observations normalised by running mean/std,
   no KL penalty). Each env runner steps ``num_envs_per_env_runner`` envs through coop_gym's
   own batched vector env (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``).
@@ -16,9 +16,8 @@
   observation normaliser it trained with (:class:`agents.rl.normalize.ObsNormalizer`, shared
   with the SB3 agents), so :func:`agents.evaluate.evaluate` scores it on the same seeded
   episodes as every agent.
-* :func:`run` -- what ``python train.py --framework rllib`` does: the same run folder as
-  the SB3 path (``args.json``, ``checkpoint/`` + ``agent.json``, ``eval.json``,
-  ``eval.csv``, ``results.json``, ``COMPLETE``).
+
+What ``python train.py --framework rllib`` does with them is :mod:`agents.trainer.rllib_run`.
 
 Ray starts a local instance by default (``num_env_runners + 1`` CPUs); ``address``
 (``"ray://head:10001"`` or ``"auto"``) joins an existing cluster instead, whose nodes
@@ -27,7 +26,6 @@ must have coop_gym installed. torch and ray are imported only in this module.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -55,10 +53,9 @@ from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, EPISODE_RETURN_MEAN, NUM
 from ray.rllib.utils.numpy import SMALL_NUMBER
 
 import coop_gym
+from agents.hyperparams import hyperparams_for
 from agents.rl.normalize import ObsNormalizer
-from agents.trainer.hyperparams import hyperparams_for
-from agents.trainer.run_folder import AGENT_FILE, ARGS_FILE, RLLIB_CHECKPOINT_DIR, RLLIB_FRAMEWORK, is_rllib_run
-from coop_gym.io import write_json
+from agents.run_folder import AGENT_FILE, RLLIB_CHECKPOINT_DIR, RLLIB_FRAMEWORK, is_rllib_run
 
 __all__ = [
     "CHECKPOINT_DIR",
@@ -70,7 +67,6 @@ __all__ = [
     "is_rllib_run",
     "load_rllib_agent",
     "ppo_config",
-    "run",
     "train",
 ]
 
@@ -146,7 +142,7 @@ def ppo_config(
     env_kwargs: dict[str, Any] | None = None,
     timesteps: int | None = None,
 ) -> PPOConfig:
-    """RLlib PPO on the new API stack, with the SB3 PPO defaults of :mod:`agents.trainer.hyperparams`.
+    """RLlib PPO on the new API stack, with the SB3 PPO defaults of :mod:`agents.hyperparams`.
 
     Args:
         env_id: Registered coop_gym id (bare or ``coop_gym:``-prefixed).
@@ -175,7 +171,7 @@ def ppo_config(
             # RLlib's default 60 s sampling timeout drops whole batches when the machine is busy
             # (iterations of 0 env steps, forever); wait for the samples instead.
             sample_timeout_s=None,
-            # SB3's VecNormalize (normalize=True in agents.trainer.hyperparams): running mean/std of
+            # SB3's VecNormalize (normalize=True in agents.hyperparams): running mean/std of
             # the observations, clipped to +-10; the runners' statistics are merged after every
             # iteration and saved in the checkpoint, where RLlibAgent reads them.
             env_to_module_connector=(
@@ -326,74 +322,3 @@ def load_rllib_agent(path: str | Path) -> RLlibAgent:
         trained_filter.restore_from_path(str(filter_path.resolve()))
         normalizer = filter_normalizer(trained_filter.get_state())
     return RLlibAgent(module, info.get("env_id"), normalizer)
-
-
-# --- train.py --framework rllib -----------------------------------------------
-
-
-def run(args: Any) -> int:
-    """``python train.py --framework rllib``: train PPO with RLlib, evaluate against the baselines.
-
-    ``args`` is ``train.Args``; the run folder has the SB3 path's layout with ``checkpoint/``
-    (and ``agent.json``) in place of ``model.zip``.
-    """
-    import ray
-
-    from agents.trainer.run_report import compare_with_baselines, finish_run, new_run_folder
-
-    torch.set_num_threads(args.threads)
-    env_id = args.env or hyperparams_for("ppo").env_id
-    run_dir = new_run_folder(args.out, env_id, "rllib_ppo", args.seed)
-    print(f"run folder: {run_dir}")
-    write_json(run_dir / ARGS_FILE, dataclasses.asdict(args))
-    # A local instance sized to the runners (plus the driver's learner), or the given cluster.
-    if args.address:
-        ray.init(address=args.address, log_to_driver=False)
-    else:
-        ray.init(num_cpus=args.num_env_runners + 1, include_dashboard=False, log_to_driver=False)
-    try:
-        training = _train_run(args, env_id, run_dir)
-    finally:
-        ray.shutdown()
-    info = {"framework": FRAMEWORK, "algo": "ppo", "env_id": env_id, "checkpoint": CHECKPOINT_DIR}
-    write_json(run_dir / AGENT_FILE, info | {"num_timesteps": training["timesteps"]})
-    print(f"trained {training['timesteps']} steps in {training['wall_time_s']:.0f} s")
-
-    # The same evaluation path, the same seeded episodes as every other agent.
-    comparison = compare_with_baselines(load_rllib_agent(run_dir), "rllib ppo (learned)", env_id, args, run_dir)
-    summary = {
-        "run": run_dir.name,
-        "framework": FRAMEWORK,
-        "algo": "ppo",
-        "env_id": env_id,
-        "seed": args.seed,
-        "model": str(run_dir / CHECKPOINT_DIR),
-        "training": training,
-        **comparison.summary(),
-        "ray": ray.__version__,
-        "torch": torch.__version__,
-    }
-    # Written last: results.json and COMPLETE mark a finished run, as on the SB3 path.
-    finish_run(run_dir, summary)
-    return 0
-
-
-def _train_run(args: Any, env_id: str, run_dir: Path) -> dict[str, Any]:
-    """Train PPO on ``env_id`` with ``train.Args``'s settings (Ray initialised); the training summary."""
-    sb3 = hyperparams_for("ppo", env_id)
-    timesteps = args.timesteps or sb3.total_timesteps
-    per_runner = envs_per_runner(args.n_envs, args.num_env_runners)
-    config = ppo_config(
-        env_id,
-        seed=args.seed,
-        num_env_runners=args.num_env_runners,
-        num_envs_per_env_runner=per_runner,
-        personas=sb3.personas,
-        timesteps=timesteps,
-    )
-    training = train(config, timesteps, run_dir / CHECKPOINT_DIR, verbose=args.progress)
-    return training | {
-        "num_env_runners": args.num_env_runners,
-        "num_envs_per_env_runner": per_runner,
-        "address": args.address,
-    }

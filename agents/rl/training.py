@@ -5,7 +5,7 @@
   (the same episodes), with episode statistics (``VecMonitor``) and optional observation
   normalisation (``VecNormalize``).
 * :func:`make_model` -- PPO, RecurrentPPO or DQN with the hyperparameters of
-  :mod:`agents.trainer.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
+  :mod:`agents.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecFrameStack, VecMonitor, VecNormalize
 
 import coop_gym  # noqa: F401 -- registers the env ids
+from agents.hyperparams import ALGORITHMS, TrainingConfig
 from agents.rl.sb3_vec import make_sb3_vec_env
-from agents.trainer.hyperparams import ALGORITHMS, TrainingConfig
 from coop_gym.cli import SEED_LIMIT
 from estimator.compiled.checks import check_integer
 
@@ -37,7 +37,7 @@ __all__ = [
 
 
 def algorithm_class(algo: str, framework: str = "sb3") -> type[BaseAlgorithm]:
-    """The class of an algorithm name (:data:`agents.trainer.hyperparams.ALGORITHMS`) in a ``framework``.
+    """The class of an algorithm name (:data:`agents.hyperparams.ALGORITHMS`) in a ``framework``.
 
     ``framework="jax"`` is :class:`agents.rl.jax_ppo.JaxPPO` or
     :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO and RecurrentPPO); they load and

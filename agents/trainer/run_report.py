@@ -1,6 +1,6 @@
 """How every training run ends: the learned agent and the baselines on the same episodes, then the files.
 
-Both trainers (``train.py`` with SB3 through :func:`evaluate_and_report`, :func:`agents.rl.rllib.run`
+Both trainers (``train.py`` with SB3 through :func:`evaluate_and_report`, :func:`agents.trainer.rllib_run.run`
 with RLlib) finish the same way: the saved agent and each scripted baseline are scored by
 :func:`agents.evaluate.evaluate` on the same seeded episodes of the held-out personas; the
 comparison table is printed with the value of reading the mind, the achieved insight and each
@@ -29,7 +29,7 @@ from agents.evaluate import (
     write_json,
 )
 from agents.evaluate.runs import aggregate_runs, run_score_of, runs_in
-from agents.trainer.run_folder import COMPLETE_FILE, INTERRUPTED_FILE, MODEL_FILE
+from agents.run_folder import COMPLETE_FILE, INTERRUPTED_FILE, MODEL_FILE
 from agents.trainer.train_args import baseline_names, personas_arg
 from coop_gym.io import make_unique_folder, write_text
 from coop_gym.io import write_json as write_json_file

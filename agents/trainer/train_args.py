@@ -24,7 +24,7 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
-from agents.trainer.run_folder import ARGS_FILE, MODEL_FILE, TRAINING_FILE, is_unfinished_run
+from agents.run_folder import ARGS_FILE, MODEL_FILE, TRAINING_FILE, is_unfinished_run
 from coop_gym.cli import BadArgs, fail, parse
 
 if TYPE_CHECKING:
@@ -100,7 +100,7 @@ def learner_framework(args: Any) -> str:
 
 def settings_framework(args: Any, algo: str) -> str:
     """Whose settings (``hyperparams_for``) a run of ``algo`` takes: ``jax`` for a JAX learner, else SB3's."""
-    from agents.trainer.hyperparams import JAX_ALGORITHMS
+    from agents.hyperparams import JAX_ALGORITHMS
 
     return "jax" if learner_framework(args) == "jax" and algo in JAX_ALGORITHMS else "sb3"
 
@@ -148,7 +148,7 @@ def _type_name(option: Any) -> str:
 
 def _problem_with_numbers(args: Any) -> str | None:
     """The first count or seed out of range (None if all are fine)."""
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
     from coop_gym.cli import seed_range_problem
 
     for name in ("timesteps", "n_envs"):
@@ -207,7 +207,7 @@ def _problem_with_framework(args: Any) -> str | None:
         return f"{flags} is for --framework rllib; the {learner_framework(args)} learner trains in this process"
     if args.framework == "rllib" and importlib.util.find_spec("ray") is None:
         return '--framework rllib needs Ray RLlib: pip install "torch==2.13.0" -e ".[train,rllib]"'
-    from agents.trainer.hyperparams import JAX_ALGORITHMS
+    from agents.hyperparams import JAX_ALGORITHMS
 
     if args.framework == "jax" and args.algo not in JAX_ALGORITHMS and not args.eval_only:  # asked for by name
         trains = " and ".join(JAX_ALGORITHMS)
@@ -361,7 +361,7 @@ def recorded_settings(run_dir: Path, args_type: type[Any]) -> dict[str, Any]:
 
 def _with_defaults(settings: dict[str, Any]) -> dict[str, Any]:
     """Run settings with the algorithm's defaults filled in (older args.json files hold None)."""
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
 
     out = dict(settings)
     algo = out.get("algo", "ppo")

@@ -24,12 +24,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from agents.trainer.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE, is_unfinished_run
+from agents.run_folder import CHECKPOINTS_DIR, INTERRUPTED_FILE, TRAINING_FILE, is_unfinished_run
 from agents.trainer.train_args import PROG
 from coop_gym.io import TEMP_MARKER, write_text
 
 if TYPE_CHECKING:
-    from agents.trainer.hyperparams import TrainingConfig
+    from agents.hyperparams import TrainingConfig
 
 __all__ = [
     "Plan",

@@ -12,6 +12,7 @@ import torch
 
 import coop_gym
 from agents.evaluate import evaluate
+from agents.hyperparams import hyperparams_for
 from agents.rl import (
     AGENT_FILE,
     BUNDLE_INFO,
@@ -23,7 +24,6 @@ from agents.rl import (
     make_train_env,
     save_agent,
 )
-from agents.trainer.hyperparams import hyperparams_for
 
 torch.set_num_threads(1)
 
@@ -142,7 +142,7 @@ def _tiny_model(folder, env_id):
 def test_compare_without_env_plays_scripted_agents_on_the_models_env(tmp_path, capsys):
     # A hard-level model compared with the handbook: the handbook must play the hard level
     # too, not the default id (where it plays far better, which would hide the mix-up).
-    from agents.evaluate.cli import main
+    from agents.tools.evaluate_cli import main
 
     folder = _tiny_model(tmp_path / "hard", HARD)
     assert main(["--compare", f"{folder / MODEL_FILE},handbook", "--episodes", "4", "--n-envs", "4", "--json"]) == 0
@@ -152,7 +152,7 @@ def test_compare_without_env_plays_scripted_agents_on_the_models_env(tmp_path, c
 
 
 def test_compare_of_models_of_different_envs_needs_env(saved, tmp_path, capsys):
-    from agents.evaluate.cli import main
+    from agents.tools.evaluate_cli import main
 
     folder = _tiny_model(tmp_path / "hard", HARD)
     with pytest.raises(SystemExit) as exit_info:

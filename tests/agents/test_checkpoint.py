@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from agents.hyperparams import ALGORITHMS, hyperparams_for
 from agents.rl import (
     CHECKPOINTS_DIR,
     CheckpointCallback,
@@ -16,7 +17,6 @@ from agents.rl import (
     make_train_env,
     restore_checkpoint,
 )
-from agents.trainer.hyperparams import ALGORITHMS, hyperparams_for
 
 torch.set_num_threads(1)
 

@@ -29,7 +29,7 @@ from agents.evaluate import (
     wilson_interval,
     write_csv,
 )
-from agents.evaluate.cli import main
+from agents.tools.evaluate_cli import main
 
 
 def test_wilson_interval_known_values():
@@ -426,7 +426,7 @@ def test_cli_human_csv_of_several_envs_needs_env(tmp_path, capsys, monkeypatch):
     csv_path = tmp_path / "played.csv"
     for env_id in ("CoopGym/SitToStandHard-v2", "CoopGym/SitToStand-v0"):
         append_played(csv_path, PlayedEpisode(env_id, 1, "test", "frail", "unsafe", 0.1, -10.0, ((2, 0, 1),)))
-    monkeypatch.setattr("agents.evaluate.cli.evaluate", None)  # the error comes before any episode is played
+    monkeypatch.setattr("agents.tools.evaluate_cli.evaluate", None)  # the error comes before any episode is played
     for agents in ([], ["--compare", "blind,oracle"]):
         line = _usage_error([*agents, "--human", str(csv_path)], capsys)  # not the default env's row alone
         expected = "holds episodes of 2 env ids (CoopGym/SitToStand-v0, CoopGym/SitToStandHard-v2): give --env ID"

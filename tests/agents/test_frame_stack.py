@@ -8,8 +8,8 @@ import torch
 from stable_baselines3.common.vec_env import VecFrameStack
 
 from agents.evaluate import evaluate
+from agents.hyperparams import hyperparams_for
 from agents.rl import SB3Agent, find_vec_normalize, load_agent, load_to_continue, make_model, make_train_env, save_agent
-from agents.trainer.hyperparams import hyperparams_for
 
 torch.set_num_threads(1)
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.evaluate.cli import main
+from agents.tools.evaluate_cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
 

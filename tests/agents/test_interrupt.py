@@ -154,7 +154,7 @@ def test_resume_without_a_checkpoint_starts_over_and_after_training_only_evaluat
     assert train.main(["--resume", str(run)]) == 0
     assert [p.name for p in run.parent.iterdir()] == [run.name] and (run / "COMPLETE").exists()
     trained = json.loads((run / "results.json").read_text())["training"]
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
 
     # One rollout of the default learner's n_steps (PPO's default framework: jax).
     assert trained["total_timesteps"] == hyperparams_for("ppo", None, "jax").algo_kwargs["n_steps"]
@@ -237,8 +237,8 @@ def test_resume_reads_args_json_back_through_the_typed_args(tmp_path, settings, 
 @pytest.fixture
 def stopped_while_evaluating(tmp_path: Path) -> Path:
     """A run folder stopped during its final evaluation: its settings, the saved agent, training.json."""
+    from agents.hyperparams import hyperparams_for
     from agents.rl import make_model, make_train_env, save_agent
-    from agents.trainer.hyperparams import hyperparams_for
 
     torch.set_num_threads(1)
     run = tmp_path / "runs" / "run"
@@ -316,9 +316,9 @@ def test_a_run_whose_model_is_gone_after_training_says_so_and_keeps_its_marker(s
 
 def test_a_foreign_model_in_a_checkpoint_is_named_before_training(tmp_path, capsys):
     """An SB3 run's model.zip (1 env) copied into a JAX run's checkpoint (2 envs) at another step count."""
+    from agents.hyperparams import hyperparams_for
     from agents.rl import make_model, make_train_env, save_agent
     from agents.rl.checkpoints import save_checkpoint
-    from agents.trainer.hyperparams import hyperparams_for
 
     run = tmp_path / "runs" / "run"
     run.mkdir(parents=True)

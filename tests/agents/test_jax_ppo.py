@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from agents.hyperparams import hyperparams_for
 from agents.rl import (
     CheckpointCallback,
     TrainingInterrupted,
@@ -24,7 +25,6 @@ from agents.rl import (
     save_agent,
 )
 from agents.rl.jax_ppo import JaxPPO
-from agents.trainer.hyperparams import hyperparams_for
 
 torch.set_num_threads(1)
 

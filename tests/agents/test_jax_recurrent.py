@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from agents.hyperparams import hyperparams_for
 from agents.rl import (
     CheckpointCallback,
     TrainingInterrupted,
@@ -21,7 +22,6 @@ from agents.rl import (
     save_agent,
 )
 from agents.rl.jax_recurrent import JaxRecurrentPPO
-from agents.trainer.hyperparams import hyperparams_for
 
 torch.set_num_threads(1)
 

@@ -146,7 +146,7 @@ def test_a_line_that_no_longer_replays_is_refused(tmp_path):
 
 
 def test_evaluate_human_adds_the_played_csv_as_the_human_row(tmp_path, capsys):
-    from agents.evaluate.cli import main as evaluate
+    from agents.tools.evaluate_cli import main as evaluate
 
     csv_path = tmp_path / "played.csv"
     (episode,) = play(ENV_ID, 5, "test", csv_path, fps=0, episodes=1, keys=scripted_keys(SCRIPT))

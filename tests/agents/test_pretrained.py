@@ -7,9 +7,9 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 from agents.evaluate import evaluate
-from agents.evaluate.cli import main
 from agents.pretrained import pretrained_card, pretrained_model_path, pretrained_names
 from agents.rl import load_agent
+from agents.tools.evaluate_cli import main
 
 NAMES = pretrained_names()
 

@@ -11,6 +11,15 @@ import torch
 
 import coop_gym  # noqa: F401
 from agents.evaluate import evaluate
+from agents.hyperparams import (
+    ALGORITHMS,
+    DEFAULT_ENV_IDS,
+    HYPERPARAMS,
+    ZOO_ALGO_NAMES,
+    TrainingConfig,
+    hyperparams_for,
+    zoo_yaml,
+)
 from agents.rl import (
     AGENT_FILE,
     MODEL_FILE,
@@ -23,15 +32,6 @@ from agents.rl import (
     save_agent,
 )
 from agents.rl.callbacks import _renamed
-from agents.trainer.hyperparams import (
-    ALGORITHMS,
-    DEFAULT_ENV_IDS,
-    HYPERPARAMS,
-    ZOO_ALGO_NAMES,
-    TrainingConfig,
-    hyperparams_for,
-    zoo_yaml,
-)
 
 torch.set_num_threads(1)
 
@@ -134,7 +134,7 @@ def test_zoo_files_are_generated_from_hyperparams():
     folder = Path(__file__).resolve().parents[2] / "agents" / "zoo"
     for algo in ALGORITHMS:
         path = folder / f"{ZOO_ALGO_NAMES[algo]}.yml"
-        assert path.read_text() == zoo_yaml(algo), f"{path} is stale: run agents.trainer.hyperparams.write_zoo_files()"
+        assert path.read_text() == zoo_yaml(algo), f"{path} is stale: run agents.hyperparams.write_zoo_files()"
         loaded = yaml.safe_load(path.read_text())
         config = hyperparams_for(algo)
         entry = loaded[config.env_id]
@@ -209,7 +209,7 @@ _SAME_SEED_RUN = """
 import sys, hashlib, torch
 torch.set_num_threads(int(sys.argv[1]))
 from stable_baselines3.common.vec_env import VecNormalize
-from agents.trainer.hyperparams import hyperparams_for
+from agents.hyperparams import hyperparams_for
 from agents.rl import make_model, make_train_env
 config = hyperparams_for("ppo")
 env = VecNormalize(make_train_env(config.env_id, 8, 3, personas=config.personas), norm_obs=True, norm_reward=False)

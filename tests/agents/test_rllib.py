@@ -25,6 +25,7 @@ from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import coop_gym  # noqa: F401
 from agents.evaluate import evaluate
+from agents.hyperparams import hyperparams_for
 from agents.rl.rllib import (
     CHECKPOINT_DIR,
     DEFAULT_NUM_ENVS,
@@ -38,7 +39,6 @@ from agents.rl.rllib import (
     load_rllib_agent,
     ppo_config,
 )
-from agents.trainer.hyperparams import hyperparams_for
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV_ID = "CoopGym/SitToStand-v0"

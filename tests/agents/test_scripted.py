@@ -255,7 +255,7 @@ def test_scripted_agents_and_evaluation_import_without_torch():
     import sys
 
     code = (
-        "import sys, agents, agents.caregivers.scripted, agents.evaluate, agents.trainer.hyperparams; "
+        "import sys, agents, agents.caregivers.scripted, agents.evaluate, agents.hyperparams; "
         "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules, 'torch was imported'; "
         "assert agents.HandbookCaregiver is agents.caregivers.scripted.HandbookCaregiver"
     )

@@ -200,11 +200,11 @@ def test_the_report_warns_when_the_learned_agent_reads_no_mind(capsys):
 
 
 def test_the_algo_choices_are_the_algorithms_with_defaults():
-    """``Args.algo``'s Literal is what tyro offers; it must name exactly agents.trainer.hyperparams.ALGORITHMS."""
+    """``Args.algo``'s Literal is what tyro offers; it must name exactly agents.hyperparams.ALGORITHMS."""
     import typing
 
     import train
-    from agents.trainer.hyperparams import ALGORITHMS
+    from agents.hyperparams import ALGORITHMS
 
     assert typing.get_args(typing.get_type_hints(train.Args)["algo"]) == ALGORITHMS
 

@@ -52,7 +52,7 @@ from agents.evaluate.runs import (
     training_seed,
 )
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
-from agents.trainer.run_folder import MODEL_FILE, is_rllib_run
+from agents.run_folder import MODEL_FILE, is_rllib_run
 from coop_gym.cli import BadArgs, fail, output_path_problem, parse, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 

@@ -1,7 +1,7 @@
 """One ``train.py`` run with Stable-Baselines3: its plan and run folder, then training with checkpoints.
 
 * :func:`plan_run` -- what the run does, settled before any work: the algorithm's settings
-  (:mod:`agents.trainer.hyperparams`) overridden by the flags, a saved model checked against the env,
+  (:mod:`agents.hyperparams`) overridden by the flags, a saved model checked against the env,
   and the run folder (the unfinished one being resumed, or a new one holding ``args.json``);
 * :func:`train` -- the training env, the model (restored from the last checkpoint, continued
   from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
@@ -23,6 +23,7 @@ from typing import Any
 import torch
 from stable_baselines3.common.vec_env import VecNormalize
 
+from agents.hyperparams import hyperparams_for
 from agents.rl import (
     CheckpointCallback,
     OutcomeStatsCallback,
@@ -39,8 +40,7 @@ from agents.rl import (
     save_agent,
     saved_model_problem,
 )
-from agents.trainer.hyperparams import hyperparams_for
-from agents.trainer.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
+from agents.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
 from agents.trainer.run_report import new_run_folder
 from agents.trainer.train_args import (
     PROG,
