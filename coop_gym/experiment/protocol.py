@@ -28,11 +28,11 @@ from coop_gym.experiment.estimators import (
     fit_recalibration,
     gaussian_xi_probabilities,
 )
-from coop_gym.experiment.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
 from coop_gym.experiment.plots import plot_confusion, plot_trial
 from coop_gym.experiment.simulation import ExperimentData, ProtocolConfig, TrialSpec, draw_trials, run_experiment
 from coop_gym.experiment.tables import aggregate, format_aggregate, format_tables, summarize
 from coop_gym.model.difficulty import DIFFICULTIES
+from estimator.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
 
 __all__ = [
     "ESTIMATORS",
