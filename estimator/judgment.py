@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import ndtr
 
 from estimator.compiled.cache import guard_kernel_cache
 from estimator.compiled.checks import is_number, python_scalar
@@ -24,6 +25,7 @@ __all__ = [
     "JUDGMENT_COLUMNS",
     "ThresholdJudgment",
     "first_judgment_step",
+    "gaussian_xi_probabilities",
     "judgment_substep",
     "threshold_judgment",
 ]
@@ -114,6 +116,25 @@ def first_judgment_step(cue_active: NDArray[np.bool_], judgment: ThresholdJudgme
         if judgment_substep(row, bool(active), 0.0, judgment.delay_s, judgment.threshold, dt_s):
             return t
     raise ValueError("no judgment inside the trial: no cue, or the judgment delay exceeds the trial")
+
+
+def gaussian_xi_probabilities(mean: ArrayLike, std: ArrayLike) -> NDArray[np.float64]:
+    """Map the KF's Gaussian ``xi`` marginal ``N(mean, std^2)`` to probabilities over {-1, 0, +1}.
+
+    ``P(xi = k)`` is the Gaussian mass of ``k``'s cell ``(-inf, -0.5]``, ``(-0.5, 0.5)``,
+    ``[0.5, inf)``: the probability that ``k`` is the nearest value. The KF has no
+    probabilities of its own; this is the documented mapping behind its log loss, Brier
+    score and ECE.
+
+    Example:
+        >>> gaussian_xi_probabilities(0.0, 1e-9).round(3).tolist()
+        [0.0, 1.0, 0.0]
+    """
+    m = np.asarray(mean, dtype=np.float64)
+    sd = np.maximum(np.asarray(std, dtype=np.float64), 1e-12)
+    lo = ndtr((-0.5 - m) / sd)
+    hi = ndtr((0.5 - m) / sd)
+    return np.stack([lo, hi - lo, 1.0 - hi], axis=-1)
 
 
 guard_kernel_cache(__name__)

@@ -155,7 +155,7 @@ def judgment_scores(
         "log_loss": metrics.log_loss(probs, labels),
         "brier": metrics.brier_score(probs, labels),
         "ece": metrics.expected_calibration_error(probs, labels),
-        "mean_latency_s": float(np.mean(latency_s)),
+        "mean_latency_s": float(np.mean(np.asarray(latency_s, dtype=np.float64))),
     }
 
 
@@ -181,7 +181,7 @@ def format_tables(
         paper: The numbers to print beside.
     """
     conf = np.array(summary["confusion"])
-    ours = [conf, *conditional_tables(conf)]
+    tables = [conf, *conditional_tables(conf)]
     theirs = [paper.matrix, *conditional_tables(paper.matrix)]
     titles = (
         "Table I   joint counts (rows: requested, columns: estimated)",
@@ -194,10 +194,10 @@ def format_tables(
         lines += ["", f"{table_title}   [{ours} | paper]", f"{'requested':>14s}{head}   |{head}"]
         for r, name in enumerate(XI_NAMES):
             if k == 0:
-                a = "".join(f"{int(v):8d}" for v in ours[0][r])
+                a = "".join(f"{int(v):8d}" for v in tables[0][r])
                 b = "".join(f"{int(v):8d}" for v in theirs[0][r])
             else:
-                a = "".join(f"{percent(v):>8s}" for v in ours[k][r])
+                a = "".join(f"{percent(v):>8s}" for v in tables[k][r])
                 b = "".join(f"{percent(v):>8s}" for v in theirs[k][r])
             lines.append(f"{name:>14s}{a}   |{b}")
     lines += [

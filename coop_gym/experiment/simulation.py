@@ -32,6 +32,7 @@ from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas, sample_person
 from estimator.judgment import ThresholdJudgment, first_judgment_step
+from estimator.multiple_model import TRIAL_PROBABILITY_FLOOR, TRIAL_SWITCHING_RATE_PER_S
 from estimator.paper import PAPER_RESULTS, XI_VALUES
 
 __all__ = [
@@ -92,8 +93,8 @@ class ProtocolConfig:
     realism: Realism = field(default_factory=Realism)
     timing: Timing = field(default_factory=Timing)
     cues: Cues = field(default_factory=Cues)
-    switching_rate_per_s: float = 0.05
-    probability_floor: float = 1e-4
+    switching_rate_per_s: float = TRIAL_SWITCHING_RATE_PER_S
+    probability_floor: float = TRIAL_PROBABILITY_FLOOR
     difficulty: str | None = None
 
     def __post_init__(self) -> None:
