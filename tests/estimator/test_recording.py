@@ -42,7 +42,7 @@ def test_estimate_gives_the_protocols_balanced_accuracy(exported: Path, capsys: 
 
 def test_a_written_recording_reads_back_exactly() -> None:
     rng = np.random.default_rng(0)
-    t = np.arange(50) * 0.02
+    t = np.arange(50, dtype=np.float64) * 0.02
     rec = Recording(t, rng.normal(size=50), rng.normal(size=50), np.r_[np.zeros(5), np.ones(45)],
                     requested_xi=np.full(50, -1.0), meta={"subject": "a"})  # fmt: skip
     back = parse_recording(format_recording(rec))

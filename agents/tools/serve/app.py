@@ -163,20 +163,25 @@ async def _caregiver_start(server: _Server, request: Request) -> dict[str, Any]:
     return {"trial_id": trial_id, "token": live.token, "env_id": settings.env_id, "scene": trial.scene()}
 
 
-async def _caregiver_step(server: _Server, request: Request) -> dict[str, Any]:
+async def _advance(server: _Server, request: Request, kind: type) -> tuple[Any, dict[str, Any]]:
+    """Step the running trial the request names; an ended trial leaves the running set (the caller stores it)."""
     payload = await server.body(request)
-    live = server.owned(payload, CaregiverTrial)
-    async with live.lock:
-        trial = live.trial
-        assert isinstance(trial, CaregiverTrial)
-        scene = trial.step(payload)
+    live = server.owned(payload, kind)
+    async with live.lock:  # one step at a time, however many requests arrive
+        scene = live.trial.step(payload)
         live.seq, live.touched = live.seq + 1, time.monotonic()
-        if not trial.done:
-            return {"scene": scene}
-        await run_in_threadpool(server.store.add_caregiver, trial.played())
-        server.live.pop(str(payload["trial_id"]), None)
-        trial.close()
-        compared = await run_in_threadpool(trial.compared)
+        if live.trial.done:
+            server.live.pop(str(payload["trial_id"]), None)
+    return live.trial, scene
+
+
+async def _caregiver_step(server: _Server, request: Request) -> dict[str, Any]:
+    trial, scene = await _advance(server, request, CaregiverTrial)
+    if not trial.done:
+        return {"scene": scene}
+    await run_in_threadpool(server.store.add_caregiver, trial.played())
+    trial.close()
+    compared = await run_in_threadpool(trial.compared)
     return {"scene": scene, "stored": True, "compared": compared}
 
 
@@ -212,19 +217,12 @@ async def _person_start(server: _Server, request: Request) -> dict[str, Any]:
 
 
 async def _person_step(server: _Server, request: Request) -> dict[str, Any]:
-    payload = await server.body(request)
-    live = server.owned(payload, PersonTrial)
-    async with live.lock:
-        trial = live.trial
-        assert isinstance(trial, PersonTrial)
-        scene = trial.step(payload)
-        live.seq, live.touched = live.seq + 1, time.monotonic()
-        if not trial.done:
-            return {"scene": scene}
-        row = PersonTrialRow(trial.session_id, trial.trial_index, trial.spec.requested_xi, trial.judgment or 0,
-                             trial.recording())  # fmt: skip
-        await run_in_threadpool(server.store.add_person_trial, row)
-        server.live.pop(str(payload["trial_id"]), None)
+    trial, scene = await _advance(server, request, PersonTrial)
+    if not trial.done:
+        return {"scene": scene}
+    row = PersonTrialRow(trial.session_id, trial.trial_index, trial.spec.requested_xi, trial.judgment or 0,
+                         trial.recording())  # fmt: skip
+    await run_in_threadpool(server.store.add_person_trial, row)
     out: dict[str, Any] = {"scene": scene, "stored": True}
     session = await run_in_threadpool(server.store.session, trial.session_id)
     if session is not None and session["done"] >= session["n_trials"]:

@@ -16,14 +16,14 @@ malformed or out-of-range request changes nothing.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from agents.base import action_type_of, encode_actions
 from agents.evaluate import evaluate
+from agents.tools.play import PlayedSteps
 from agents.tools.play_log import PlayedEpisode, personas_arg
 from coop_gym.envs.actions import ACTION_SHAPE
 from coop_gym.envs.core import nominal_model_for
@@ -67,23 +67,13 @@ class CaregiverTrial:
     env_id: str
     personas: str
     seed: int
-    env: Any = None
-    persona: str = ""
-    actions: list[tuple[int, int, int]] = field(default_factory=list)
-    times_s: list[float] = field(default_factory=list)
-    true_xi: list[int] = field(default_factory=list)
-    episode_return: float = 0.0
-    outcome: str = "none"
-    lift_time_s: float | None = None
     done: bool = False
 
     def __post_init__(self) -> None:
         """Make the env and reset it to the seed."""
-        names = [p.name for p in resolve_personas(personas_arg(self.personas))]
-        self.env = gym.make(self.env_id, personas=names)
+        self.env = gym.make(self.env_id, personas=[p.name for p in resolve_personas(personas_arg(self.personas))])
         _, info = self.env.reset(seed=self.seed)
-        self.persona = str(info["persona"])
-        self.times_s, self.true_xi = [0.0], [int(info["true_xi"])]
+        self.log = PlayedSteps(self.seed, str(info["persona"]), [0.0], [int(info["true_xi"])])
         self.last_info = info
 
     def step(self, payload: dict[str, Any]) -> dict[str, Any]:
@@ -92,17 +82,7 @@ class CaregiverTrial:
         push, verbal, lift = (_integer(payload, name, n) for name, n in zip(names, ACTION_SHAPE, strict=True))
         if self.done:
             raise BadInput("the episode has ended")
-        action = encode_actions(np.array([push]), np.array([verbal]), np.array([lift]), action_type_of(self.env))[0]
-        _, reward, terminated, truncated, info = self.env.step(action)
-        self.actions.append((push, verbal, lift))
-        self.episode_return += float(reward)
-        self.times_s.append(float(info["elapsed_s"]))
-        self.true_xi.append(int(info["true_xi"]))
-        self.outcome = str(info["outcome"])
-        if lift:
-            self.lift_time_s = float(info["elapsed_s"])
-        self.done = bool(terminated or truncated)
-        self.last_info = info
+        self.done, self.last_info = self.log.step(self.env, push, verbal, lift)
         return self.scene()
 
     def scene(self) -> dict[str, Any]:
@@ -120,8 +100,9 @@ class CaregiverTrial:
             "done": self.done,
         }
         if self.done:
-            out.update(outcome=self.outcome, lift_time_s=self.lift_time_s, episode_return=self.episode_return,
-                       persona=self.persona, times_s=self.times_s, true_xi=self.true_xi)  # fmt: skip
+            log = self.log
+            out.update(outcome=log.outcome, lift_time_s=log.lift_time_s, episode_return=log.episode_return,
+                       persona=log.persona, times_s=log.times_s, true_xi=log.true_xi)  # fmt: skip
         return out
 
     def compared(self) -> list[dict[str, Any]]:
@@ -137,8 +118,7 @@ class CaregiverTrial:
 
     def played(self) -> PlayedEpisode:
         """The finished episode as a line of the played-episodes CSV."""
-        return PlayedEpisode(self.env_id, self.seed, self.personas, self.persona, self.outcome, self.lift_time_s,
-                             self.episode_return, tuple(self.actions))  # fmt: skip
+        return self.log.played(self.env_id, self.personas)
 
     def close(self) -> None:
         """Close the env."""
