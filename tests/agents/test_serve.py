@@ -21,6 +21,7 @@ from typing import Any
 
 import pytest
 
+from agents.evaluate import cli as evaluate_cli
 from agents.tools.play_log import read_played, score_played
 from estimator import estimate
 
@@ -149,6 +150,7 @@ def test_a_caregiver_episode_by_keyboard_is_stored_and_scored_as_its_replay(
     assert (record.outcome, record.steps) == (played[0].outcome, played[0].steps)
     assert record.episode_return == pytest.approx(played[0].episode_return, abs=1e-9)
     assert played[0].outcome in outcome
+    assert evaluate_cli.main(["--human", str(tmp_path / "out" / "caregiver.csv")]) == 0
 
 
 @needs_chromium
@@ -215,6 +217,7 @@ def test_a_killed_server_keeps_every_finished_trial_and_no_partial_one(database:
     finally:
         first.kill()  # ... the server dies
     with sqlite3.connect(database.removeprefix("sqlite:///")) as db:
+        assert db.execute("PRAGMA journal_mode").fetchone() == ("wal",)
         assert db.execute("SELECT session_id, trial_index FROM person_trials").fetchall() == [(1, 0)]
         assert db.execute("SELECT COUNT(*) FROM caregiver_trials").fetchone() == (0,)
     again = Server(database, person_trials=2)

@@ -83,3 +83,13 @@ def test_identify_fits_recordings_through_the_reader(exported: Path) -> None:
     assert [t.xi for t in trials] == [r.requested for r in recordings]
     fit = identify(trials[:4], initial=recordings[0].model, restarts=1, max_iterations=20)
     assert np.isfinite(fit.negative_log_likelihood)
+
+
+def test_the_plot_and_an_empty_folder(exported: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("matplotlib")
+    first = sorted(exported.glob("*.csv"))[0]
+    assert estimate.main([str(first), "--plot", str(tmp_path / "trace.png")]) == 0
+    assert (tmp_path / "trace.png").stat().st_size > 0
+    (tmp_path / "empty").mkdir()
+    assert estimate.main([str(tmp_path / "empty")]) == 1
+    assert "no recordings" in capsys.readouterr().err

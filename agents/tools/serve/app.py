@@ -46,8 +46,9 @@ from estimator.recording import parse_recording
 
 __all__ = ["IDLE_TRIAL_S", "ServerSettings", "make_app"]
 
-IDLE_TRIAL_S = 600.0
-"""A running trial no tab has stepped for this long is dropped, unstored [s]."""
+IDLE_TRIAL_S = 5.0
+"""A running trial no tab has stepped for this long is dropped, unstored, when a trial starts [s]: a
+playing tab steps every 0.1 s, so such a trial's tab was closed, and its place is free again."""
 
 _MAX_BODY_BYTES = 4096
 

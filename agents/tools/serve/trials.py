@@ -10,7 +10,8 @@ malformed or out-of-range request changes nothing.
 * :class:`PersonTrial` -- one of the paper's cue trials (:mod:`coop_gym.experiment.simulation`)
   with the player as the person: their input is the intention ``eta``; the body answers through
   eq. 1 (the simulator's exact zero-order hold of the typical persona's biomechanics), is sensed
-  with the simulator's camera and force noise, and is judged live by the paper's filter.
+  with the simulator's camera and force noise, and is judged live by the paper's filter (the IMM's
+  ``P(xi)`` shown beside it).
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ from coop_gym.experiment.simulation import ProtocolConfig, TrialSpec, draw_trial
 from coop_gym.model.dynamics import zoh_matrices
 from coop_gym.model.personas import get_persona, resolve_personas
 from estimator.judgment import JUDGE, JUDGMENT_COLUMNS, judgment_substep
-from estimator.kalman import PaperKalmanFilter
+from estimator.kalman import PaperKalmanFilter, nominal_row
+from estimator.multiple_model import TRIAL_PROBABILITY_FLOOR, TRIAL_SWITCHING_RATE_PER_S, IMMEstimator
 from estimator.recording import Recording, format_recording
 
 __all__ = ["COMPARED", "BadInput", "CaregiverTrial", "PersonTrial", "person_design"]
@@ -162,6 +164,12 @@ class PersonTrial:
         self.xi_hat = np.zeros(n)
         self._sense(0, 0.0)
         self.kf = PaperKalmanFilter(self.model, float(self.position_m[0]))
+        # Beside the paper's filter, the package's IMM reads the same samples: P(xi) live.
+        self.imm = IMMEstimator(
+            nominal_row(self.model)[None, :], self.position_m[:1], prior=self.model,
+            probability_floor=TRIAL_PROBABILITY_FLOOR, switching_rate_per_s=TRIAL_SWITCHING_RATE_PER_S,
+        )  # fmt: skip
+        self.p_xi = np.full(3, 1.0 / 3.0)
         self.tracker = np.zeros(len(JUDGMENT_COLUMNS))
         self.judgment: int | None = None
 
@@ -202,6 +210,7 @@ class PersonTrial:
         self._sense(t, eta)
         mean = self.kf.step(self.force_n[t], self.verbal[t], self.position_m[t])
         self.xi_hat[t] = float(mean[3])
+        self.p_xi = self.imm.step(self.force_n[t : t + 1], self.verbal[t : t + 1], self.position_m[t : t + 1])[0]
         active = bool(self.push[t] > 0.0 or self.verbal[t] != 0.0)
         judgment = self.config.judgment
         if judgment_substep(self.tracker, active, self.xi_hat[t], judgment.delay_s, judgment.threshold,
@@ -222,6 +231,7 @@ class PersonTrial:
             "verbal_cue": int(self.verbal[t]),
             "xi_estimate": float(self.xi_hat[t]),
             "judgment": self.judgment,
+            "p_xi_imm": [float(p) for p in self.p_xi],
             "done": self.done,
         }
 

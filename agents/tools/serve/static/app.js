@@ -49,6 +49,17 @@ function draw(scene) {
   g.fillText("judgment: " + judged, gx, gy + 40);
   g.fillText("t = " + scene.elapsed_s.toFixed(1) + " s", gx, 40);
   if (scene.true_xi) { drawTruth(g, scene); }
+  if (scene.p_xi_imm) { drawProbabilities(g, scene.p_xi_imm); }
+}
+
+function drawProbabilities(g, p) {
+  // The IMM's P(xi = -1, 0, +1), read from the same samples as the paper's filter.
+  const x0 = 560, y0 = 170, labels = ["uncoop.", "unresp.", "coop."];
+  g.fillStyle = "#000"; g.font = "14px sans-serif"; g.fillText("IMM P(xi)", x0, y0 - 95);
+  p.forEach((v, k) => {
+    g.fillStyle = "#69c"; g.fillRect(x0 + 20 + 90 * k, y0 - 80 * v, 40, 80 * v);
+    g.fillStyle = "#000"; g.fillText(labels[k] + " " + v.toFixed(2), x0 + 90 * k, y0 + 18);
+  });
 }
 
 function drawTruth(g, scene) {
