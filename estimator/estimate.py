@@ -184,13 +184,17 @@ def plot_estimate(recording: Recording, estimate: TrialEstimate, judgment: Thres
 
 
 PROG = "python -m estimator.estimate"
+DESCRIPTION = (
+    "The paper's filter run offline over recorded sit-to-stand trials (CSV, see estimator.recording): "
+    "estimates, judgments and, where the requested xi is recorded, the paper's three tables."
+)
 
 
 @dataclass
 class Args:
     """The command line's arguments; each field's docstring is its ``--help``."""
 
-    recordings: tyro.conf.Positional[tuple[str, ...]]
+    recordings: Annotated[tuple[str, ...], tyro.conf.Positional, tyro.conf.arg(metavar="RECORDING...")]
     """recording files (CSV, see estimator.recording), or folders of them"""
     estimator: Literal["kalman", "multiple_model", "imm"] = "kalman"
     """estimator to run"""
@@ -220,7 +224,10 @@ def _text(summary: dict[str, Any], estimator: str) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point: exit 0, 1 on a bad recording (the message names line and column), 2 on usage."""
-    args = tyro.cli(Args, args=list(sys.argv[1:] if argv is None else argv), prog=PROG, description=__doc__)
+    args = tyro.cli(Args, args=list(sys.argv[1:] if argv is None else argv), prog=PROG, description=DESCRIPTION)
+    if not args.recordings:
+        print(f"usage: {PROG} [-h] [OPTIONS] RECORDING...\n{PROG}: error: give at least one recording", file=sys.stderr)
+        return 2
     try:
         paths = recordings_in(args.recordings)
         if not paths:

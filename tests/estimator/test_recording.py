@@ -93,3 +93,8 @@ def test_the_plot_and_an_empty_folder(exported: Path, tmp_path: Path, capsys: py
     (tmp_path / "empty").mkdir()
     assert estimate.main([str(tmp_path / "empty")]) == 1
     assert "no recordings" in capsys.readouterr().err
+
+
+def test_no_recording_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert estimate.main([]) == 2
+    assert "error: give at least one recording" in capsys.readouterr().err
