@@ -297,6 +297,8 @@ CASES: list[tuple[str, str, list[str], str]] = [
 # argv keeps the work tiny, so a late failure shows as a traceback, not a long run.
 # {blocked} is a folder that cannot exist: its parent is a regular file.
 LATE_CASES: list[tuple[str, str, list[str], str]] = [
+    ("coop_gym.experiment.protocol", "export in a folder that cannot be created", ["--export", "{blocked}"], r"a_file"),
+    ("agents.tools.serve", "export in a folder that cannot be created", ["--export", "{blocked}"], r"a_file"),
     (
         "train.py",
         "out in a folder that cannot be created",

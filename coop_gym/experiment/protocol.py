@@ -194,9 +194,8 @@ def args_problem(args: Args) -> str | None:
         problem = output_path_problem(path) if path is not None else None
         if problem:
             return problem
-    if args.export is not None and Path(args.export).exists() and not Path(args.export).is_dir():
-        return f"--export must be a folder, got the file {args.export!r}"
-    return None
+    problem = output_path_problem(args.export, folder=True) if args.export is not None else None
+    return f"--export: {problem}" if problem else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -24,7 +24,7 @@ from agents.tools.play import DEFAULT_ENV_ID
 from agents.tools.play_log import personas_arg
 from agents.tools.serve.app import ServerSettings, make_app
 from agents.tools.serve.store import DEFAULT_DATABASE, Store
-from coop_gym.cli import BadArgs, PositiveInt, parse
+from coop_gym.cli import BadArgs, PositiveInt, output_path_problem, parse
 from coop_gym.io import write_text
 from coop_gym.model.personas import resolve_personas
 
@@ -61,6 +61,9 @@ class Args:
             resolve_personas(personas_arg(self.personas))
         except ValueError as exc:
             raise BadArgs(f"--personas: {exc}") from None
+        problem = output_path_problem(self.export, folder=True) if self.export is not None else None
+        if problem:
+            raise BadArgs(f"--export: {problem}")
 
 
 def export(store: Store, folder: str | Path) -> tuple[Path, list[Path]]:
