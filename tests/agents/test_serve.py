@@ -179,7 +179,7 @@ def test_a_person_trial_by_keyboard_is_stored_and_read_by_the_estimator(
     time.sleep(2.5)
     _shot(browser, "web_person.png")
     ActionChains(browser).key_up("f").perform()
-    status = _wait_for(browser, "status", "complete", 30)
+    status = _wait_for(browser, "status", "complete", 90)
     assert "balanced accuracy" in status
     assert "Table I" in browser.find_element(By.ID, "results").text
     with sqlite3.connect(database.removeprefix("sqlite:///")) as db:

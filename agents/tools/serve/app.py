@@ -119,7 +119,9 @@ class _Server:
         """Register a running trial (dropping the long idle ones); returns its id and record."""
         now = time.monotonic()
         for key in [k for k, v in self.live.items() if now - v.touched > IDLE_TRIAL_S]:
-            self.live.pop(key)
+            dropped = self.live.pop(key).trial
+            if isinstance(dropped, CaregiverTrial):
+                dropped.close()
         trial_id = secrets.token_hex(6)
         self.live[trial_id] = _Live(trial)
         return trial_id, self.live[trial_id]
