@@ -43,6 +43,7 @@ from estimator.compiled.checks import is_integer, is_number, python_scalar
 from estimator.kalman import NOMINAL, nominal_row
 from estimator.mode_kernels import N_MODES, mode_covariance_step, mode_mean_step
 from estimator.nominal import NominalModel
+from estimator.recording import Recording
 
 __all__ = [
     "DEFAULT_FITTED_FIELDS",
@@ -135,6 +136,17 @@ class Trial:
     def n_steps(self) -> int:
         """Number of samples ``T``."""
         return int(self.measured_position_m.shape[0])
+
+    @classmethod
+    def from_recording(cls, recording: Recording, labelled: bool = True) -> Trial:
+        """A recorded trial (:mod:`estimator.recording`) as a trial to fit: its measured force, words and shoulder.
+
+        ``xi`` is the recording's requested one where ``labelled`` (``None`` otherwise, or where
+        none was recorded), so recordings fit as :func:`identify` fits any trials:
+        ``identify([Trial.from_recording(read_recording(p)) for p in paths])``.
+        """
+        xi = recording.requested if labelled else None
+        return cls(recording.force_n, recording.verbal_cue, recording.shoulder_position_m, xi, recording.dt_s)
 
 
 @dataclass(frozen=True)

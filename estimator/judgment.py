@@ -13,13 +13,22 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import ndtr
 
 from estimator.compiled.cache import guard_kernel_cache
 from estimator.compiled.checks import is_number, python_scalar
 from estimator.compiled.schema import index_table
 
-__all__ = ["JUDGE", "JUDGMENT_COLUMNS", "ThresholdJudgment", "judgment_substep", "threshold_judgment"]
+__all__ = [
+    "JUDGE",
+    "JUDGMENT_COLUMNS",
+    "ThresholdJudgment",
+    "first_judgment_step",
+    "gaussian_xi_probabilities",
+    "judgment_substep",
+    "threshold_judgment",
+]
 
 
 @dataclass(frozen=True)
@@ -87,6 +96,45 @@ def judgment_substep(
             row[JUDGE.judgment] = 0.0
         return True
     return False
+
+
+def first_judgment_step(cue_active: NDArray[np.bool_], judgment: ThresholdJudgment, dt_s: float) -> int:
+    """Index of the step at which the judgment tracker judges a trial's initial cue onset.
+
+    Runs :func:`judgment_substep` over ``cue_active`` (one flag per filter step), so the
+    protocol, the environments and the offline estimator of recordings sample ``xi_hat`` on
+    exactly the same step.
+
+    Example:
+        >>> first_judgment_step(np.arange(100) >= 10, ThresholdJudgment(), 0.02)
+        47
+    """
+    row = np.zeros(len(JUDGMENT_COLUMNS))
+    # Long since any onset: the first active step is an onset even at index 0.
+    row[JUDGE.since_onset_s] = 1e9
+    for t, active in enumerate(np.asarray(cue_active, dtype=bool)):
+        if judgment_substep(row, bool(active), 0.0, judgment.delay_s, judgment.threshold, dt_s):
+            return t
+    raise ValueError("no judgment inside the trial: no cue, or the judgment delay exceeds the trial")
+
+
+def gaussian_xi_probabilities(mean: ArrayLike, std: ArrayLike) -> NDArray[np.float64]:
+    """Map the KF's Gaussian ``xi`` marginal ``N(mean, std^2)`` to probabilities over {-1, 0, +1}.
+
+    ``P(xi = k)`` is the Gaussian mass of ``k``'s cell ``(-inf, -0.5]``, ``(-0.5, 0.5)``,
+    ``[0.5, inf)``: the probability that ``k`` is the nearest value. The KF has no
+    probabilities of its own; this is the documented mapping behind its log loss, Brier
+    score and ECE.
+
+    Example:
+        >>> gaussian_xi_probabilities(0.0, 1e-9).round(3).tolist()
+        [0.0, 1.0, 0.0]
+    """
+    m = np.asarray(mean, dtype=np.float64)
+    sd = np.maximum(np.asarray(std, dtype=np.float64), 1e-12)
+    lo = ndtr((-0.5 - m) / sd)
+    hi = ndtr((0.5 - m) / sd)
+    return np.stack([lo, hi - lo, 1.0 - hi], axis=-1)
 
 
 guard_kernel_cache(__name__)

@@ -46,6 +46,8 @@ from estimator.nominal import NominalModel
 
 __all__ = [
     "MODE_VALUES",
+    "TRIAL_PROBABILITY_FLOOR",
+    "TRIAL_SWITCHING_RATE_PER_S",
     "IMMEstimator",
     "MultipleModelEstimator",
     "confident_judgment",
@@ -56,6 +58,14 @@ __all__ = [
 
 MODE_VALUES: NDArray[np.int64] = np.array([-1, 0, 1], dtype=np.int64)
 """Cooperativeness of each mode, in the order of every ``(..., 3)`` probability array."""
+
+TRIAL_PROBABILITY_FLOOR = 1e-4
+"""Mode-probability floor for judging the paper's cue trials (the simulated protocol's and the
+offline estimator's default): a trial is short, so a floor this low lets one trial's evidence
+decide while no mode is ever ruled out for good."""
+TRIAL_SWITCHING_RATE_PER_S = 0.05
+"""IMM's mode-switching rate on the paper's cue trials [1/s]: a subject acts one requested
+``xi`` per trial, so a switch within a trial's 10 s is rare."""
 
 # --------------------------------------------------------------------------- estimators
 

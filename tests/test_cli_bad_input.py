@@ -269,6 +269,8 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("coop_gym.experiment.calibrate", "unknown flag", ["--bogus"], r"Unrecognized options: --bogus"),
     ("agents.tools.play", "unknown env", ["--env", "Nope-v0"], r"--env: unknown env id 'Nope-v0'"),
     ("agents.tools.play", "fps 0", ["--fps", "0"], r"--fps must be >= 1"),
+    ("agents.tools.serve", "port out of range", ["--port", "70000"], r"--port must be in 0..65535"),
+    ("agents.tools.serve", "unknown persona", ["--personas", "nobody"], r"--personas: .*nobody"),
     ("agents.tools.play", "unknown pace", ["--pace", "slow"], r"invalid choice 'slow' for argument '--pace'"),
     ("agents.caregivers.reading", "episodes 0", ["--episodes", "0"], r"--episodes must be positive, got 0"),
     ("agents.tune.baselines", "no family", [], r"\{blind,prober\}"),
@@ -295,6 +297,8 @@ CASES: list[tuple[str, str, list[str], str]] = [
 # argv keeps the work tiny, so a late failure shows as a traceback, not a long run.
 # {blocked} is a folder that cannot exist: its parent is a regular file.
 LATE_CASES: list[tuple[str, str, list[str], str]] = [
+    ("coop_gym.experiment.protocol", "export in a folder that cannot be created", ["--export", "{blocked}"], r"a_file"),
+    ("agents.tools.serve", "export in a folder that cannot be created", ["--export", "{blocked}"], r"a_file"),
     (
         "train.py",
         "out in a folder that cannot be created",
@@ -481,6 +485,7 @@ PACKAGE_CLIS = (
     "agents.evaluate",
     "agents.tools.record",
     "agents.tools.play",
+    "agents.tools.serve",
     "agents.caregivers.reading",
     "agents.tune.baselines",
     "agents.tune.belief",

@@ -29,14 +29,16 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("estimator.compiled",),
     ("coop_gym.model", "estimator"),
     ("coop_gym",),
-    ("coop_gym.experiment", "agents"),
+    ("coop_gym.experiment",),
+    ("agents",),
     ("train", "scripts", "bench"),
 )
 """The layer order, lowest first: a module may import its own group and any lower layer.
 
 Groups of one layer (e.g. the model and the filters) may not import each other.
 ``estimator.compiled`` is its own group below the filters; ``coop_gym.model`` is its own group
-below the rest of ``coop_gym`` (the envs, registration, cli), and ``coop_gym.experiment`` above it.
+below the rest of ``coop_gym`` (the envs, registration, cli), and ``coop_gym.experiment`` above it;
+``agents`` sits above the experiment, so the web app's person role runs the paper's trial design.
 """
 
 KNOWN_CYCLES: frozenset[frozenset[str]] = frozenset()

@@ -69,6 +69,7 @@ __all__ = [
     "PROG",
     "Args",
     "Controls",
+    "PlayedSteps",
     "args_problem",
     "main",
     "play",
@@ -164,8 +165,8 @@ def scripted_keys(script: Iterable[Sequence[str]]) -> KeySource:
 
 
 @dataclass
-class _Episode:
-    """A running episode's record."""
+class PlayedSteps:
+    """A running played episode's record: what the player did and what the env answered, step by step."""
 
     seed: int
     persona: str
@@ -175,6 +176,19 @@ class _Episode:
     episode_return: float = 0.0
     outcome: str = "none"
     lift_time_s: float | None = None
+
+    def step(self, env: gym.Env[Any, Any], push: int, verbal: int, lift: int) -> tuple[bool, dict[str, Any]]:
+        """One env step with the player's component action, recorded; returns ``(done, info)``."""
+        action = encode_actions(np.array([push]), np.array([verbal]), np.array([lift]), action_type_of(env))[0]
+        _, reward, terminated, truncated, info = env.step(action)
+        self.actions.append((push, verbal, lift))
+        self.episode_return += float(reward)
+        self.times_s.append(float(info["elapsed_s"]))
+        self.true_xi.append(int(info["true_xi"]))
+        self.outcome = str(info["outcome"])
+        if lift:
+            self.lift_time_s = float(info["elapsed_s"])
+        return bool(terminated or truncated), info
 
     def played(self, env_id: str, personas: str) -> PlayedEpisode:
         """The finished episode as a line of the played-episodes CSV."""
@@ -228,20 +242,10 @@ class _Session:
             self.view.close()
 
 
-def _step(session: _Session, episode: _Episode, controls: Controls) -> tuple[bool, NDArray[np.uint8]]:
+def _step(session: _Session, episode: PlayedSteps, controls: Controls) -> tuple[bool, NDArray[np.uint8]]:
     """One env step with the held controls; returns ``(done, frame)``."""
-    push, verbal, lift = controls.take()
-    action_type = action_type_of(session.env)
-    action = encode_actions(np.array([push]), np.array([verbal]), np.array([lift]), action_type)[0]
-    _, reward, terminated, truncated, info = session.env.step(action)
-    episode.actions.append((push, verbal, lift))
-    episode.episode_return += float(reward)
-    episode.times_s.append(float(info["elapsed_s"]))
-    episode.true_xi.append(int(info["true_xi"]))
-    episode.outcome = str(info["outcome"])
-    if lift:
-        episode.lift_time_s = float(info["elapsed_s"])
-    return bool(terminated or truncated), session.env.render()  # type: ignore[return-value]
+    done, _ = episode.step(session.env, *controls.take())
+    return done, session.env.render()  # type: ignore[return-value]
 
 
 def _compared(env_id: str, personas: list[str], seed: int) -> list[tuple[str, str, float | None]]:
@@ -253,7 +257,7 @@ def _compared(env_id: str, personas: list[str], seed: int) -> list[tuple[str, st
     return out
 
 
-def _play_episode(session: _Session, seed: int) -> tuple[_Episode, NDArray[np.uint8] | None]:
+def _play_episode(session: _Session, seed: int) -> tuple[PlayedSteps, NDArray[np.uint8] | None]:
     """Reset to ``seed`` and step under the player's keys until the episode ends.
 
     Returns:
@@ -262,7 +266,7 @@ def _play_episode(session: _Session, seed: int) -> tuple[_Episode, NDArray[np.ui
     _, info = session.env.reset(seed=seed)
     frame: NDArray[np.uint8] = session.env.render()  # type: ignore[assignment]
     session.open_view(frame)
-    episode = _Episode(seed, str(info["persona"]), [0.0], [int(info["true_xi"])])
+    episode = PlayedSteps(seed, str(info["persona"]), [0.0], [int(info["true_xi"])])
     # Real time waits for the first Space, so the player sees the person before the clock runs.
     controls, paused, done, stepped = Controls(), session.pace == "realtime", False, True
     while not done:
@@ -284,7 +288,7 @@ def _play_episode(session: _Session, seed: int) -> tuple[_Episode, NDArray[np.ui
     return episode, frame
 
 
-def _summary(session: _Session, episode: _Episode, note: str) -> Any:
+def _summary(session: _Session, episode: PlayedSteps, note: str) -> Any:
     """The after-episode panel: the outcome, the mental state under the player's cues, the scripted agents' runs."""
     from agents.tools.play_view import Summary
 

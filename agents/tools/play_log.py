@@ -39,7 +39,17 @@ from coop_gym.cli import SEED_LIMIT
 from coop_gym.envs.contract import ACTION_SHAPE
 from coop_gym.model.personas import resolve_personas
 
-__all__ = ["PLAYED_COLUMNS", "PlayedEpisode", "append_played", "next_seed", "read_played", "score_played"]
+__all__ = [
+    "PLAYED_COLUMNS",
+    "PlayedEpisode",
+    "append_played",
+    "next_seed",
+    "parse_played",
+    "personas_arg",
+    "played_csv",
+    "read_played",
+    "score_played",
+]
 
 PLAYED_COLUMNS: tuple[str, ...] = (
     "played_at_utc",
@@ -212,6 +222,16 @@ def read_played(path: str | Path) -> list[PlayedEpisode]:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path} is not UTF-8 text: {exc}") from None
+    return parse_played(text, str(path))
+
+
+def played_csv(lines: Sequence[str]) -> str:
+    """A played-episodes CSV of complete lines (:meth:`PlayedEpisode.csv_line`): the header, then the lines."""
+    return _header_line() + "".join(lines)
+
+
+def parse_played(text: str, path: str = "<played>") -> list[PlayedEpisode]:
+    """Every episode of the text of a played-episodes CSV (header first); errors name ``path`` and the line."""
     reader = csv.DictReader(io.StringIO(text), strict=True)
     episodes = []
     try:
@@ -258,7 +278,8 @@ class _Replay:
         return encode_actions(np.array([push]), np.array([verbal]), np.array([lift]), self.action_type), state
 
 
-def _personas_arg(text: str) -> str | list[str]:
+def personas_arg(text: str) -> str | list[str]:
+    """A persona set as given on a command line (``"test"``, ``"a,b"``) as ``resolve_personas`` takes it."""
     return text if "," not in text else [p.strip() for p in text.split(",") if p.strip()]
 
 
@@ -296,7 +317,7 @@ def score_played(csv_path: str | Path, env_id: str, name: str = "human") -> Eval
         result = evaluate(
             _Replay(episode.actions, action_type),
             env_id,
-            _personas_arg(episode.personas),
+            personas_arg(episode.personas),
             episodes=1,
             seed=episode.seed,
             n_envs=1,
@@ -311,6 +332,6 @@ def score_played(csv_path: str | Path, env_id: str, name: str = "human") -> Eval
                 "the env changed since it was played"
             )
         records.append(replace(record, episode=k))
-        personas += [p.name for p in resolve_personas(_personas_arg(episode.personas)) if p.name not in personas]
+        personas += [p.name for p in resolve_personas(personas_arg(episode.personas)) if p.name not in personas]
         wall += result.wall_time_s
     return EvaluationResult(name, env_id, tuple(personas), played[0].seed, tuple(records), wall, "single")

@@ -21,12 +21,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from coop_gym.envs.core import nominal_model_for
-from coop_gym.experiment.paper import XI_VALUES
 from coop_gym.experiment.simulation import ExperimentData
 from coop_gym.model.params import PersonParams, Timing
 from estimator.identify import Trial, identify
 from estimator.kalman import NOMINAL_COLUMNS, FastKalmanFilter
 from estimator.nominal import NominalModel
+from estimator.paper import XI_VALUES
 
 __all__ = [
     "IDENTIFIED_FIELDS",

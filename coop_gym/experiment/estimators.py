@@ -9,7 +9,7 @@ when confident:
   to the filterpy reference) on the persona's nominal model
   (:func:`coop_gym.envs.core.nominal_model_for`: the persona's typical gains, not the
   subject's varied ones), thresholded at +/-0.3. Its probabilities for log loss / Brier /
-  ECE come from :func:`gaussian_xi_probabilities`.
+  ECE come from :func:`~estimator.judgment.gaussian_xi_probabilities`.
 * ``multiple_model`` / ``imm`` -- MMAE and IMM of :mod:`estimator.multiple_model` on
   the same nominal model, MAP judgment.
 * ``delay_aware`` -- the same MMAE fed the *delayed* intention drive
@@ -51,8 +51,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
-from scipy.special import ndtr
+from numpy.typing import NDArray
 
 from coop_gym.envs.switching import level_filter
 from coop_gym.experiment.banks import (
@@ -65,6 +64,7 @@ from coop_gym.experiment.banks import (
     subject_models,
 )
 from coop_gym.experiment.simulation import ExperimentData, judgment_step
+from estimator.judgment import gaussian_xi_probabilities
 from estimator.kalman import FastKalmanFilter, nominal_row
 from estimator.multiple_model import IMMEstimator, MultipleModelEstimator, map_judgment, sequential_judgment
 from estimator.nominal import NominalModel
@@ -93,7 +93,7 @@ class EstimateResult:
         estimator: Its name.
         judgment: (S, N) judged ``xi`` in {-1, 0, +1}.
         probabilities: (S, N, 3) ``P(xi = -1, 0, +1)`` at the judgment, ordered as :data:`XI_VALUES`
-            (for the KF, :func:`gaussian_xi_probabilities` of its ``xi`` marginal).
+            (for the KF, :func:`~estimator.judgment.gaussian_xi_probabilities` of its ``xi`` marginal).
         latency_s: (S, N) time from the initial cue onset to the judgment [s].
         xi_trace: (S, N, T) running ``xi`` estimate (KF mean, or posterior mean ``P(+1) - P(-1)``).
         state_trace: (S, N, T, 3) running ``x, xdot, eta`` estimate (NaN where not kept).
@@ -107,25 +107,6 @@ class EstimateResult:
     xi_trace: NDArray[np.float64]
     state_trace: NDArray[np.float64]
     xi_std_trace: NDArray[np.float64]
-
-
-def gaussian_xi_probabilities(mean: ArrayLike, std: ArrayLike) -> NDArray[np.float64]:
-    """Map the KF's Gaussian ``xi`` marginal ``N(mean, std^2)`` to probabilities over {-1, 0, +1}.
-
-    ``P(xi = k)`` is the Gaussian mass of ``k``'s cell ``(-inf, -0.5]``, ``(-0.5, 0.5)``,
-    ``[0.5, inf)``: the probability that ``k`` is the nearest value. The KF has no
-    probabilities of its own; this is the documented mapping behind its log loss, Brier
-    score and ECE.
-
-    Example:
-        >>> gaussian_xi_probabilities(0.0, 1e-9).round(3).tolist()
-        [0.0, 1.0, 0.0]
-    """
-    m = np.asarray(mean, dtype=np.float64)
-    sd = np.maximum(np.asarray(std, dtype=np.float64), 1e-12)
-    lo = ndtr((-0.5 - m) / sd)
-    hi = ndtr((0.5 - m) / sd)
-    return np.stack([lo, hi - lo, 1.0 - hi], axis=-1)
 
 
 def _flatten(

@@ -7,17 +7,17 @@ from typing import Any
 import numpy as np
 
 from coop_gym.experiment.estimators import EstimateResult, estimate
-from coop_gym.experiment.paper import (
+from coop_gym.experiment.simulation import ExperimentData
+from coop_gym.io import save_figure
+from estimator.paper import (
     PAPER_RESULTS,
     XI_NAMES,
     XI_SHORT,
     PaperResults,
     balanced_accuracy,
     conditional_tables,
+    percent,
 )
-from coop_gym.experiment.simulation import ExperimentData
-from coop_gym.experiment.tables import _pct
-from coop_gym.io import save_figure
 
 __all__ = ["plot_confusion", "plot_trial"]
 
@@ -163,7 +163,7 @@ def plot_confusion(summary: dict[str, Any], path: str, paper: PaperResults = PAP
         for r in range(3):
             for c in range(3):
                 v = rates[r, c]
-                txt = f"{int(conf[r, c])}\n{_pct(v)}"
+                txt = f"{int(conf[r, c])}\n{percent(v)}"
                 ax.text(c, r, txt, ha="center", va="center", color="white" if v > 0.5 else "black", fontsize=9)
         ax.set_xticks(range(3), list(XI_SHORT))
         ax.set_yticks(range(3), list(XI_SHORT))

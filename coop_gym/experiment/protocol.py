@@ -14,12 +14,14 @@ import json
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 import tyro
 
 from coop_gym.cli import BadArgs, PositiveInt, Seed, exit_status, one_of, output_path_problem, parse, seed_range_problem
-from coop_gym.experiment.banks import identified_banks, intention_drive
+from coop_gym.experiment.banks import identified_banks, intention_drive, subject_models
 from coop_gym.experiment.estimators import (
     ESTIMATORS,
     NEEDS_CALIBRATION,
@@ -28,11 +30,13 @@ from coop_gym.experiment.estimators import (
     fit_recalibration,
     gaussian_xi_probabilities,
 )
-from coop_gym.experiment.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
 from coop_gym.experiment.plots import plot_confusion, plot_trial
 from coop_gym.experiment.simulation import ExperimentData, ProtocolConfig, TrialSpec, draw_trials, run_experiment
 from coop_gym.experiment.tables import aggregate, format_aggregate, format_tables, summarize
+from coop_gym.io import write_text
 from coop_gym.model.difficulty import DIFFICULTIES
+from estimator.paper import PAPER_RESULTS, accuracy, balanced_accuracy, conditional_tables, confusion_matrix
+from estimator.recording import Recording, format_recording
 
 __all__ = [
     "ESTIMATORS",
@@ -52,6 +56,7 @@ __all__ = [
     "confusion_matrix",
     "draw_trials",
     "estimate",
+    "export_recordings",
     "fit_recalibration",
     "format_aggregate",
     "format_tables",
@@ -87,6 +92,44 @@ def run_protocol(
     return summarize(data, estimate(data, estimator, decision=decision))
 
 
+def export_recordings(data: ExperimentData, folder: str | Path) -> list[Path]:
+    """Write every trial of ``data`` as a recording file (:mod:`estimator.recording`); returns the paths.
+
+    Each file ``seed{seed}_s{subject}_t{trial}.csv`` holds the measured position and force, the
+    verbal and commanded physical cues, the requested and true ``xi``, and the subject's nominal
+    model (the one the protocol's filters run on), so ``python -m estimator.estimate`` judges
+    the files exactly as the protocol judged the trials.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    models = subject_models(data)
+    time_s = np.arange(data.config.n_steps, dtype=np.float64) * data.config.timing.dt_s
+    paths = []
+    for i, persona in enumerate(data.personas):
+        for k, spec in enumerate(data.trials):
+            recording = Recording(
+                time_s=time_s,
+                shoulder_position_m=data.measured_position_m[i, k],
+                force_n=data.measured_force_n[i, k],
+                verbal_cue=data.verbal_cue[k],
+                cue_force_n=data.push_force_n[k],
+                requested_xi=np.full(time_s.shape, spec.requested_xi),
+                true_xi=data.true_state[i, k, :, 3],
+                model=models[i],
+                meta={
+                    "source": f"{PROG} --seed {data.seed}",
+                    "subject": f"s{i:02d}",
+                    "persona": persona.name,
+                    "trial": f"t{k:02d}",
+                    "cues": f"physical {spec.physical_cue}, verbal {spec.verbal_cue}, "
+                    f"verbal minus physical onset {spec.relative_timing_s} s",
+                },
+            )
+            path = folder / f"seed{data.seed}_s{i:02d}_t{k:02d}.csv"
+            paths.append(write_text(path, format_recording(recording)))
+    return paths
+
+
 PROG = "python -m coop_gym.experiment.protocol"
 DESCRIPTION = (
     "Bell & Asada's cooperativeness-judgment experiment on simulated subjects: the paper's "
@@ -120,6 +163,8 @@ class Args:
     """write a Fig. 6 style trace of one trial (PNG)"""
     plot_confusion: Annotated[str | None, tyro.conf.arg(metavar="PATH")] = None
     """write the confusion matrix beside the paper's (PNG)"""
+    export: Annotated[str | None, tyro.conf.arg(metavar="DIR")] = None
+    """write every simulated trial as a recording (estimator.recording) into this folder"""
 
     def __post_init__(self) -> None:
         """The first value no run can use is a usage error naming it."""
@@ -149,7 +194,8 @@ def args_problem(args: Args) -> str | None:
         problem = output_path_problem(path) if path is not None else None
         if problem:
             return problem
-    return None
+    problem = output_path_problem(args.export, folder=True) if args.export is not None else None
+    return f"--export: {problem}" if problem else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -162,6 +208,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         data = run_experiment(config, seed, with_calibration=args.estimator in NEEDS_CALIBRATION)
         result = estimate(data, args.estimator, decision=args.decision)
         summaries.append(summarize(data, result))
+        if args.export is not None:
+            export_recordings(data, args.export)
         if first is None:
             first = (data, result)
     assert first is not None

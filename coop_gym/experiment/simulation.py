@@ -27,12 +27,13 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from coop_gym.experiment.paper import PAPER_RESULTS, XI_VALUES
 from coop_gym.model.difficulty import get_difficulty
 from coop_gym.model.dynamics import simulate
 from coop_gym.model.params import Cues, PersonParams, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas, sample_person
-from estimator.judgment import JUDGMENT_COLUMNS, ThresholdJudgment, judgment_substep
+from estimator.judgment import ThresholdJudgment, first_judgment_step
+from estimator.multiple_model import TRIAL_PROBABILITY_FLOOR, TRIAL_SWITCHING_RATE_PER_S
+from estimator.paper import PAPER_RESULTS, XI_VALUES
 
 __all__ = [
     "ExperimentData",
@@ -92,8 +93,8 @@ class ProtocolConfig:
     realism: Realism = field(default_factory=Realism)
     timing: Timing = field(default_factory=Timing)
     cues: Cues = field(default_factory=Cues)
-    switching_rate_per_s: float = 0.05
-    probability_floor: float = 1e-4
+    switching_rate_per_s: float = TRIAL_SWITCHING_RATE_PER_S
+    probability_floor: float = TRIAL_PROBABILITY_FLOOR
     difficulty: str | None = None
 
     def __post_init__(self) -> None:
@@ -224,16 +225,11 @@ def draw_trials(config: ProtocolConfig, rng: np.random.Generator) -> tuple[Trial
 def judgment_step(config: ProtocolConfig, push_force_n: NDArray[np.float64], verbal_cue: NDArray[np.float64]) -> int:
     """Step index at which the environments' judgment tracker judges the initial cue onset.
 
-    Runs :func:`~estimator.judgment.judgment_substep` over the cue sequence, so the
-    protocol and the environments sample ``xi_hat`` on exactly the same step.
+    :func:`~estimator.judgment.first_judgment_step` over the cue sequence, so the protocol and
+    the environments sample ``xi_hat`` on exactly the same step.
     """
-    row = np.zeros(len(JUDGMENT_COLUMNS))
-    row[0] = config.timing.episode_s
-    for t in range(push_force_n.shape[0]):
-        active = bool(push_force_n[t] > 0.0 or verbal_cue[t] != 0.0)
-        if judgment_substep(row, active, 0.0, config.judgment.delay_s, config.judgment.threshold, config.timing.dt_s):
-            return t
-    raise ValueError("no judgment inside the trial: no cue, or the judgment delay exceeds the trial")
+    active = (np.asarray(push_force_n) > 0.0) | (np.asarray(verbal_cue) != 0.0)
+    return first_judgment_step(active, config.judgment, config.timing.dt_s)
 
 
 # --------------------------------------------------------------------------- the experiment

@@ -2,27 +2,25 @@
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from coop_gym.experiment.estimators import EstimateResult
-from coop_gym.experiment.paper import (
+from coop_gym.experiment.simulation import ExperimentData
+from estimator.paper import (
     PAPER_RESULTS,
     XI_NAMES,
     XI_SHORT,
     PaperResults,
-    accuracy,
-    balanced_accuracy,
     conditional_tables,
-    confusion_matrix,
+    judgment_scores,
+    nan_to_none,
+    percent,
 )
-from coop_gym.experiment.simulation import ExperimentData
-from estimator import metrics
+from estimator.paper import format_tables as paper_tables
 
 __all__ = [
     "aggregate",
@@ -37,81 +35,31 @@ __all__ = [
 def summarize(data: ExperimentData, result: EstimateResult) -> dict[str, Any]:
     """The paper's three tables and the scores of one estimator on one experiment (JSON-ready).
 
-    Keys: ``confusion`` (rows requested -1, 0, 1; columns judged -1, 0, 1),
+    Keys: those of :func:`estimator.paper.judgment_scores` (``confusion``,
     ``p_estimated_given_requested``, ``p_requested_given_estimated``, ``accuracy``,
-    ``balanced_accuracy``, ``log_loss``, ``brier``, ``ece``, ``mean_latency_s`` and the run's
+    ``balanced_accuracy``, ``log_loss``, ``brier``, ``ece``, ``mean_latency_s``) and the run's
     identification.
     """
-    requested = data.requested
-    conf = confusion_matrix(requested, result.judgment)
-    # Calibration scores from estimator.metrics (10 top-label bins on [1/3, 1] for the ECE).
-    probs = result.probabilities.reshape(-1, 3)
-    probs = probs / probs.sum(axis=1, keepdims=True)
-    labels = requested.ravel()
-    given_req, given_est = conditional_tables(conf)
     return {
         "estimator": result.estimator,
         "seed": data.seed,
         "n_subjects": len(data.subjects),
         "n_trials": len(data.trials),
         "personas": [p.name for p in data.personas],
-        "confusion": conf.tolist(),
-        "p_estimated_given_requested": _nan_to_none(given_req),
-        "p_requested_given_estimated": _nan_to_none(given_est),
-        "accuracy": accuracy(conf),
-        "balanced_accuracy": balanced_accuracy(conf),
-        "log_loss": metrics.log_loss(probs, labels),
-        "brier": metrics.brier_score(probs, labels),
-        "ece": metrics.expected_calibration_error(probs, labels),
-        "mean_latency_s": float(result.latency_s.mean()),
+        **judgment_scores(data.requested, result.judgment, result.probabilities, result.latency_s),
     }
-
-
-def _nan_to_none(a: NDArray[np.float64]) -> list[list[float | None]]:
-    return [[None if not math.isfinite(v) else float(v) for v in row] for row in a]
 
 
 # --------------------------------------------------------------------------- reporting
 
 
-def _pct(v: float | None) -> str:
-    return "   -  " if v is None or not math.isfinite(v) else f"{100 * v:5.1f}%"
-
-
 def format_tables(summary: dict[str, Any], paper: PaperResults = PAPER_RESULTS) -> str:
     """The paper's three tables for one run, each beside the paper's numbers on real people."""
-    conf = np.array(summary["confusion"])
-    ours = [conf, *conditional_tables(conf)]
-    theirs = [paper.matrix, *conditional_tables(paper.matrix)]
-    titles = (
-        "Table I   joint counts (rows: requested, columns: estimated)",
-        "Table II  P(estimated | requested)",
-        "Table III P(requested | estimated)",
-    )
-    head = "".join(f"{n:>8s}" for n in XI_SHORT)
-    lines = [
+    title = (
         f"estimator: {summary['estimator']}, seed {summary['seed']}, {summary['n_subjects']} subjects x "
-        f"{summary['n_trials']} trials (simulated)  |  paper: 4 real subjects x 25 trials",
-    ]
-    for k, title in enumerate(titles):
-        lines += ["", f"{title}   [simulated | paper]", f"{'requested':>14s}{head}   |{head}"]
-        for r, name in enumerate(XI_NAMES):
-            if k == 0:
-                a = "".join(f"{int(v):8d}" for v in ours[0][r])
-                b = "".join(f"{int(v):8d}" for v in theirs[0][r])
-            else:
-                a = "".join(f"{_pct(v):>8s}" for v in ours[k][r])
-                b = "".join(f"{_pct(v):>8s}" for v in theirs[k][r])
-            lines.append(f"{name:>14s}{a}   |{b}")
-    lines += [
-        "",
-        f"accuracy           {100 * summary['accuracy']:5.1f}%   (paper {100 * paper.accuracy:5.1f}%)",
-        f"balanced accuracy  {100 * summary['balanced_accuracy']:5.1f}%   "
-        f"(paper {100 * paper.balanced_accuracy:5.1f}%)",
-        f"log loss {summary['log_loss']:.3f} nats, Brier {summary['brier']:.3f}, ECE {summary['ece']:.3f}, "
-        f"judgment {summary['mean_latency_s']:.2f} s after the initial cue onset",
-    ]
-    return "\n".join(lines)
+        f"{summary['n_trials']} trials (simulated)  |  paper: 4 real subjects x 25 trials"
+    )
+    return paper_tables(summary, title, paper=paper)
 
 
 def aggregate(summaries: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -128,10 +76,10 @@ def aggregate(summaries: Sequence[dict[str, Any]]) -> dict[str, Any]:
     }
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        out["p_estimated_given_requested_mean"] = _nan_to_none(np.nanmean(given_req, axis=0))
-        out["p_estimated_given_requested_std"] = _nan_to_none(np.nanstd(given_req, axis=0))
-        out["p_requested_given_estimated_mean"] = _nan_to_none(np.nanmean(given_est, axis=0))
-        out["p_requested_given_estimated_std"] = _nan_to_none(np.nanstd(given_est, axis=0))
+        out["p_estimated_given_requested_mean"] = nan_to_none(np.nanmean(given_req, axis=0))
+        out["p_estimated_given_requested_std"] = nan_to_none(np.nanstd(given_req, axis=0))
+        out["p_requested_given_estimated_mean"] = nan_to_none(np.nanmean(given_est, axis=0))
+        out["p_requested_given_estimated_std"] = nan_to_none(np.nanstd(given_est, axis=0))
     for key in ("accuracy", "balanced_accuracy", "log_loss", "brier", "ece", "mean_latency_s"):
         values = np.array([s[key] for s in summaries], dtype=np.float64)
         out[key] = float(values.mean())
@@ -158,7 +106,7 @@ def format_aggregate(agg: dict[str, Any], paper: PaperResults = PAPER_RESULTS) -
         for r, name in enumerate(XI_NAMES):
             if pct:
                 a = "".join(f"{100 * m:6.1f} +/-{100 * s:4.1f}" for m, s in zip(mean[r], std[r], strict=True))
-                b = "".join(f"{_pct(v):>8s}" for v in theirs[r])
+                b = "".join(f"{percent(v):>8s}" for v in theirs[r])
             else:
                 a = "".join(f"{m:6.1f} +/-{s:4.1f}" for m, s in zip(mean[r], std[r], strict=True))
                 b = "".join(f"{int(v):8d}" for v in theirs[r])
