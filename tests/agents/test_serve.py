@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 
-from agents.evaluate import cli as evaluate_cli
+from agents.tools import evaluate_cli
 from agents.tools.play_log import read_played, score_played
 from estimator import estimate
 
