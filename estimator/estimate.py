@@ -24,9 +24,11 @@ Example:
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -222,11 +224,29 @@ def _text(summary: dict[str, Any], estimator: str) -> str:
     return "\n".join(lines)
 
 
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+"""The figure formats ``--plot`` writes (matplotlib's, by the file's suffix)."""
+
+
+def _plot_problem(plot: str | None) -> str | None:
+    """Why ``--plot`` cannot be written, before any recording is read (None if it can, or is not asked for)."""
+    if plot is None:
+        return None
+    path = Path(plot)
+    if path.suffix.lower() not in PLOT_SUFFIXES:
+        return f"--plot: unsupported file type {path.suffix or '(none)'!r}; use {', '.join(PLOT_SUFFIXES)}"
+    folder = path.parent
+    if path.is_dir() or not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+        return f"--plot: cannot write {path} ({folder} is not a writable folder)"
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point: exit 0, 1 on a bad recording (the message names line and column), 2 on usage."""
     args = tyro.cli(Args, args=list(sys.argv[1:] if argv is None else argv), prog=PROG, description=DESCRIPTION)
-    if not args.recordings:
-        print(f"usage: {PROG} [-h] [OPTIONS] RECORDING...\n{PROG}: error: give at least one recording", file=sys.stderr)
+    problem = "give at least one recording" if not args.recordings else _plot_problem(args.plot)
+    if problem:
+        print(f"usage: {PROG} [-h] [OPTIONS] RECORDING...\n{PROG}: error: {problem}", file=sys.stderr)
         return 2
     try:
         paths = recordings_in(args.recordings)
@@ -246,4 +266,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        status = main()
+        sys.stdout.flush()
+    except BrokenPipeError:  # a reader that closed the pipe early (... --json | head): a quiet stop, status 1
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        status = 1
+    sys.exit(status)

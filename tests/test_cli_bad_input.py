@@ -271,6 +271,8 @@ CASES: list[tuple[str, str, list[str], str]] = [
     ("agents.tools.play", "fps 0", ["--fps", "0"], r"--fps must be >= 1"),
     ("agents.tools.serve", "port out of range", ["--port", "70000"], r"--port must be in 0..65535"),
     ("agents.tools.serve", "unknown persona", ["--personas", "nobody"], r"--personas: .*nobody"),
+    ("agents.tools.serve", "unknown database", ["--database", "nope://x"], r"--database nope://x: cannot open it"),
+    ("agents.tools.serve", "not a database URL", ["--database", "not a url"], r"--database not a url: cannot open it"),
     ("agents.tools.play", "unknown pace", ["--pace", "slow"], r"invalid choice 'slow' for argument '--pace'"),
     ("agents.caregivers.reading", "episodes 0", ["--episodes", "0"], r"--episodes must be positive, got 0"),
     ("agents.tune.baselines", "no family", [], r"\{blind,prober\}"),

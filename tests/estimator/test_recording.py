@@ -98,3 +98,15 @@ def test_the_plot_and_an_empty_folder(exported: Path, tmp_path: Path, capsys: py
 def test_no_recording_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert estimate.main([]) == 2
     assert "error: give at least one recording" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("plot", "message"),
+    [("trace.txt", "--plot: unsupported file type '.txt'"), ("missing/trace.png", "is not a writable folder")],
+)
+def test_a_plot_that_cannot_be_written_is_refused_before_any_work(
+    exported: Path, tmp_path: Path, plot: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert estimate.main([str(exported), "--plot", str(tmp_path / plot)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and not list(tmp_path.glob("**/trace*"))

@@ -24,7 +24,7 @@ from agents.tools.play import DEFAULT_ENV_ID
 from agents.tools.play_log import personas_arg
 from agents.tools.serve.app import ServerSettings, make_app
 from agents.tools.serve.store import DEFAULT_DATABASE, Store
-from coop_gym.cli import BadArgs, PositiveInt, output_path_problem, parse
+from coop_gym.cli import BadArgs, PositiveInt, fail, output_path_problem, parse
 from coop_gym.io import write_text
 from coop_gym.model.personas import resolve_personas
 
@@ -78,10 +78,20 @@ def export(store: Store, folder: str | Path) -> tuple[Path, list[Path]]:
     return played, recordings
 
 
+def _open_store(url: str) -> Store:
+    """The database at ``url``; a usage error naming it where it cannot be opened (a bad URL, a missing driver)."""
+    import sqlalchemy as sa
+
+    try:
+        return Store(url)
+    except (sa.exc.SQLAlchemyError, ValueError, OSError, ImportError) as exc:
+        fail(PROG, f"--database {url}: cannot open it ({type(exc).__name__}: {str(exc).splitlines()[0]})")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve until interrupted (or export and exit); usage errors exit with status 2."""
     args = parse(Args, argv, PROG, DESCRIPTION)
-    store = Store(args.database)
+    store = _open_store(args.database)
     if args.export is not None:
         played, recordings = export(store, args.export)
         print(f"wrote {played} ({len(store.caregiver_episodes())} caregiver episodes) and {len(recordings)} recordings")
@@ -91,7 +101,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Bound here, so port 0 gives a free port and the printed address is the real one.
     sock = socket.socket(socket.AF_INET6 if ":" in args.host else socket.AF_INET)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind((args.host, args.port))
+    try:
+        sock.bind((args.host, args.port))
+    except OSError as exc:  # the port is taken, or the host is no address of this machine
+        sock.close()
+        fail(PROG, f"--host {args.host} --port {args.port}: cannot listen there ({exc.strerror or exc})")
     sock.listen(128)  # connections wait in the backlog until uvicorn accepts them
     port = sock.getsockname()[1]
     names = {args.host, "127.0.0.1", "localhost"} if args.host in ("127.0.0.1", "localhost") else {args.host}
