@@ -329,14 +329,21 @@ def _timeouts_end(env: Any) -> Any:
     return TimeoutsEnd(env)
 
 
-def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int) -> dict[str, Any]:
-    """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out."""
+def train_one(
+    name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int, people: bool = False
+) -> dict[str, Any]:
+    """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out.
+
+    With ``people``, every scored policy also plays the validation people and the held-out episodes
+    (recorded in the run's ``candidates``, never selecting: :func:`people_report`).
+    """
     import torch
     from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
     from agents.evaluate import evaluate
     from agents.hyperparams import hyperparams_for
     from agents.rl import SelectionCallback, load_agent, make_model, make_train_env, save_agent
+    from agents.rl.callbacks import VALIDATION_SEED
 
     torch.set_num_threads(1)  # as train.py --threads
     row, size = _row(name)
@@ -363,7 +370,10 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     half = timesteps // 2
     every = max(1, (timesteps - half) // 8)
     checkpoints = folder / f"{name}__{seed}__{timesteps}_checkpoints"
-    selection = SelectionCallback(checkpoints, row.algo, ENV_ID, validation, 8, half, every, env_kwargs=row.env_kwargs)
+    recorded = {"validation": ("validation", validation, VALIDATION_SEED), "test": ("test", episodes, 0)}
+    selection = SelectionCallback(
+        checkpoints, row.algo, ENV_ID, validation, 8, half, every, row.env_kwargs, recorded=recorded if people else None
+    )
     started = time.perf_counter()
     model.learn(timesteps, callback=selection)
     selected = selection.finish(model)
@@ -380,7 +390,20 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
         "train_wall_s": wall_s,
         "kept_step": selected["timesteps"],
         "validation_success_rate": selected["validation_success_rate"],
+        **({"candidates": selected["scores"]} if people else {}),
     }
+
+
+def people_report(runs: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """Over a row's runs with ``candidates``: how well the training personas' validation episodes
+    (``train``, today's selection) and the validation people (``validation``) predict the held-out
+    people, and what each keeps (:func:`agents.evaluate.headroom.selection_study`); None without them."""
+    from agents.evaluate.headroom import selection_study
+
+    if len(runs) < 3 or not all("candidates" in run for run in runs):
+        return None
+    scored = [[{**p, "train": {"success_rate": p["success_rate"]}} for p in run["candidates"]] for run in runs]
+    return selection_study(scored, ("train", "validation"))
 
 
 def scripted(episodes: int) -> dict[str, dict[str, Any]]:
@@ -427,6 +450,12 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--cleanrl-script", type=Path, default=None, help="CleanRL's ppo.py, to train the cleanrl-* rows"
     )
+    parser.add_argument(
+        "--people",
+        action="store_true",
+        help="score every candidate policy on the validation people and the held-out episodes too: how well "
+        "each selecting set predicts the held-out people (the report's 'people' of each row)",
+    )
     add_save_argument(parser, "learners.json")
     return parser
 
@@ -446,7 +475,7 @@ def _row_runs(name: str, args: argparse.Namespace, parser: argparse.ArgumentPars
             )
             write_json(path, run)
         if not path.exists():
-            run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes)
+            run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes, args.people)
             write_json(path, run)
         run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
         if run["episodes"] != args.episodes:
@@ -497,6 +526,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.rows:
         runs = _row_runs(name, args, parser)
         table[name] = {"what": _what(name), **aggregate(runs, blind, oracle), "per_seed": runs}
+        if (people := people_report(runs)) is not None:
+            table[name]["people"] = people
     for name, row in table.items():
         s, c = row["success"], row["score"]
         print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']} {c['ci95']}")
