@@ -107,6 +107,8 @@ class Row:
     algo_kwargs: dict[str, Any] = field(default_factory=dict)
     """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``). A JaxPPO row without
     ``policy_lag`` here runs ``policy_lag=0``, whatever ``train.py``'s default."""
+    personas: str = "train_wide"
+    """The people trained on (``train.py``'s wider training personas, or e.g. ``"train_population"``)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -149,6 +151,14 @@ ROWS: dict[str, Row] = {
         " (train.py's default)",
         "jax",
         algo_kwargs={"policy_lag": 1},
+    ),
+    "jax-kalman-lag-population": Row(
+        "ppo",
+        {},
+        "jax-kalman-lag trained across bodies: 512 persons of the validation people's population (train_population)",
+        "jax",
+        algo_kwargs={"policy_lag": 1},
+        personas="train_population",
     ),
     "jax-switching": Row("ppo", SWITCHING, "JaxPPO, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"),
     "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
@@ -332,11 +342,8 @@ def _timeouts_end(env: Any) -> Any:
 def train_one(
     name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int, people: bool = False
 ) -> dict[str, Any]:
-    """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out.
-
-    With ``people``, every scored policy also plays the validation people and the held-out episodes
-    (recorded in the run's ``candidates``, never selecting: :func:`people_report`).
-    """
+    """Train row ``name`` as ``train.py`` does, keep the best-validated policy, score it held-out (``people``: see
+    :func:`people_report`; every scored policy also plays the validation people and the held-out episodes)."""
     import torch
     from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
@@ -351,7 +358,7 @@ def train_one(
     sequential = {"policy_lag": 0} if row.algo == "ppo" and row.framework == "jax" else {}
     config = config.replace(
         total_timesteps=timesteps,
-        personas="train_wide",
+        personas=row.personas,
         algo_kwargs={**config.algo_kwargs, **sequential, **row.algo_kwargs},
     )
     if size:  # the same samples per update on N envs (and E epochs)

@@ -58,6 +58,7 @@ __all__ = [
     "PERSONAS",
     "POPULATION",
     "TEST_PERSONAS",
+    "TRAINING_POPULATION_SEED",
     "TRAIN_PERSONAS",
     "VALIDATION_PEOPLE",
     "VALIDATION_POPULATION_SEED",
@@ -68,6 +69,7 @@ __all__ = [
     "get_persona",
     "resolve_personas",
     "sample_person",
+    "training_population",
     "validation_people",
 ]
 
@@ -235,7 +237,8 @@ def resolve_personas(spec: str | Persona | Sequence[str | Persona]) -> tuple[Per
 
     The sets: ``"train"``, ``"test"`` (held out), ``"all"``, ``"train_wide"`` -- the
     training personas with :data:`WIDE_VARIATION_STD` person-to-person variation -- and
-    ``"validation"``, the validation people (:func:`validation_people`).
+    ``"validation"``, the validation people (:func:`validation_people`), and ``"train_population"``,
+    other people of their population to train on (:func:`training_population`).
     """
     if isinstance(spec, Persona):
         return (spec,)
@@ -262,8 +265,8 @@ def resolve_personas(spec: str | Persona | Sequence[str | Persona]) -> tuple[Per
 
 def _bad_persona(spec: object) -> tuple[Persona, ...]:
     raise ValueError(
-        "personas must be 'train', 'train_wide', 'validation', 'test', 'all', a persona name or a non-empty "
-        f"list of them, got {spec!r}"
+        "personas must be 'train', 'train_wide', 'train_population', 'validation', 'test', 'all', a persona name "
+        f"or a non-empty list of them, got {spec!r}"
     )
 
 
@@ -411,13 +414,15 @@ def _person(rng: np.random.Generator) -> tuple[PersonParams, tuple[tuple[str, fl
 
 
 @functools.lru_cache(maxsize=8)  # immutable people, resolved by every env and evaluation of the set
-def validation_people(n: int = VALIDATION_PEOPLE, seed: int = VALIDATION_POPULATION_SEED) -> tuple[Persona, ...]:
+def validation_people(
+    n: int = VALIDATION_PEOPLE, seed: int = VALIDATION_POPULATION_SEED, prefix: str = "validation"
+) -> tuple[Persona, ...]:
     """``n`` persons drawn from :data:`POPULATION` with ``seed``: the same people for the same arguments.
 
-    Each is a :class:`Persona` named ``validation_KK`` with no
-    person-to-person variation of its own. ``personas="validation"`` is
-    ``validation_people()``; any env, :func:`agents.evaluate.evaluate` and ``--personas`` take
-    the tuple too.
+    Each is a :class:`Persona` named ``{prefix}_KK`` with no person-to-person variation of its
+    own. ``personas="validation"`` is ``validation_people()``, ``"train_population"`` is
+    :func:`training_population`; any env, :func:`agents.evaluate.evaluate` and ``--personas``
+    take the tuple too.
 
     Raises:
         ValueError: ``n`` is not a positive int, or ``seed`` not a non-negative int.
@@ -431,8 +436,8 @@ def validation_people(n: int = VALIDATION_PEOPLE, seed: int = VALIDATION_POPULAT
         params, factors = _person(rng)
         people.append(
             Persona(
-                f"validation_{k:0{width}d}",
-                f"Validation person {k} of the population (seed {seed}).",
+                f"{prefix}_{k:0{width}d}",
+                f"Person {k} drawn from the population (seed {seed}).",
                 params,
                 variation_relative_std=0.0,
                 level_factors=factors,
@@ -441,10 +446,27 @@ def validation_people(n: int = VALIDATION_PEOPLE, seed: int = VALIDATION_POPULAT
     return tuple(people)
 
 
+TRAINING_POPULATION_SEED = 1958
+"""Seed of the ``"train_population"`` draw: other people than the validation people's seed draws."""
+
+
+def training_population() -> tuple[Persona, ...]:
+    """``"train_population"``: 512 persons of :data:`POPULATION` (seed :data:`TRAINING_POPULATION_SEED`) to train on.
+
+    Training across bodies (domain randomisation over the person parameters): the same
+    population as the validation people, other persons, so validation still meets people no
+    training episode shows; the test people stay outside both.
+    """
+    return validation_people(512, TRAINING_POPULATION_SEED, "population")
+
+
 def _check_int(name: str, value: object, low: int) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
         raise ValueError(f"validation_people: {name} must be an int >= {low}, got {value!r}")
 
 
-_DRAWN_SETS: dict[str, Callable[[], tuple[Persona, ...]]] = {"validation": validation_people}
+_DRAWN_SETS: dict[str, Callable[[], tuple[Persona, ...]]] = {
+    "validation": validation_people,
+    "train_population": training_population,
+}
 """Set names that resolve to drawn people."""

@@ -20,6 +20,7 @@ from coop_gym.model.personas import (
     ParameterRange,
     Persona,
     resolve_personas,
+    training_population,
     validation_people,
 )
 
@@ -38,6 +39,17 @@ def test_the_validation_set_is_the_seeded_draw_of_named_people_apart_from_every_
     # Another seed draws other people; the draw does not depend on how many are drawn.
     assert validation_people(4, seed=1) != validation_people(4)
     assert [p.params for p in validation_people(4)] == [p.params for p in people[:4]]
+
+
+def test_the_training_population_is_other_people_of_the_same_population() -> None:
+    from agents.trainer.hyperparams import hyperparams_for
+
+    trained = resolve_personas("train_population")
+    assert trained == training_population() and len(trained) == 512
+    assert all(p.name.startswith("population_") for p in trained)
+    assert not {p.params for p in trained} & {p.params for p in validation_people()}
+    # A training distribution the trainer accepts (it holds no held-out persona).
+    assert hyperparams_for("ppo").replace(personas="train_population").personas == "train_population"
 
 
 def test_every_drawn_parameter_lies_in_its_documented_range() -> None:
