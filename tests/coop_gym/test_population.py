@@ -42,7 +42,7 @@ def test_the_validation_set_is_the_seeded_draw_of_named_people_apart_from_every_
 
 
 def test_the_training_population_is_other_people_of_the_same_population() -> None:
-    from agents.trainer.hyperparams import hyperparams_for
+    from agents.hyperparams import hyperparams_for
 
     trained = resolve_personas("train_population")
     assert trained == training_population() and len(trained) == 512
