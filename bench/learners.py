@@ -1,7 +1,7 @@
 """Learner x observation on the hard level: one budget, the same held-out episodes, several seeds.
 
     python bench/learners.py [--rows ppo-kalman,ppo-raw,...] [--seeds 0,1,2,3,4] [--timesteps 1000000]
-                             [--episodes 2000] [--runs DIR] [--save [PATH]]
+                             [--episodes 2000] [--runs DIR] [--people] [--save [PATH]]
 
 Does the paper's estimator help a learner, and can memory replace it? Each row is a learner
 and the observation it gets (:data:`ROWS`):
@@ -22,7 +22,8 @@ and the observation it gets (:data:`ROWS`):
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no ``VecNormalize``;
   ``jax-kalman-lag``: ``jax-kalman`` with ``policy_lag=1`` (each update on a second core while the
-  next rollout plays, one update behind): what ``python train.py`` trains;
+  next rollout plays, one update behind): what ``python train.py`` trains; ``jax-kalman-lag-population``:
+  the same trained across bodies (``personas="train_population"``, other people of the validation people's population);
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
   :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
   ``jax-discreteunit-ends``: the same with a time-out ending the return, as in CleanRL's script;
@@ -57,7 +58,9 @@ Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with 
 model beside it) as soon as it is done; a rerun with the same ``--runs`` skips what is
 there, so an interrupted sweep loses only the run in progress; ``--no-train`` reports the runs
 there and trains none (rows may then have different seeds). ``--save`` writes the report
-to ``bench/results/learners.json`` (``bench/result_files.py``).
+to ``bench/results/learners.json`` (``bench/result_files.py``). ``--people`` has every scored policy also
+play the validation people and the held-out episodes: each row's ``people`` says how well each selecting
+set predicts the held-out people (``bench/results/selection_people.json``).
 """
 
 from __future__ import annotations
