@@ -1,13 +1,11 @@
 """Train a robot-caregiver guidance agent, then score it against the scripted baselines.
 
-``python train.py`` trains PPO on ``CoopGym/SitToStandHard-v2`` (training personas only), keeps
-the policy that scores best on validation episodes (docs/agents.md, "Which policy is saved"),
-scores it and every scripted baseline on the same 1000 seeded episodes of the held-out personas, prints
-the comparison (with each agent's mind-reading score) and saves ``runs/{env}__{algo}__{seed}__{time}/``
-(:mod:`agents.run_folder`). Ctrl-C stops at a checkpoint; ``--resume RUN`` continues it.
-
-Read top to bottom: the typed :class:`Args` (tyro; field docstrings are the ``--help``; checked by
-:mod:`agents.trainer.train_args`), train (:mod:`agents.trainer.run`), report (:mod:`agents.trainer.run_report`).
+``python train.py`` trains PPO on ``CoopGym/SitToStandHard-v2`` (training personas only), keeps the policy that scores
+best on validation episodes (``--select-on``; docs/agents.md, "Which policy is saved"), scores it and every scripted
+baseline on the same 1000 seeded episodes of the held-out personas, prints the comparison (mind-reading scores too),
+saves ``runs/{env}__{algo}__{seed}__{time}/`` (:mod:`agents.run_folder`). Ctrl-C stops at a checkpoint;
+``--resume RUN`` continues it. Read top to bottom: :class:`Args` (tyro; field docstrings are the ``--help``; checked by
+:mod:`agents.trainer.train_args`), training (:mod:`agents.trainer.run`), the report (:mod:`agents.trainer.run_report`).
 """
 
 from __future__ import annotations
@@ -46,7 +44,7 @@ class Args:
     eval_seed: int = 0
     """seed of evaluation episode 0 (the same episodes for every agent)"""
     eval_personas: str = "test"
-    """personas evaluated on: test (held out, never trained on), train, all, a name or names joined by ','"""
+    """personas evaluated on: test (held out, never trained on), validation, train, all, names joined by ','"""
     eval_only: bool = False
     """skip training: evaluate --model against the baselines"""
     model: str | None = None
@@ -58,7 +56,9 @@ class Args:
     select_points: int = 8
     """sb3: scores on validation episodes in the last half of training; the best policy is saved (0: the last)"""
     select_episodes: int = 1000
-    """validation episodes per score (the training personas, never the held-out ones)"""
+    """validation episodes per score (never the held-out personas)"""
+    select_on: Literal["train", "validation"] = "train"
+    """people selected on: train (the training personas) or validation (the validation people, never trained on)"""
     checkpoint_every: int | None = None
     """env steps between checkpoints, at the next rollout boundary; None: a tenth of --timesteps; 0: on stop only"""
     threads: int = 1

@@ -1,7 +1,7 @@
 """Learner x observation on the hard level: one budget, the same held-out episodes, several seeds.
 
     python bench/learners.py [--rows ppo-kalman,ppo-raw,...] [--seeds 0,1,2,3,4] [--timesteps 1000000]
-                             [--episodes 2000] [--runs DIR] [--save [PATH]]
+                             [--episodes 2000] [--runs DIR] [--people] [--save [PATH]]
 
 Does the paper's estimator help a learner, and can memory replace it? Each row is a learner
 and the observation it gets (:data:`ROWS`):
@@ -22,7 +22,8 @@ and the observation it gets (:data:`ROWS`):
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no ``VecNormalize``;
   ``jax-kalman-lag``: ``jax-kalman`` with ``policy_lag=1`` (each update on a second core while the
-  next rollout plays, one update behind): what ``python train.py`` trains;
+  next rollout plays, one update behind): what ``python train.py`` trains; ``jax-kalman-lag-population``:
+  the same trained across bodies (``personas="train_population"``, other people of the validation people's population);
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
   :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
   ``jax-discreteunit-ends``: the same with a time-out ending the return, as in CleanRL's script;
@@ -57,7 +58,9 @@ Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with 
 model beside it) as soon as it is done; a rerun with the same ``--runs`` skips what is
 there, so an interrupted sweep loses only the run in progress; ``--no-train`` reports the runs
 there and trains none (rows may then have different seeds). ``--save`` writes the report
-to ``bench/results/learners.json`` (``bench/result_files.py``).
+to ``bench/results/learners.json`` (``bench/result_files.py``). ``--people`` has every scored policy also
+play the validation people and the held-out episodes: each row's ``people`` says how well each selecting
+set predicts the held-out people (``bench/results/selection_people.json``).
 """
 
 from __future__ import annotations
@@ -107,6 +110,8 @@ class Row:
     algo_kwargs: dict[str, Any] = field(default_factory=dict)
     """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``). A JaxPPO row without
     ``policy_lag`` here runs ``policy_lag=0``, whatever ``train.py``'s default."""
+    personas: str = "train_wide"
+    """The people trained on (``train.py``'s wider training personas, or e.g. ``"train_population"``)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -149,6 +154,14 @@ ROWS: dict[str, Row] = {
         " (train.py's default)",
         "jax",
         algo_kwargs={"policy_lag": 1},
+    ),
+    "jax-kalman-lag-population": Row(
+        "ppo",
+        {},
+        "jax-kalman-lag trained across bodies: 512 persons of the validation people's population (train_population)",
+        "jax",
+        algo_kwargs={"policy_lag": 1},
+        personas="train_population",
     ),
     "jax-switching": Row("ppo", SWITCHING, "JaxPPO, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"),
     "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
@@ -329,14 +342,18 @@ def _timeouts_end(env: Any) -> Any:
     return TimeoutsEnd(env)
 
 
-def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int) -> dict[str, Any]:
-    """Train row ``name`` with ``seed`` as ``train.py`` does, keep the best-validated policy, score it held-out."""
+def train_one(
+    name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int, people: bool = False
+) -> dict[str, Any]:
+    """Train row ``name`` as ``train.py`` does, keep the best-validated policy, score it held-out (``people``: see
+    :func:`people_report`; every scored policy also plays the validation people and the held-out episodes)."""
     import torch
     from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
     from agents.evaluate import evaluate
     from agents.hyperparams import hyperparams_for
     from agents.rl import SelectionCallback, load_agent, make_model, make_train_env, save_agent
+    from agents.rl.callbacks import VALIDATION_SEED
 
     torch.set_num_threads(1)  # as train.py --threads
     row, size = _row(name)
@@ -344,7 +361,7 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     sequential = {"policy_lag": 0} if row.algo == "ppo" and row.framework == "jax" else {}
     config = config.replace(
         total_timesteps=timesteps,
-        personas="train_wide",
+        personas=row.personas,
         algo_kwargs={**config.algo_kwargs, **sequential, **row.algo_kwargs},
     )
     if size:  # the same samples per update on N envs (and E epochs)
@@ -363,7 +380,10 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
     half = timesteps // 2
     every = max(1, (timesteps - half) // 8)
     checkpoints = folder / f"{name}__{seed}__{timesteps}_checkpoints"
-    selection = SelectionCallback(checkpoints, row.algo, ENV_ID, validation, 8, half, every, env_kwargs=row.env_kwargs)
+    recorded = {"validation": ("validation", validation, VALIDATION_SEED), "test": ("test", episodes, 0)}
+    selection = SelectionCallback(
+        checkpoints, row.algo, ENV_ID, validation, 8, half, every, row.env_kwargs, recorded=recorded if people else None
+    )
     started = time.perf_counter()
     model.learn(timesteps, callback=selection)
     selected = selection.finish(model)
@@ -380,7 +400,20 @@ def train_one(name: str, seed: int, timesteps: int, episodes: int, folder: Path,
         "train_wall_s": wall_s,
         "kept_step": selected["timesteps"],
         "validation_success_rate": selected["validation_success_rate"],
+        **({"candidates": selected["scores"]} if people else {}),
     }
+
+
+def people_report(runs: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """Over a row's runs with ``candidates``: how well the training personas' validation episodes
+    (``train``, today's selection) and the validation people (``validation``) predict the held-out
+    people, and what each keeps (:func:`agents.evaluate.headroom.selection_study`); None without them."""
+    from agents.evaluate.headroom import selection_study
+
+    if len(runs) < 3 or not all("candidates" in run for run in runs):
+        return None
+    scored = [[{**p, "train": {"success_rate": p["success_rate"]}} for p in run["candidates"]] for run in runs]
+    return selection_study(scored, ("train", "validation"))
 
 
 def scripted(episodes: int) -> dict[str, dict[str, Any]]:
@@ -427,6 +460,12 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--cleanrl-script", type=Path, default=None, help="CleanRL's ppo.py, to train the cleanrl-* rows"
     )
+    parser.add_argument(
+        "--people",
+        action="store_true",
+        help="score every candidate policy on the validation people and the held-out episodes too: how well "
+        "each selecting set predicts the held-out people (the report's 'people' of each row)",
+    )
     add_save_argument(parser, "learners.json")
     return parser
 
@@ -446,7 +485,7 @@ def _row_runs(name: str, args: argparse.Namespace, parser: argparse.ArgumentPars
             )
             write_json(path, run)
         if not path.exists():
-            run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes)
+            run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes, args.people)
             write_json(path, run)
         run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
         if run["episodes"] != args.episodes:
@@ -497,6 +536,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.rows:
         runs = _row_runs(name, args, parser)
         table[name] = {"what": _what(name), **aggregate(runs, blind, oracle), "per_seed": runs}
+        if (people := people_report(runs)) is not None:
+            table[name]["people"] = people
     for name, row in table.items():
         s, c = row["success"], row["score"]
         print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']} {c['ci95']}")

@@ -551,3 +551,48 @@ Trained by {command}.
 
 {_table(header, rows)}
 """
+
+
+_PEOPLE_COMMAND = "python bench/learners.py --rows jax-kalman-lag --seeds 0,1,...,15 --people --runs runs/people"
+
+
+def _corr(value: float | None) -> str:
+    """A correlation to two decimals; "—" where it is undefined (a constant input)."""
+    return "—" if value is None else f"{value:.2f}"
+
+
+_SELECTING = {"train": "training personas' validation episodes", "validation": "validation people"}
+
+
+@_from_results("selection_people", "### Selecting on the validation people", _PEOPLE_COMMAND)
+def selection_people(report: dict[str, Any], record: dict[str, Any]) -> str:
+    """How well each selecting set predicts the held-out people across seeds (``bench/learners.py --people``)."""
+    belief = report["scripted"]["belief"]["success_rate"]
+    tables = []
+    for name, row in report["rows"].items():
+        if (study := row.get("people")) is None:  # a row without --people's scores, or under 3 seeds
+            continue
+        cells = []
+        for rule, label in _SELECTING.items():
+            found = study[rule]
+            kept, pairs = found["kept_target_success"], found["best_of_pairs_target_success"]
+            r, (low, high) = _corr(found["pearson_r"]), (_corr(c) for c in found["pearson_r_ci95"])
+            cells.append([label, f"{r} [{low}, {high}]", _corr(found["spearman_rho"])])
+            cells[-1] += [_corr(found["candidates_pearson_r"]), f"{_pct(statistics.mean(kept))} / {_pct(min(kept))}"]
+            cells[-1] += [f"{sum(k >= belief for k in kept)} of {len(kept)}"]
+            cells[-1] += [f"{_pct(statistics.mean(pairs))} / {_pct(min(pairs))}"]
+        header = [f"`{name}`, selected on", "r: kept policy's score vs held-out success [95 % CI]", "Spearman rho"]
+        header += ["r over every scored policy", "held-out success of the kept: mean / lowest"]
+        header += [f"seeds ≥ belief ({_pct(belief)})", "better-scored of seeds s, s + n/2: held-out mean / lowest"]
+        tables.append(f"{study['runs']} seeds of `{name}`:\n\n{_table(header, cells)}")
+    return f"""Each seed trains as `train.py` does ({report["timesteps"]:,} steps on `{report["env_id"]}`); every policy
+the selection scores (8 in the last half and the final one) plays three sets: 1000 validation episodes of the training
+personas (today's selection), 1000 of the validation people (`personas="validation"`: 64 persons no training episode
+shows, `coop_gym.model.personas.validation_people`) and the {report["episodes"]} held-out episodes of the test
+people. Per selecting set: the policy each seed keeps (its best there, ties to the later), how its score there
+correlates with its held-out success over seeds (Pearson r with its Fisher interval, Spearman rho) and over every
+scored policy, what it scores held-out, and what keeping the better-scored of two seeds gives. The held-out scores
+are recorded only to report; nothing is chosen on them.
+
+{chr(10).join(tables)}
+"""

@@ -127,6 +127,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "learners_budget_4096",
         ),
         (
+            "learners",
+            [
+                *["--rows", "jax-kalman-lag", "--seeds", "0,1,2", "--timesteps", "4096", "--episodes", "4"],
+                *["--validation-episodes", "4", "--people", "--runs", str(tmp / "people")],
+            ],
+            "selection_people.json",
+            "selection_people",
+        ),
+        (
             "cleanrl_defaults",
             [
                 "--script",

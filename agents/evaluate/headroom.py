@@ -56,6 +56,7 @@ __all__ = [
     "MindReadingScore",
     "headroom",
     "iqm_across_runs",
+    "selection_study",
 ]
 
 ORACLE_AGENTS = ("oracle",)
@@ -374,3 +375,49 @@ def iqm_across_runs(scores_by_level: Mapping[str, Sequence[float]]) -> Aggregate
         )
         ci = float(found.confidence_interval.low), float(found.confidence_interval.high)
     return AggregateScore(point, ci, {level: len(v) for level, v in samples.items()})
+
+
+def selection_study(
+    candidates: Sequence[Sequence[Mapping[str, Any]]], rules: Sequence[str], target: str = "test"
+) -> dict[str, Any]:
+    """How well each selecting set predicts ``target`` across training runs, and what it keeps.
+
+    Args:
+        candidates: Per run, its scored policies in order (``SelectionCallback``'s scores with
+            ``recorded`` sets): each maps a set name to ``{"success_rate": ...}``.
+        rules: Set names a policy may be selected on (e.g. ``"train"``, ``"validation"``).
+        target: The set the choice is judged on (the held-out people), never a rule.
+
+    Returns:
+        Per rule: the policy each run keeps (its best on the rule, ties to the later), the
+        Pearson ``r`` (with its 95 % interval) and Spearman ``rho`` between the kept policies'
+        rule and ``target`` success over runs, the same over every candidate of every run,
+        the kept ``target`` success per run, and, runs paired ``k`` and ``k + n/2``, the
+        ``target`` success of the better-scored run of each pair.
+    """
+    if target in rules or len(candidates) < 3:
+        raise ValueError(f"selection_study needs >= 3 runs and a target not among the rules, got {len(candidates)}")
+    out: dict[str, Any] = {"runs": len(candidates), "target": target}
+    half = len(candidates) // 2
+    for rule in rules:
+        kept = [max(reversed(run), key=lambda p: p[rule]["success_rate"]) for run in candidates]
+        x = [k[rule]["success_rate"] for k in kept]
+        y = [k[target]["success_rate"] for k in kept]
+        every = [(p[rule]["success_rate"], p[target]["success_rate"]) for run in candidates for p in run]
+        pearson = stats.pearsonr(x, y)
+        scored = list(zip(x, y, strict=True))
+        pairs = [max(scored[k], scored[k + half], key=lambda s: s[0]) for k in range(half)]
+        out[rule] = _finite(
+            {
+                "pearson_r": float(pearson.statistic),
+                "pearson_r_ci95": list(pearson.confidence_interval()),
+                "spearman_rho": float(stats.spearmanr(x, y).statistic),
+                "candidates_pearson_r": float(stats.pearsonr(*zip(*every, strict=True)).statistic),
+                "kept_timesteps": [k["timesteps"] for k in kept],
+                "kept_rule_success": x,
+                "kept_target_success": y,
+                "kept_target_unsafe": [k[target]["unsafe_rate"] for k in kept],
+                "best_of_pairs_target_success": [t for _, t in pairs],
+            }
+        )
+    return out

@@ -5,8 +5,8 @@
 * :class:`OutcomeStatsCallback` -- outcome rates of recent training episodes.
 * :class:`PeriodicEvalCallback` -- the current policy scored through the one evaluation
   path every so many env steps (the learning curve; it never selects a model).
-* :class:`SelectionCallback` -- the policy scored on the training personas' validation
-  episodes in the last half of training; the best-scoring policy becomes the saved model.
+* :class:`SelectionCallback` -- the policy scored on validation episodes (the training personas'
+  or the validation people's) in the last half of training; the best-scoring policy becomes the saved model.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from agents.rl.training import find_frame_stack, find_vec_normalize
 from coop_gym.envs.config import Outcome
 
 __all__ = [
+    "SELECTION_PERSONAS",
     "VALIDATION_PERSONAS",
     "VALIDATION_SEED",
     "CleanRLTensorBoard",
@@ -34,7 +35,10 @@ __all__ = [
 ]
 
 VALIDATION_PERSONAS = "train"
-"""The people a policy is selected on: the training personas (never the held-out ones)."""
+"""The people a policy is selected on by default: the training personas (never the held-out ones)."""
+SELECTION_PERSONAS: tuple[str, ...] = ("train", "validation")
+"""The people a policy may be selected on: the training personas' validation episodes, or the
+validation people (:func:`coop_gym.model.personas.validation_people`), whom no training episode shows."""
 VALIDATION_SEED = 2_000_000
 """Seed of validation episode 0: episodes apart from the evaluation's (``--eval-seed`` 0 ..)."""
 
@@ -171,12 +175,12 @@ class PeriodicEvalCallback(BaseCallback):
 
 
 class SelectionCallback(BaseCallback):
-    """Keeps the policy that scores best on the training personas' validation episodes.
+    """Keeps the policy that scores best on validation episodes.
 
     From half-way through training, at ``points`` rollout starts ``every`` env steps apart
     (and once more on the final policy, :meth:`finish`), the policy plays the same
-    ``episodes`` validation episodes: the :data:`VALIDATION_PERSONAS`, seeds
-    :data:`VALIDATION_SEED` onwards -- never the held-out personas. Each policy that scores at
+    ``episodes`` validation episodes: of ``personas`` (the training personas, or the
+    validation people), seeds :data:`VALIDATION_SEED` onwards -- never the held-out personas. Each policy that scores at
     least as well as the best so far is saved to ``folder/best_step_N.zip`` (with its
     observation statistics). PPO's held-out success moves by up to 16 points between policies
     of one run a few hundred thousand steps apart, its success on the training personas by
@@ -195,6 +199,11 @@ class SelectionCallback(BaseCallback):
         every: Env steps between scores.
         env_kwargs: Env kwargs the policy is trained with beyond the id's own (e.g.
             ``estimator="switching"``): the validation episodes are played with them.
+        personas: The people selected on: :data:`VALIDATION_PERSONAS`, or ``"validation"``,
+            the validation people (:func:`coop_gym.model.personas.validation_people`); never the held-out ones.
+        recorded: ``{name: (personas, episodes, seed)}``: sets every scored policy also plays,
+            their rates recorded in its score under ``name`` and never used to select (a
+            benchmark measures how well the selecting set predicts them).
     """
 
     def __init__(
@@ -207,10 +216,14 @@ class SelectionCallback(BaseCallback):
         start: int,
         every: int,
         env_kwargs: dict[str, Any] | None = None,
+        personas: str = VALIDATION_PERSONAS,
+        recorded: dict[str, tuple[str, int, int]] | None = None,
     ):
         """Store the settings; scores happen during ``learn`` and in :meth:`finish`."""
         super().__init__()
-        self.env_kwargs = dict(env_kwargs or {})
+        if personas not in SELECTION_PERSONAS:
+            raise ValueError(f"SelectionCallback.personas must be one of {list(SELECTION_PERSONAS)}, got {personas!r}")
+        self.env_kwargs, self.personas, self.recorded = dict(env_kwargs or {}), personas, dict(recorded or {})
         self.folder, self.algo, self.env_id = Path(folder), algo, env_id
         self.episodes, self.points, self.every = episodes, points, max(1, every)
         self.history: list[dict[str, Any]] = []
@@ -237,10 +250,11 @@ class SelectionCallback(BaseCallback):
         from agents.evaluate import evaluate
 
         agent = _current_policy(self.model, self.algo, self.env_id)
-        result = evaluate(
-            agent, self.env_id, VALIDATION_PERSONAS, self.episodes, VALIDATION_SEED, env_kwargs=self.env_kwargs
-        )
+        result = evaluate(agent, self.env_id, self.personas, self.episodes, VALIDATION_SEED, env_kwargs=self.env_kwargs)
         point: dict[str, Any] = {"timesteps": int(self.num_timesteps), "success_rate": result.success_rate}
+        for name, (personas, episodes, seed) in self.recorded.items():
+            other = evaluate(agent, self.env_id, personas, episodes, seed, env_kwargs=self.env_kwargs)
+            point[name] = {"success_rate": other.success_rate, "unsafe_rate": other.unsafe_rate}
         if save and all(point["success_rate"] >= p["success_rate"] for p in self.history):
             vec_normalize = find_vec_normalize(self.model.get_env())
             path = self.saved_path(point["timesteps"])
@@ -265,7 +279,7 @@ class SelectionCallback(BaseCallback):
             "timesteps": best["timesteps"],
             "validation_success_rate": best["success_rate"],
             "final_timesteps": final["timesteps"],
-            "personas": VALIDATION_PERSONAS,
+            "personas": self.personas,
             "episodes": self.episodes,
             "seed": VALIDATION_SEED,
             "scores": [dict(p) for p in self.history],

@@ -104,7 +104,7 @@ class Args:
     runs: Annotated[list[str] | None, tyro.conf.arg(metavar="RUN [RUN ...]", help=_RUNS_HELP)] = None
     env: Annotated[str | None, tyro.conf.arg(help=_ENV_HELP)] = None
     personas: str = "test"
-    """train, train_wide, test, all, a persona name or names joined by ','"""
+    """train, train_wide, validation, test, all, a persona name or names joined by ','"""
     episodes: int = 1000
     """number of seeded episodes"""
     seed: int = 0

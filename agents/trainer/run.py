@@ -216,12 +216,15 @@ def _training_summary(plan: Plan, model: Any, start_steps: int, train_s: float) 
     }
 
 
+_SELECTED_ON = {"train": "training personas", "validation": "validation people"}
+
+
 def _print_selection(selected: dict[str, Any]) -> None:
     """One line: which policy is saved and how it and the final policy scored on validation."""
     final = selected["scores"][-1]  # the final policy is scored last
     print(
         f"saved the policy at {selected['timesteps']} steps: validation success "
-        f"{selected['validation_success_rate']:.1%} on the {selected['personas']} personas "
+        f"{selected['validation_success_rate']:.1%} on the {_SELECTED_ON.get(selected['personas'], 'people')} "
         f"({selected['episodes']} episodes; the final policy {final['success_rate']:.1%})"
     )
 
@@ -241,7 +244,7 @@ def _callbacks(
         if state:
             _restore_curve(curve, state)
         callbacks.append(curve)
-    # Scores on the training personas' validation episodes in the last half: the saved policy.
+    # Scores on validation episodes (--select-on's people) in the last half: the saved policy.
     selection = None
     if args.select_points > 0:
         half = plan.timesteps // 2
@@ -249,7 +252,9 @@ def _callbacks(
         folder = plan.run_dir / CHECKPOINTS_DIR
         start = start_steps + half
         points, episodes = args.select_points, args.select_episodes
-        selection = SelectionCallback(folder, plan.algo, plan.env_id, episodes, points, start, every)
+        selection = SelectionCallback(
+            folder, plan.algo, plan.env_id, episodes, points, start, every, personas=args.select_on
+        )
         if state.get("selection") is not None:
             selection.restore(state["selection"])
         callbacks.append(selection)

@@ -66,6 +66,7 @@ RUN_FIELDS = (
     "eval_points",
     "select_points",
     "select_episodes",
+    "select_on",
     "checkpoint_every",
     "framework",
     "policy_lag",
@@ -349,6 +350,7 @@ def recorded_settings(run_dir: Path, args_type: type[Any]) -> dict[str, Any]:
         )
     settings = {name: recorded[name] for name in (*RUN_FIELDS, "resume") if name in recorded}
     settings.setdefault("framework", "sb3")  # written before there was a choice: SB3's run
+    settings.setdefault("select_on", "train")  # likewise: selected on the training personas
     try:
         args_type(**settings)
     except BadArgs as exc:

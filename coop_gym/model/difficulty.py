@@ -88,8 +88,15 @@ class Difficulty:
     premature_penalty: float = 1.0
 
     def personas_at(self, personas: Sequence[Persona]) -> tuple[Persona, ...]:
-        """``personas`` with their parameters at this level (:meth:`apply`; names and variation kept)."""
-        return tuple(dataclasses.replace(p, params=self.apply(p.params)) for p in personas)
+        """``personas`` with their parameters at this level (:meth:`apply`; names and variation kept).
+
+        A persona's ``level_factors`` scale this level's knobs for that persona alone.
+        """
+        return tuple(dataclasses.replace(p, params=self.scaled(p.level_factors).apply(p.params)) for p in personas)
+
+    def scaled(self, factors: Sequence[tuple[str, float]]) -> Difficulty:
+        """This level with each ``(knob, factor)`` knob multiplied by its factor."""
+        return dataclasses.replace(self, **{knob: getattr(self, knob) * f for knob, f in factors}) if factors else self
 
     def apply(self, person: PersonParams) -> PersonParams:
         """``person`` at this level (every other parameter as it was)."""

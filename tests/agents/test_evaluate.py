@@ -431,3 +431,27 @@ def test_cli_human_csv_of_several_envs_needs_env(tmp_path, capsys, monkeypatch):
         line = _usage_error([*agents, "--human", str(csv_path)], capsys)  # not the default env's row alone
         expected = "holds episodes of 2 env ids (CoopGym/SitToStand-v0, CoopGym/SitToStandHard-v2): give --env ID"
         assert f"--human: {csv_path} {expected}" in line, line
+
+
+def test_selection_study_keeps_each_rules_best_and_correlates_it_with_the_target():
+    """Per rule: the kept policy (ties to the later), r over runs, and the better run of each pair."""
+    from agents.evaluate.headroom import selection_study
+
+    def point(step, train, validation, test):
+        rates = {"train": train, "validation": validation, "test": test}
+        return {"timesteps": step, **{k: {"success_rate": v, "unsafe_rate": 0.0} for k, v in rates.items()}}
+
+    runs = [
+        [point(1, 0.9, 0.5, 0.6), point(2, 0.8, 0.7, 0.8)],
+        [point(1, 0.7, 0.6, 0.7), point(2, 0.7, 0.6, 0.75)],
+        [point(1, 0.95, 0.4, 0.5), point(2, 0.6, 0.8, 0.9)],
+        [point(1, 0.85, 0.65, 0.7), point(2, 0.5, 0.3, 0.4)],
+    ]
+    study = selection_study(runs, ("train", "validation"))
+    assert study["train"]["kept_timesteps"] == [1, 2, 1, 1]  # run 2 ties: the later
+    assert study["train"]["kept_target_success"] == [0.6, 0.75, 0.5, 0.7]
+    assert study["validation"]["kept_target_success"] == [0.8, 0.75, 0.9, 0.7]
+    assert study["validation"]["pearson_r"] > 0.8 > study["train"]["pearson_r"]
+    assert study["validation"]["best_of_pairs_target_success"] == [0.9, 0.7]  # runs (0, 2) and (1, 3)
+    with pytest.raises(ValueError, match="selection_study needs >= 3 runs"):
+        selection_study(runs[:2], ("train",))

@@ -205,6 +205,39 @@ def test_selection_saves_the_best_validated_policy(tmp_path, monkeypatch):
     env.close()
 
 
+def test_selection_on_the_validation_people_records_other_sets_without_selecting_on_them(tmp_path, monkeypatch):
+    """``personas="validation"`` selects on the validation people; ``recorded`` sets are played and only recorded."""
+    import agents.evaluate as evaluate_module
+    from agents.rl import SelectionCallback
+    from agents.rl.callbacks import VALIDATION_SEED
+
+    rates = {"validation": iter([0.2, 0.7, 0.3]), "test": iter([0.9, 0.1, 0.95])}
+    calls = []
+
+    class Result:
+        def __init__(self, personas, episodes, seed):
+            calls.append((personas, episodes, seed))
+            self.success_rate, self.unsafe_rate = next(rates[personas]), 0.0
+
+    monkeypatch.setattr(
+        evaluate_module, "evaluate", lambda agent, env_id, personas, n, seed, **kw: Result(personas, n, seed)
+    )
+    config, env, model = tiny_model("ppo")
+    recorded = {"test": ("test", 4, 0)}
+    selection = SelectionCallback(
+        tmp_path, "ppo", config.env_id, 8, 2, 64, 64, personas="validation", recorded=recorded
+    )
+    model.learn(64 * 4, callback=selection)
+    selected = selection.finish(model)
+    assert calls == [("validation", 8, VALIDATION_SEED), ("test", 4, 0)] * 3
+    assert selected["personas"] == "validation"
+    assert selected["validation_success_rate"] == 0.7  # the test people's 0.95 never selects
+    assert [p["test"]["success_rate"] for p in selected["scores"]] == [0.9, 0.1, 0.95]
+    with pytest.raises(ValueError, match=r"SelectionCallback.personas must be one of \['train', 'validation'\]"):
+        SelectionCallback(tmp_path, "ppo", config.env_id, 8, 2, 64, 64, personas="test")
+    env.close()
+
+
 _SAME_SEED_RUN = """
 import sys, hashlib, torch
 torch.set_num_threads(int(sys.argv[1]))

@@ -126,6 +126,7 @@ def test_eval_only_in_process(first_run, tmp_path, capsys):
         ["--eval-episodes", "0"],
         ["--env", "CoopGym/Nope-v0"],
         ["--eval-personas", "grumpy"],
+        ["--select-on", "test"],
         ["--baselines", "handbook,nurse"],
         ["--resume", "/no/such/run"],
         ["--model", "x.zip"],
