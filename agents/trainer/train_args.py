@@ -172,6 +172,8 @@ def _problem_with_numbers(args: Any) -> str | None:
         return "--eval-points must be >= 0 and --threads >= 1"
     if args.select_points < 0 or args.select_episodes < 1:
         return "--select-points must be >= 0 and --select-episodes >= 1"
+    if getattr(args, "select_on", "train") != "train" and args.select_points == 0:  # nothing would be selected
+        return f"--select-on {args.select_on} needs --select-points >= 1 (0 saves the last policy, selecting none)"
     if args.checkpoint_every is not None and args.checkpoint_every < 0:
         return f"--checkpoint-every must be >= 0, got {args.checkpoint_every}"
     return None

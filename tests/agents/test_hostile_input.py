@@ -123,6 +123,7 @@ def test_runs_refuses_copies_of_one_training_seed(tmp_path, capsys):
         (["--address", "ray://head:10001"], "--address is for --framework rllib; the jax learner trains"),
         (["--framework", "sb3", "--address", "auto"], "--address is for --framework rllib; the sb3 learner"),
         (["--timesteps", "99999999999999999999999"], "--timesteps must be <= 9223372036854775807"),
+        (["--select-on", "validation", "--select-points", "0"], "--select-on validation needs --select-points >= 1"),
     ],
 )
 def test_train_refuses_what_its_run_would_ignore_or_never_reach(argv, message, capsys):
