@@ -32,6 +32,8 @@ it (:data:`LEARNERS`), on ``CoopGym/SitToStandHard-v2``::
   (:func:`agents.rl.sb3_settings`): ``PPO(settings.policy, settings.make_env(seed), seed=seed,
   **settings.hyperparams).learn(settings.total_timesteps)``.
 
+``--timesteps N`` trains every learner N steps instead (a quick check of the script).
+
 The final policy is kept (no selection), saved as ``DIR/<learner>__<seed>.zip`` (a rerun with the
 same ``--runs`` skips what is there), and all are scored in one ``python -m agents.evaluate
 --compare ...,blind,prober,belief,oracle --personas test`` on the same seeded held-out episodes:
@@ -98,24 +100,24 @@ class _Snapshots(BaseCallback):
         return True
 
 
-def _train_defaults(seed: int, path: Path) -> None:
+def _train_defaults(seed: int, path: Path, timesteps: int | None) -> None:
     from stable_baselines3.common.env_util import make_vec_env
 
     env = make_vec_env(HARD_ID, n_envs=8, seed=seed)
-    PPO("MlpPolicy", env, seed=seed, device="cpu").learn(DEFAULTS_TIMESTEPS).save(path)
+    PPO("MlpPolicy", env, seed=seed, device="cpu").learn(timesteps or DEFAULTS_TIMESTEPS).save(path)
 
 
-def _train_settings(seed: int, path: Path) -> None:
+def _train_settings(seed: int, path: Path, timesteps: int | None) -> None:
     from agents.rl import find_vec_normalize, save_model_bundle, sb3_settings
 
     settings = sb3_settings(HARD_ID)
     env = settings.make_env(seed)
     model = PPO(settings.policy, env, seed=seed, device="cpu", **settings.hyperparams)
-    model.learn(settings.total_timesteps)
+    model.learn(timesteps or settings.total_timesteps)
     save_model_bundle(model, path, algo="ppo", env_id=HARD_ID, vec_normalize=find_vec_normalize(env))
 
 
-LEARNERS: dict[str, tuple[str, Callable[[int, Path], None]]] = {
+LEARNERS: dict[str, tuple[str, Callable[[int, Path, int | None], None]]] = {
     "sb3-defaults": ('PPO("MlpPolicy", make_vec_env(id, n_envs=8)): SB3 defaults, 300k steps', _train_defaults),
     "sb3-settings": ("PPO(**sb3_settings(id).hyperparams) on settings.make_env(): package settings", _train_settings),
 }
@@ -166,7 +168,7 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
             path = runs / f"{name}__{seed}.zip"
             if not path.exists():
                 started = time.perf_counter()
-                LEARNERS[name][1](seed, path)
+                LEARNERS[name][1](seed, path, args.timesteps)
                 walls[path.stem] = time.perf_counter() - started
                 walls_path.write_text(json.dumps(walls, indent=2) + "\n")
                 print(f"{path.stem}: trained in {walls[path.stem]:.0f} s", flush=True)
@@ -184,7 +186,7 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--algo", choices=sorted(ENV_IDS))
-    parser.add_argument("--timesteps", type=positive_int, default=300_000)
+    parser.add_argument("--timesteps", type=positive_int, help="default: 300000; with --seeds each learner's own")
     parser.add_argument("--env", choices=sorted(coop_gym.ENV_IDS), help="default: the algorithm's id in ENV_IDS")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--episodes", type=positive_int, default=1000, help="held-out episodes per score")
@@ -203,6 +205,7 @@ def main(argv: list[str] | None = None) -> None:
         return
     if args.algo is None:
         parser.error("--algo is required without --seeds")
+    args.timesteps = args.timesteps or DEFAULTS_TIMESTEPS
     if any(n < 1 or n >= args.timesteps for n in args.snapshot_at):
         parser.error(f"--snapshot-at: each must be in [1, --timesteps), got {args.snapshot_at}")
     _single(args, argv)
