@@ -32,7 +32,8 @@ it (:data:`LEARNERS`), on ``CoopGym/SitToStandHard-v2``::
   (:func:`agents.rl.sb3_settings`): ``PPO(settings.policy, settings.make_env(seed), seed=seed,
   **settings.hyperparams).learn(settings.total_timesteps)``.
 
-``--timesteps N`` trains every learner N steps instead (a quick check of the script).
+``--timesteps N`` trains every learner N steps instead (a quick check of the script); ``--no-train``
+scores the models already in ``--runs`` (a learner's row then holds the seeds it has).
 
 The final policy is kept (no selection), saved as ``DIR/<learner>__<seed>.zip`` (a rerun with the
 same ``--runs`` skips what is there), and all are scored in one ``python -m agents.evaluate
@@ -128,14 +129,15 @@ def _score_seeds(learners: list[str], seeds: list[int], runs: Path, episodes: in
     from agents.evaluate.headroom import iqm_across_runs
 
     walls = json.loads((runs / "train_wall_s.json").read_text())
-    models = [str(runs / f"{name}__{seed}.zip") for name in learners for seed in seeds]
+    seeds_of = {name: [seed for seed in seeds if (runs / f"{name}__{seed}.zip").exists()] for name in learners}
+    models = [str(runs / f"{name}__{seed}.zip") for name in learners for seed in seeds_of[name]]
     command = [sys.executable, "-m", "agents.evaluate", "--compare", ",".join([*models, *SCRIPTED]), "--env", HARD_ID]
     command += ["--personas", "test", "--episodes", str(episodes), "--json"]
     done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, check=True)
     scored = {r["agent"]: r for r in json.loads(done.stdout)["results"]}
     rows: dict[str, Any] = {}
     for name in learners:
-        results = [scored[f"ppo:{name}__{seed}"] for seed in seeds]
+        results = [scored[f"ppo:{name}__{seed}"] for seed in seeds_of[name]]
         per_seed = [
             {
                 "seed": seed,
@@ -143,7 +145,7 @@ def _score_seeds(learners: list[str], seeds: list[int], runs: Path, episodes: in
                 "never_lift_rate": result["timeout_rate"],
                 "train_wall_s": walls.get(f"{name}__{seed}"),
             }
-            for seed, result in zip(seeds, results, strict=True)
+            for seed, result in zip(seeds_of[name], results, strict=True)
         ]
         success = iqm_across_runs({HARD_ID: [s["success_rate"] for s in per_seed]})
         rows[name] = {
@@ -166,7 +168,7 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
     for name in learners:
         for seed in args.seeds:
             path = runs / f"{name}__{seed}.zip"
-            if not path.exists():
+            if not path.exists() and not args.no_train:
                 started = time.perf_counter()
                 LEARNERS[name][1](seed, path, args.timesteps)
                 walls[path.stem] = time.perf_counter() - started
@@ -195,6 +197,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=seed_list, help="the hard level over these training seeds (--learners)")
     parser.add_argument("--learners", default=",".join(LEARNERS), help=f"with --seeds: {', '.join(LEARNERS)}")
     parser.add_argument("--runs", default="runs/library_seeds", help="with --seeds: where the models are kept")
+    parser.add_argument("--no-train", action="store_true", help="with --seeds: score the models in --runs only")
     add_save_argument(parser, "library_defaults_<algo>_<env>_<timesteps>.json")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
