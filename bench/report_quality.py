@@ -1,7 +1,7 @@
 """The quality sections of ``docs/BENCHMARKS.md``.
 
-The levels, ``train.py``, the learners (and the same seeds on another CPU), library defaults, RLlib,
-the paper's experiment.
+The levels, ``train.py``, the learners (and the same seeds on another CPU), library defaults (and
+outside learners over seeds), RLlib, the paper's experiment.
 """
 
 from __future__ import annotations
@@ -213,6 +213,42 @@ separately; its tyro comes with coop_gym) and scores its agent both greedy and s
 """
         )
     return "\n".join(sections)
+
+
+def _seeds_row(name: str, per_seed: list[dict[str, Any]], success: dict[str, Any]) -> list[str]:
+    cells = [
+        f"{100 * r['success_rate']:.1f} / {100 * r.get('never_lift_rate', r.get('timeout_rate')):.1f}" for r in per_seed
+    ]
+    return [name, str(len(per_seed)), f"{_pct(success['iqm'])} {_ci(success['ci95'])}", "; ".join(cells)]
+
+
+def outside_learners(results: Results) -> str:
+    """SB3 and CleanRL over training seeds on the hard level, as their users run them."""
+    head = "### Outside learners over seeds on the hard level\n"
+    record, cleanrl = results.get("library_seeds_SitToStandHard-v2"), results.get("learners")
+    if record is None:
+        return head + "\n" + _missing("python bench/library_defaults.py --seeds 0,1,2,3,4") + "\n"
+    report = record["results"]
+    rows = [_seeds_row(f"SB3 `{n}`: {r['what']}", r["per_seed"], r["success"]) for n, r in report["rows"].items()]
+    for name in ("cleanrl-ppo", "cleanrl-ppo-trainpy") if cleanrl else ():
+        if (row := cleanrl["results"]["rows"].get(name)) is not None:
+            rows.append(_seeds_row(f"`{name}`: {row['what']}", row["per_seed"], row["success"]))
+    rows += [[f"{a} (scripted)", "", _pct(r["success_rate"]), ""] for a, r in report["scripted"].items()]
+    header = ["learner, as its user runs it", "seeds", "success, IQM [95 % CI]", "per seed: success / never lifts (%)"]
+    cleanrl_line = f"\n\nThe `cleanrl-*` rows: {_provenance(cleanrl)}" if cleanrl else ""
+    return f"""{head}
+{_provenance(record)}{cleanrl_line}
+
+What a user of SB3 or CleanRL gets on `{report["env_id"]}`: each learner trained once per seed,
+its final policy scored greedy on the same {report["episodes"]} held-out episodes as the scripted
+caregivers (`python -m agents.evaluate`, the test personas). *Never lifts* is the share of episodes
+that end in a timeout. The SB3 rows are `bench/library_defaults.py --seeds` (SB3's defaults; the
+package's settings from `agents.rl.sb3_settings`); the CleanRL rows are `bench/learners.py`'s
+(CleanRL's `ppo.py` unmodified: its defaults; the flags of docs/integrations.md). The interquartile
+mean over seeds and its stratified bootstrap interval follow rliable.
+
+{_table(header, rows)}
+"""
 
 
 def rllib(results: Results) -> str:

@@ -8,7 +8,7 @@ import gymnasium as gym
 
 from coop_gym.model.params import Timing
 
-__all__ = ["ENV_IDS", "HARD_ENV_ID", "LEVEL_ENV_IDS", "register_envs"]
+__all__ = ["ENV_IDS", "HARD_ENV_ID", "LEVEL_ENV_IDS", "register_envs", "unit_twin"]
 
 MAX_EPISODE_STEPS = Timing().max_episode_steps
 """30 s at one action per 0.1 s: the episode length of every registered id on its default timing.
@@ -82,6 +82,22 @@ LEVEL_ENV_IDS: dict[str, str] = {
 HARD_ENV_ID = LEVEL_ENV_IDS["hard-v2"]
 """The hard level's newest id: what ``train.py``, ``agents.tools.play``, ``agents.caregivers.reading`` and
 ``agents.tune.belief`` play by default."""
+
+
+def unit_twin(env_id: str | None) -> str | None:
+    """The id of the same task with physical observation features, for a unit-scaled id (None otherwise).
+
+    Example:
+        >>> unit_twin("CoopGym/SitToStandHardDiscreteUnit-v2")
+        'CoopGym/SitToStandHardDiscrete-v2'
+        >>> unit_twin("CoopGym/SitToStandHard-v2") is None
+        True
+    """
+    kwargs = ENV_IDS.get(env_id or "", {})
+    if kwargs.get("observation_scale") != "unit":
+        return None
+    physical = {k: v for k, v in kwargs.items() if k != "observation_scale"}
+    return next((other for other, other_kwargs in ENV_IDS.items() if other_kwargs == physical), None)
 
 
 def register_envs() -> None:

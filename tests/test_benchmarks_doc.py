@@ -97,6 +97,12 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "library_defaults_dqn_SitToStandDiscrete-v0_64",
         ),
         (
+            "library_defaults",
+            ["--seeds", "0", "--timesteps", "64", "--episodes", "4", "--runs", str(tmp / "seeds")],
+            "library_seeds_SitToStandHard-v2.json",
+            "library_seeds_SitToStandHard-v2",
+        ),
+        (
             "learners",
             [
                 "--rows",

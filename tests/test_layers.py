@@ -274,7 +274,9 @@ def test_the_single_and_the_vector_env_do_not_import_each_other() -> None:
     assert "coop_gym.envs.core" in graph[single] & graph[vector]
 
 
-AGENT_ROOMS: tuple[str, ...] = ("base", "pretrained", "caregivers", "evaluate", "rl", "tools", "trainer", "tune")
+AGENT_ROOMS: tuple[str, ...] = (
+    "base", "pretrained", "zoo", "caregivers", "evaluate", "rl", "tools", "trainer", "tune",
+)  # fmt: skip
 """The rooms of ``agents/``, lowest first: a module may import its own room and the rooms before it.
 ``base`` is the modules directly in ``agents/`` (``base.py``, ``run_folder.py``). A ``__main__`` (what
 ``python -m`` runs) may import any room: nothing imports it."""

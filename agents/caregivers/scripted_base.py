@@ -26,8 +26,9 @@ from agents.base import action_type_of, encode_actions, features_of, level_of, r
 from coop_gym.envs.config import ACTION_TYPES
 from coop_gym.envs.contract import observation_features
 from coop_gym.model.difficulty import DIFFICULTIES, Difficulty
+from coop_gym.registration import unit_twin
 
-__all__ = ["EPS_S", "PhaseState", "ScriptedAgent"]
+__all__ = ["EPS_S", "PhaseState", "ScriptedAgent", "unit_id_hint"]
 
 EPS_S = 1e-6
 """Slack on clock comparisons [s]: elapsed time is a float sum of 0.1 s steps."""
@@ -143,7 +144,10 @@ class ScriptedAgent:
         """
         if cls.tuned is not None and kwargs.get("settings") is None:
             kwargs["settings"] = cls.chosen_settings(level_of(env))
-        return cls(features_of(env), action_type_of(env), **kwargs)
+        try:
+            return cls(features_of(env), action_type_of(env), **kwargs)
+        except ValueError as exc:
+            raise ValueError(f"{exc}{unit_id_hint(getattr(getattr(env, 'spec', None), 'id', None))}") from None
 
     @classmethod
     def chosen_settings(cls, level: str | Difficulty | None) -> Any:
@@ -229,3 +233,19 @@ class ScriptedAgent:
 
     def _column(self, obs: NDArray[np.float64], feature: str) -> NDArray[np.float64]:
         return obs[:, self.columns[feature]]
+
+
+def unit_id_hint(env_id: str | None) -> str:
+    """What a scripted agent's error adds on a unit-scaled id: the twin id it can play ("" on other ids).
+
+    Example:
+        >>> unit_id_hint("CoopGym/SitToStandHardUnit-v2")[:60]
+        '; CoopGym/SitToStandHardUnit-v2 observes unit-scaled feature'
+    """
+    twin = unit_twin(env_id)
+    if twin is None:
+        return ""
+    return (
+        f"; {env_id} observes unit-scaled features and the scripted agents read physical ones: "
+        f"play them on its twin {twin} (the same task, physical features)"
+    )

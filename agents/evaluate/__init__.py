@@ -29,6 +29,7 @@ import gymnasium as gym
 import coop_gym  # noqa: F401 -- registers the env ids
 from agents.base import Agent, feature_mismatch
 from agents.caregivers.scripted import SCRIPTED_AGENTS, ScriptedAgent, make_scripted
+from agents.caregivers.scripted_base import unit_id_hint
 from agents.evaluate.episodes import make_slots, play
 from agents.evaluate.headroom import (
     BLIND_AGENTS,
@@ -186,7 +187,10 @@ def _policy(
     if agent not in SCRIPTED_AGENTS:
         raise ValueError(f"unknown agent {agent!r}; scripted agents: {', '.join(SCRIPTED_AGENTS)}")
     level = kwargs.get("difficulty", gym.spec(env_id).kwargs.get("difficulty"))
-    return make_scripted(agent, features, action_type, seed=seed, level=level)
+    try:
+        return make_scripted(agent, features, action_type, seed=seed, level=level)
+    except ValueError as exc:
+        raise ValueError(f"{exc}{unit_id_hint(env_id)}") from None
 
 
 def _check_counts(episodes: Any, n_envs: Any, seed: Any, backend: str) -> None:

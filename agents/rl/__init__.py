@@ -4,6 +4,7 @@ One import for everything the trainer and the loaders use; each part has a modul
 
 * :mod:`agents.rl.training` -- :func:`make_train_env` (the training ``VecEnv``) and
   :func:`make_model` (the algorithm with the defaults of :mod:`agents.hyperparams`);
+  :func:`sb3_settings` (those defaults as the dict and wrappers an SB3 script passes);
 * :mod:`agents.rl.bundle` -- :func:`save_agent` / :func:`load_agent`: a self-contained
   ``model.zip`` that loads as an :class:`SB3Agent`, scored by :func:`agents.evaluate.evaluate`
   like any other agent;
@@ -53,12 +54,15 @@ from agents.rl.checkpoints import (
 )
 from agents.rl.normalize import ObsNormalizer
 from agents.rl.training import (
+    VEC_NORMALIZE_KWARGS,
     LinearDecay,
+    SB3Settings,
     algorithm_class,
     find_vec_normalize,
     make_model,
     make_train_env,
     observation_features,
+    sb3_settings,
 )
 from agents.run_folder import AGENT_FILE, CHECKPOINTS_DIR, MODEL_FILE, VECNORMALIZE_FILE
 
@@ -69,6 +73,7 @@ __all__ = [
     "CHECKPOINTS_DIR",
     "MODEL_FILE",
     "VECNORMALIZE_FILE",
+    "VEC_NORMALIZE_KWARGS",
     "CheckpointCallback",
     "CleanRLTensorBoard",
     "LinearDecay",
@@ -76,6 +81,7 @@ __all__ = [
     "OutcomeStatsCallback",
     "PeriodicEvalCallback",
     "SB3Agent",
+    "SB3Settings",
     "SelectionCallback",
     "TrainingInterrupted",
     "algorithm_class",
@@ -95,4 +101,5 @@ __all__ = [
     "save_checkpoint",
     "save_model_bundle",
     "saved_model_problem",
+    "sb3_settings",
 ]

@@ -6,11 +6,14 @@
   normalisation (``VecNormalize``).
 * :func:`make_model` -- PPO, RecurrentPPO or DQN with the hyperparameters of
   :mod:`agents.hyperparams` (RL Zoo's ``lin_<value>`` schedules become :class:`LinearDecay`).
+* :func:`sb3_settings` -- the same settings for an SB3 user's own script: the constructor's
+  keyword arguments as a dict, and the env wrappers they were tuned with, named.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,20 +23,27 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecFrameStack, VecMonitor, VecNormalize
 
 import coop_gym  # noqa: F401 -- registers the env ids
-from agents.hyperparams import ALGORITHMS, TrainingConfig
+from agents.hyperparams import ALGORITHMS, TrainingConfig, hyperparams_for
 from agents.rl.sb3_vec import make_sb3_vec_env
 from coop_gym.cli import SEED_LIMIT
 from estimator.compiled.checks import check_integer
 
 __all__ = [
+    "VEC_NORMALIZE_KWARGS",
     "LinearDecay",
+    "SB3Settings",
     "algorithm_class",
     "find_frame_stack",
     "find_vec_normalize",
     "make_model",
     "make_train_env",
     "observation_features",
+    "sb3_settings",
 ]
+
+VEC_NORMALIZE_KWARGS: dict[str, Any] = {"norm_obs": True, "norm_reward": False}
+"""``VecNormalize``'s keyword arguments wherever a setting says ``normalize``: observations by a
+running mean and std, rewards left alone (they are already O(1))."""
 
 
 def algorithm_class(algo: str, framework: str = "sb3") -> type[BaseAlgorithm]:
@@ -118,7 +128,7 @@ def make_train_env(
         # VecMonitor always starts a new file; a resumed run keeps its episodes and adds rows.
         venv.results_writer = ResultsWriter(str(filename), extra_keys=("outcome",), override_existing=False)
     if normalize:
-        venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
+        venv = VecNormalize(venv, **VEC_NORMALIZE_KWARGS)
     return venv
 
 
@@ -178,6 +188,84 @@ def make_model(
         device="cpu",
         tensorboard_log=str(tensorboard_log) if tensorboard_log is not None else None,
         **kwargs,
+    )
+
+
+@dataclass(frozen=True)
+class SB3Settings:
+    """The package's tuned settings for one env id, in the form an SB3 script takes them.
+
+    Example:
+        >>> from stable_baselines3 import PPO
+        >>> settings = sb3_settings("CoopGym/SitToStandHard-v2")
+        >>> settings.wrappers
+        ('VecMonitor', 'VecNormalize')
+        >>> env = settings.make_env(seed=0)  # n_envs envs on the training persona set, normalised
+        >>> model = PPO(settings.policy, env, seed=0, **settings.hyperparams)
+        >>> model.n_steps, model.n_envs
+        (512, 8)
+        >>> env.close()
+
+    Attributes:
+        env_id: Registered env id.
+        algo: ``"ppo"``, ``"recurrent_ppo"`` or ``"dqn"`` (its class: :func:`algorithm_class`).
+        policy: SB3 policy name.
+        n_envs: Parallel training envs the settings were tuned with (``n_steps`` is per env).
+        total_timesteps: Training budget [env steps].
+        env_kwargs: ``gym.make`` keyword arguments of the training envs: the persona set.
+        vec_normalize: ``VecNormalize`` keyword arguments (:data:`VEC_NORMALIZE_KWARGS`), or None
+            where the settings train without it. The statistics are part of the trained agent:
+            save them beside the model (or use :func:`agents.rl.save_agent`).
+        hyperparams: The algorithm constructor's keyword arguments, ``policy_kwargs`` included
+            and ``lin_<value>`` schedules as :class:`LinearDecay` callables.
+    """
+
+    env_id: str
+    algo: str
+    policy: str
+    n_envs: int
+    total_timesteps: int
+    env_kwargs: dict[str, Any]
+    vec_normalize: dict[str, Any] | None
+    hyperparams: dict[str, Any]
+
+    @property
+    def wrappers(self) -> tuple[str, ...]:
+        """The ``VecEnv`` wrappers of :meth:`make_env`, innermost first."""
+        return ("VecMonitor", "VecNormalize") if self.vec_normalize is not None else ("VecMonitor",)
+
+    def make_env(self, seed: int = 0) -> VecEnv:
+        """The training ``VecEnv`` of these settings (:func:`make_train_env`): seeded envs, wrapped as named.
+
+        SB3's own ``VecNormalize(make_vec_env(env_id, n_envs, seed, env_kwargs=env_kwargs),
+        **vec_normalize)`` plays the same people, one single env at a time.
+        """
+        return make_train_env(
+            self.env_id,
+            self.n_envs,
+            seed,
+            personas=self.env_kwargs["personas"],
+            normalize=self.vec_normalize is not None,
+            env_kwargs={k: v for k, v in self.env_kwargs.items() if k != "personas"},
+        )
+
+
+def sb3_settings(env_id: str, algo: str = "ppo") -> SB3Settings:
+    """The settings ``train.py --framework sb3`` trains ``algo`` with on ``env_id`` (:func:`hyperparams_for`).
+
+    Raises:
+        ValueError: unknown algorithm.
+    """
+    config = hyperparams_for(algo, env_id)
+    return SB3Settings(
+        env_id=env_id,
+        algo=config.algo,
+        policy=config.policy,
+        n_envs=config.n_envs,
+        total_timesteps=config.total_timesteps,
+        env_kwargs={"personas": config.personas},
+        vec_normalize=dict(VEC_NORMALIZE_KWARGS) if config.normalize else None,
+        hyperparams=_schedules(config.model_kwargs()),
     )
 
 

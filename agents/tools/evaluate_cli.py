@@ -71,8 +71,8 @@ _MODEL_HELP = (
 _ENV_HELP = f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
 _COMPARE_HELP = (
     "comma-separated agents to evaluate into one table: scripted names and/or model paths "
-    "(--agent/--model, if given, are added first; each agent once). A model's row is named algo:FOLDER, "
-    "or algo:PATH where two models' folders share a name"
+    "(--agent/--model, if given, are added first; each agent once). A model's row is named algo:FILE (its file's "
+    "stem; a train.py run's model.zip: algo:FOLDER), or algo:PATH where two models share that name"
 )
 _HUMAN_HELP = (
     "add the episodes played with python -m agents.tools.play as the 'human' row (replayed on their own seeds; "
@@ -278,17 +278,22 @@ def _model_file(entry: str) -> str:
 
 
 def _model_names(entries: list[str]) -> dict[str, str]:
-    """The name of each saved model path in the table: its folder's, or the path as given where folders share a name.
+    """The name of each saved model path in the table: its file's, or the path as given where names are shared.
 
-    A run folder's name says env, algorithm, seed and time, so it names the run's model;
-    two models of one folder (``dir/full.zip``, ``dir/other.zip``) or of folders with one
-    name would share it, and one result would overwrite the other wherever results are
+    A model file is named by its stem (``logs/seed3.zip``: ``seed3``; RL Zoo's
+    ``logs/ppo/<env>_1/<env>.zip``: ``<env>``); a ``train.py`` run folder, or the ``model.zip``
+    inside it, by the folder, whose name says env, algorithm, seed and time. Two models of one
+    name would share a row name, and one result would overwrite the other wherever results are
     keyed by name (the mind-reading scores).
     """
     paths = [e for e in entries if e not in SCRIPTED_AGENTS and not is_pretrained(e)]
-    folder_names = {e: (Path(e) if Path(e).is_dir() else Path(e).parent).name or Path(e).stem for e in paths}
-    shared = Counter(folder_names.values())
-    return {e: name if shared[name] == 1 else e for e, name in folder_names.items()}
+    names = {}
+    for entry in paths:
+        path = Path(entry)
+        in_run_folder = path.is_dir() or path.name == MODEL_FILE
+        names[entry] = ((path if path.is_dir() else path.parent).name if in_run_folder else "") or path.stem
+    shared = Counter(names.values())
+    return {e: name if shared[name] == 1 else e for e, name in names.items()}
 
 
 def _planned(args: Args, entry: str, name: str) -> tuple[Agent | str, str, str]:

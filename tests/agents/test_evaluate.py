@@ -403,20 +403,20 @@ def test_cli_runs_refuses_a_run_counted_twice_or_runs_scored_on_other_episodes(t
     assert "is neither a train.py run folder nor a folder of them" in _usage_error(["--runs", str(no_runs)], capsys)
 
 
-def test_cli_compare_names_two_models_of_one_folder_apart(tmp_path, capsys):
+def test_cli_compare_names_two_models_of_one_file_name_apart(tmp_path, capsys):
     from agents.pretrained import pretrained_model_path
 
-    full, other = tmp_path / "dir" / "full.zip", tmp_path / "dir" / "other.zip"
-    full.parent.mkdir()
+    full, other = tmp_path / "a" / "seed.zip", tmp_path / "b" / "seed.zip"
     for path in (full, other):
+        path.parent.mkdir()
         shutil.copyfile(pretrained_model_path("hard-v2-ppo"), path)
     assert main(["--compare", f"{full},{other},blind,oracle", "--episodes", "2", "--json"]) == 0
     payload = json.loads(capsys.readouterr().out)
-    labels = [f"ppo:{full}", f"ppo:{other}", "blind", "oracle"]  # not "ppo:dir" twice
+    labels = [f"ppo:{full}", f"ppo:{other}", "blind", "oracle"]  # not "ppo:seed" twice
     assert [r["agent"] for r in payload["results"]] == labels
     assert list(payload["headroom"]["mind_reading_score"]) == labels  # no score overwrote another
-    line = _usage_error(["--model", str(full), "--compare", f"blind,{tmp_path}/dir/../dir/full.zip"], capsys)
-    assert f"'{full}' and '{tmp_path}/dir/../dir/full.zip' are one model" in line and "list each agent once" in line
+    line = _usage_error(["--model", str(full), "--compare", f"blind,{tmp_path}/a/../a/seed.zip"], capsys)
+    assert f"'{full}' and '{tmp_path}/a/../a/seed.zip' are one model" in line and "list each agent once" in line
     assert "'blind' is given twice" in _usage_error(["--compare", "blind,oracle,blind"], capsys)
 
 

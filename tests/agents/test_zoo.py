@@ -7,6 +7,7 @@ includes it). The commands are docs/integrations.md's, with a tiny ``-n``.
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -45,3 +46,18 @@ def test_zoo_trained_model_plays_with_enjoy_and_loads_in_agents(tmp_path):
     score = _run("agents.evaluate", "--model", str(model), "--personas", "test", "--episodes", "8", "--json", cwd=ROOT)
     assert score.returncode == 0, score.stderr[-3000:]
     assert '"episodes": 8' in score.stdout
+
+
+def test_zoo_takes_the_package_module_for_a_hard_id_from_any_folder(tmp_path):
+    # -conf names a module (agents.zoo.ppo), not a file: no checkout path in the command.
+    argv = ["--algo", "ppo", "--env", "CoopGym/SitToStandHardDiscreteUnit-v2", "--gym-packages", "coop_gym"]
+    argv += ["-conf", "agents.zoo.ppo", "--num-threads", "1", "-n", "4096", "-f", "logs", "--eval-freq", "-1"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}  # this checkout's agents, wherever coop_gym is installed
+    train = subprocess.run(
+        [sys.executable, "-m", "rl_zoo3.train", *argv], capture_output=True, text=True, timeout=600, cwd=tmp_path,
+        env=env, check=False,
+    )  # fmt: skip
+    assert train.returncode == 0, train.stderr[-3000:]
+    assert "'ent_coef', 0.02" in train.stdout and "'personas': 'train_wide'" in train.stdout  # the hard settings
+    run = tmp_path / "logs" / "ppo" / "CoopGym-SitToStandHardDiscreteUnit-v2_1"
+    assert (run / "CoopGym-SitToStandHardDiscreteUnit-v2.zip").exists()

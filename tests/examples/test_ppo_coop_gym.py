@@ -55,6 +55,27 @@ def test_recorded_episode_statistics_match_the_rewards_and_outcomes_the_env_retu
         assert outcome in ("success", "unsafe", "premature", "timeout")
 
 
+def test_example_defaults_are_train_py_settings_on_the_default_hard_level():
+    from agents.hyperparams import hyperparams_for
+    from coop_gym.registration import HARD_ENV_ID
+
+    args, config = _example().Args(), hyperparams_for("ppo")
+    assert args.env_id == config.env_id == HARD_ENV_ID
+    assert (args.personas, args.total_timesteps, args.num_envs) == (
+        config.personas,
+        config.total_timesteps,
+        config.n_envs,
+    )
+    kwargs = config.algo_kwargs
+    assert (args.num_steps, args.update_epochs, args.num_steps * args.num_envs // args.num_minibatches) == (
+        kwargs["n_steps"], kwargs["n_epochs"], kwargs["batch_size"]
+    )  # fmt: skip
+    assert (args.gamma, args.gae_lambda, args.ent_coef, args.clip_coef) == (
+        kwargs["gamma"], kwargs["gae_lambda"], kwargs["ent_coef"], kwargs["clip_range"]
+    )  # fmt: skip
+    assert args.anneal_lr and float(kwargs["learning_rate"].removeprefix("lin_")) == args.learning_rate
+
+
 def test_example_trains_a_few_hundred_steps(tmp_path):
     argv = ["--total-timesteps", "512", "--num-envs", "4", "--num-steps", "64", "--update-epochs", "2"]
     out = subprocess.run(
