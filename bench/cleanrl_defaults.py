@@ -15,7 +15,7 @@ the tyro it needs comes with coop_gym)::
 The id is handed to the script as ``coop_gym:<id>``, so ``gym.make`` imports coop_gym (and so
 registers the ids) before it makes the env. The JSON written to ``--out`` holds the command,
 the wall time, both evaluations and the handbook caregiver's on the same episodes
-(``bench/held_out.py``). ``--save`` also writes it to
+(``bench/result_files.py``). ``--save`` also writes it to
 ``bench/results/cleanrl_defaults_<script>_<env>_<timesteps>.json`` (``bench/result_files.py``).
 """
 
@@ -33,9 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.p
 import gymnasium as gym
 import numpy as np
 import torch
-from held_out import held_out_report
 from numpy.typing import NDArray
-from result_files import add_save_argument, save
+from result_files import add_save_argument, held_out_report, save
 
 import coop_gym
 from coop_gym.io import save_with, write_json

@@ -59,8 +59,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 import torch
-from held_out import held_out_report
-from result_files import RESULTS, ROOT, add_save_argument, save
+from result_files import RESULTS, ROOT, add_save_argument, held_out_report, save
 from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.callbacks import BaseCallback
 

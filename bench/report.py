@@ -4,7 +4,7 @@
     python bench/report.py --check    # exit 1 if the page differs from what the results render
 
 Every figure on the page comes from a results file written by a bench script's ``--save``
-(``bench/result_files.py``); the prose of each section (``bench/report_quality.py``,
+(``bench/result_files.py``); the prose of each section (``bench/report_quality.py``, ``bench/report_learners.py``,
 ``bench/report_speed.py``) says what each benchmark measures and what it
 compares, and each section names the command, date and machine of its measurement. A section
 whose results file is missing names the command that makes it. ``tests/test_benchmarks_doc.py``
@@ -20,18 +20,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from report_format import Results
+from report_learners import learners, learners_across_cpus, selection_people, training_budget
 from report_quality import (
-    learners,
-    learners_across_cpus,
     library_defaults,
     outside_learners,
     papers_experiment,
     rllib,
-    selection_people,
     test_command,
     the_levels,
     train_py,
-    training_budget,
 )
 from report_speed import against_gymnasium, cold_start, rendering, reset, soak, threads, time_to_quality
 from result_files import RESULTS, ROOT, load_all

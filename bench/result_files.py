@@ -126,3 +126,23 @@ def save(path: str | Path, benchmark: str, argv: Sequence[str] | None, results: 
 def load_all(folder: Path = RESULTS) -> dict[str, dict[str, Any]]:
     """Every results file in ``folder``, by file stem."""
     return {path.stem: json.loads(path.read_text(encoding="utf-8")) for path in sorted(folder.glob("*.json"))}
+
+
+# Scores of a trained learner on the held-out personas, beside the handbook caregiver's (library_defaults.py,
+# cleanrl_defaults.py): every agent plays the same seeded episodes of the held-out personas; the handbook plays
+# them on CoopGym/SitToStand-v0 (the same model and people as the unit-scaled ids; the observation it reads).
+REFERENCE_ENV_ID = "CoopGym/SitToStand-v0"
+
+
+def held_out_report(
+    run: dict[str, Any], agents: dict[str, tuple[Any, bool]], env_id: str, episodes: int
+) -> dict[str, Any]:
+    """``run`` with the scores of ``agents`` (label: (agent, deterministic)) and the handbook's."""
+    from agents.evaluate import evaluate
+
+    scores = {"handbook": evaluate("handbook", REFERENCE_ENV_ID, "test", episodes, 0).summary()}
+    for label, (agent, deterministic) in agents.items():
+        scores[label] = evaluate(agent, env_id, "test", episodes, 0, deterministic=deterministic).summary()
+    for label, score in scores.items():
+        print(f"{label:>12}: success {score['success_rate']:.3f}, unsafe {score['unsafe_rate']:.3f}")
+    return {**run, "env_id": env_id, "episodes": episodes, "reference_env_id": REFERENCE_ENV_ID, "scores": scores}

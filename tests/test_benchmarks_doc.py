@@ -359,7 +359,7 @@ def test_the_machine_record_names_the_cpu_and_its_widest_vector_extension(tmp_pa
 
 
 def test_the_same_seeds_on_another_cpu_are_rendered_seed_by_seed(tmp_path: Path) -> None:
-    report = _bench("report_quality")
+    report = _bench("report_learners")
     reference = json.loads((BENCH / "results" / "learners.json").read_text(encoding="utf-8"))
     # One machine: the section names the command that measures another.
     assert "bench/results/learners_<cpu>.json" in report.learners_across_cpus({"learners": reference})
@@ -379,7 +379,7 @@ def test_the_same_seeds_on_another_cpu_are_rendered_seed_by_seed(tmp_path: Path)
 
 def test_training_budget_rows_are_one_cpus_budgets_and_not_another_cpu() -> None:
     """``learners_budget_*.json`` make the budget table with the same CPU's default row, and no CPU row."""
-    report = _bench("report_quality")
+    report = _bench("report_learners")
     results = {
         stem: json.loads((BENCH / "results" / f"{stem}.json").read_text(encoding="utf-8"))
         for stem in ("learners", "learners_avx512", "learners_budget_2000000")

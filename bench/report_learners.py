@@ -1,0 +1,272 @@
+"""The learners' sections of docs/BENCHMARKS.md: learner x observation, across CPUs, budgets, selection.
+
+Each renders one results file of ``bench/learners.py`` (``bench/result_files.py`` finds them); the
+other quality sections are ``bench/report_quality.py``'s.
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/report_format.py, however this runs
+from report_format import (
+    Results,
+    _ci,
+    _count,
+    _from_results,
+    _missing,
+    _pct,
+    _provenance,
+    _table,
+)
+
+
+def _except_cleanrl(report: dict[str, Any]) -> str:
+    """The learners page's exception: CleanRL's script keeps its own protocol."""
+    if not any(name.startswith("cleanrl-") for name in report["rows"]):
+        return ""
+    return (
+        " but the `cleanrl-*` ones (CleanRL's `ppo.py` as its user runs it: its settings or the flags"
+        " and id the row names, its personas unless the row says otherwise, its final policy)"
+    )
+
+
+def learners(results: Results) -> str:
+    """Learner x observation on the hard level (``bench/learners.py``)."""
+    head = "### Learners and observations on the hard level\n"
+    record = results.get("learners")
+    if record is None:
+        return head + "\n" + _missing("python bench/learners.py") + "\n"
+    report = record["results"]
+    rows = []
+    for name, row in report["rows"].items():
+        success, score = row["success"], row["score"]
+        per_seed = ", ".join(f"{100 * run['success_rate']:.1f}" for run in row["per_seed"])
+        score_ci = "" if score["ci95"][0] is None else f" [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]"
+        score_text = "—" if score["iqm"] is None else f"{score['iqm']:.2f}{score_ci}"
+        rows.append(
+            [
+                f"`{name}`: {row['what']}",
+                str(row["runs"]),
+                f"{_pct(success['iqm'])} {_ci(success['ci95']) if success['ci95'][0] is not None else ''}".rstrip(),
+                score_text,
+                per_seed,
+                _pct(row["unsafe_rate_mean"]),
+                f"{row['train_wall_s_median']:.0f} s",
+            ]
+        )
+    for name, row in report["scripted"].items():
+        rows.append([f"{name} (scripted)", "", _pct(row["success_rate"]), "", "", _pct(row["unsafe_rate"]), ""])
+    header = [
+        "learner: observation",
+        "seeds",
+        "success, IQM [95 % CI]",
+        "mind-reading score, IQM [95 % CI]",
+        "success per seed (%)",
+        "unsafe (mean)",
+        "training (median)",
+    ]
+    return f"""{head}
+{_provenance(record)}
+
+Each row{_except_cleanrl(report)} trains with `train.py`'s protocol on `{report["env_id"]}`
+({report["timesteps"]:,} steps, the wider training personas, the best-validated policy of the last
+half kept; the observation, action and normalisation the row names) once per training seed,
+and plays the same {report["episodes"]} held-out episodes as the scripted caregivers below
+(seeds 0..{report["episodes"] - 1}, the test personas). The interquartile mean over seeds and
+its stratified bootstrap interval follow rliable; the mind-reading score is
+`(success - blind) / (oracle - blind)` per seed. Training seconds were measured with other runs
+on the machine.
+
+{_table(header, rows)}
+"""
+
+
+def _seeds_at(runs: list[dict[str, Any]], level: float | None) -> str:
+    return "—" if level is None else f"{sum(run['success_rate'] >= level for run in runs)}/{len(runs)}"
+
+
+def _moved(changes: list[float]) -> str:
+    """The median and the largest of per-seed changes of a rate, in points."""
+    return "—" if not changes else f"{100 * statistics.median(changes):.1f} / {100 * max(changes):.1f}"
+
+
+def _cpu_row(name: str, record: dict[str, Any], first: dict[int, float], is_reference: bool) -> list[str]:
+    """Row ``name`` of one machine's ``learners*.json`` ``record``; ``first``: each seed's success on the first."""
+    report = record["results"]
+    row = report["rows"][name]
+    runs = row["per_seed"]
+    moved = [abs(run["success_rate"] - first[run["training_seed"]]) for run in runs if run["training_seed"] in first]
+    return [
+        f"`{name}`",
+        record["machine"].get("cpu") or "not recorded",
+        *_seed_cells(row, report["scripted"]),
+        "(reference)" if is_reference else _moved(moved),
+    ]
+
+
+_SEED_COLUMNS = [
+    "seeds",
+    "validation: mean",
+    "validation: lowest",
+    "held-out success, IQM [95 % CI]",
+    "held-out: lowest seed",
+    "seeds ≥ belief",
+    "seeds ≥ prober",
+]
+"""The columns of :func:`_seed_cells`."""
+
+
+def _seed_cells(row: dict[str, Any], scripted: dict[str, Any]) -> list[str]:
+    """A ``learners.json`` row over its seeds: validation, held-out, and the seeds at the scripted levels."""
+    runs = row["per_seed"]
+    validation = [run["validation_success_rate"] for run in runs if "validation_success_rate" in run]
+    return [
+        str(len(runs)),
+        _pct(statistics.mean(validation)) if validation else "—",
+        _pct(min(validation)) if validation else "—",
+        f"{_pct(row['success']['iqm'])} {_ci(row['success']['ci95'])}",
+        _pct(min(run["success_rate"] for run in runs)),
+        _seeds_at(runs, scripted.get("belief", {}).get("success_rate")),
+        _seeds_at(runs, scripted.get("prober", {}).get("success_rate")),
+    ]
+
+
+def learners_across_cpus(results: Results) -> str:
+    """The same rows and seeds of ``bench/learners.py`` trained on several CPUs (``learners*.json``)."""
+    head = "### The same seeds on another CPU\n"
+    records = {
+        stem: record
+        for stem, record in results.items()
+        if stem == "learners" or (stem.startswith("learners_") and not stem.startswith(BUDGET_PREFIX))
+    }
+    if "learners" not in records or len(records) < 2:
+        return (
+            f"{head}\nNo second machine yet: on a CPU other than `bench/results/learners.json`'s, `python"
+            " bench/learners.py --rows jax-kalman --seeds 0,1,2,3,4,5,6,7 --save bench/results/learners_<cpu>.json`,"
+            " then `python bench/report.py`.\n"
+        )
+    reference = records["learners"]["results"]["rows"]
+    ordered = ["learners", *sorted(stem for stem in records if stem != "learners")]
+    rows = []
+    for name in reference:
+        holders = [stem for stem in ordered if name in records[stem]["results"]["rows"]]
+        if len(holders) < 2:  # a row on the first machine only
+            continue
+        first = {run["training_seed"]: run["success_rate"] for run in reference[name]["per_seed"]}
+        rows.extend(_cpu_row(name, records[stem], first, stem == "learners") for stem in holders)
+    header = [
+        "row",
+        "CPU (widest vector extension)",
+        *_SEED_COLUMNS,
+        "held-out change per seed: median / largest (points)",
+    ]
+    provenance = "\n\n".join(_provenance(records[stem]) for stem in ordered if stem != "learners")
+    return f"""{head}
+{provenance}
+
+A seed trains the same weights in every process on one machine, not on another CPU: NumPy's BLAS,
+MKL and XLA pick their kernels by the CPU's vector extensions and add in another order
+(docs/agents.md, "Reproducibility"). Each row here is trained by `bench/learners.py` on the
+same seeds on each machine and scored on the same held-out episodes; the first machine's rows
+are those of the table above (`bench/results/learners.json`), and the last column compares each
+seed's held-out success with that seed's there.
+
+{_table(header, rows)}
+"""
+
+
+BUDGET_PREFIX = "learners_budget_"
+"""``bench/results/learners_budget_<steps>.json``: the default learner on another budget (:func:`training_budget`)."""
+
+
+def training_budget(results: Results) -> str:
+    """``train.py``'s learner on several budgets, the same seeds on one CPU (``learners_budget_*.json``)."""
+    head = "### Training budget\n"
+    budgets = [record for stem, record in sorted(results.items()) if stem.startswith(BUDGET_PREFIX)]
+    command = (
+        "`python bench/learners.py --rows jax-kalman-lag --seeds 0,1,...,15 --timesteps T --save "
+        "bench/results/learners_budget_T.json`"
+    )
+    if not budgets:
+        return f"{head}\nNo results file yet: {command}, then `python bench/report.py`.\n"
+    from agents.hyperparams import hyperparams_for
+
+    train_steps = hyperparams_for("ppo").total_timesteps
+    cpu = budgets[0]["machine"].get("cpu")
+    same_cpu = [
+        record
+        for stem, record in sorted(results.items())
+        if (stem == "learners" or stem.startswith("learners_")) and record["machine"].get("cpu") == cpu
+    ]
+    rows = []
+    for record in sorted(same_cpu, key=lambda r: r["results"]["timesteps"]):
+        report = record["results"]
+        row = report["rows"].get("jax-kalman-lag")
+        if row is None:
+            continue
+        steps = report["timesteps"]
+        budget = f"**{_count(steps)}**" if steps == train_steps else _count(steps)
+        rows.append([budget, *_seed_cells(row, report["scripted"])])
+    header = ["budget (env steps)", *_SEED_COLUMNS]
+    provenance = "\n\n".join(_provenance(record) for record in budgets)
+    return f"""{head}
+{provenance}
+
+`train.py`'s learner (`jax-kalman-lag`) on other budgets, its learning rate decaying to 0 over
+each, the same sixteen seeds on one CPU ({cpu or "not recorded"}), each run keeping its
+best-validated policy of the last half and scored on the held-out episodes of [Learners and
+observations](#learners-and-observations-on-the-hard-level); the {_count(train_steps)}-step row is
+that section's on this CPU ([The same seeds on another CPU](#the-same-seeds-on-another-cpu)).
+Trained by {command}.
+
+{_table(header, rows)}
+"""
+
+
+_PEOPLE_COMMAND = "python bench/learners.py --rows jax-kalman-lag --seeds 0,1,...,15 --people --runs runs/people"
+
+
+def _corr(value: float | None) -> str:
+    """A correlation to two decimals; "—" where it is undefined (a constant input)."""
+    return "—" if value is None else f"{value:.2f}"
+
+
+_SELECTING = {"train": "training personas' validation episodes", "validation": "validation people"}
+
+
+@_from_results("selection_people", "### Selecting on the validation people", _PEOPLE_COMMAND)
+def selection_people(report: dict[str, Any], record: dict[str, Any]) -> str:
+    """How well each selecting set predicts the held-out people across seeds (``bench/learners.py --people``)."""
+    belief = report["scripted"]["belief"]["success_rate"]
+    tables = []
+    for name, row in report["rows"].items():
+        if (study := row.get("people")) is None:  # a row without --people's scores, or under 3 seeds
+            continue
+        cells = []
+        for rule, label in _SELECTING.items():
+            found = study[rule]
+            kept, pairs = found["kept_target_success"], found["best_of_pairs_target_success"]
+            r, (low, high) = _corr(found["pearson_r"]), (_corr(c) for c in found["pearson_r_ci95"])
+            cells.append([label, f"{r} [{low}, {high}]", _corr(found["spearman_rho"])])
+            cells[-1] += [_corr(found["candidates_pearson_r"]), f"{_pct(statistics.mean(kept))} / {_pct(min(kept))}"]
+            cells[-1] += [f"{sum(k >= belief for k in kept)} of {len(kept)}"]
+            cells[-1] += [f"{_pct(statistics.mean(pairs))} / {_pct(min(pairs))}"]
+        header = [f"`{name}`, selected on", "r: kept policy's score vs held-out success [95 % CI]", "Spearman rho"]
+        header += ["r over every scored policy", "held-out success of the kept: mean / lowest"]
+        header += [f"seeds ≥ belief ({_pct(belief)})", "better-scored of seeds s, s + n/2: held-out mean / lowest"]
+        tables.append(f"{study['runs']} seeds of `{name}`:\n\n{_table(header, cells)}")
+    return f"""Each seed trains as `train.py` does ({report["timesteps"]:,} steps on `{report["env_id"]}`); every policy
+the selection scores (8 in the last half and the final one) plays three sets: 1000 validation episodes of the training
+personas (today's selection), 1000 of the validation people (`personas="validation"`: 64 persons no training episode
+shows, `coop_gym.model.personas.validation_people`) and the {report["episodes"]} held-out episodes of the test
+people. Per selecting set: the policy each seed keeps (its best there, ties to the later), how its score there
+correlates with its held-out success over seeds (Pearson r with its Fisher interval, Spearman rho) and over every
+scored policy, what it scores held-out, and what keeping the better-scored of two seeds gives. The held-out scores
+are recorded only to report; nothing is chosen on them.
+
+{chr(10).join(tables)}
+"""
