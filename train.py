@@ -1,11 +1,9 @@
 """Train a robot-caregiver guidance agent, then score it against the scripted baselines.
 
-``python train.py`` trains PPO on ``CoopGym/SitToStandHard-v2`` (training personas only), keeps the policy that scores
-best on validation episodes (``--select-on``; docs/agents.md, "Which policy is saved"), scores it and every scripted
-baseline on the same 1000 seeded episodes of the held-out personas, prints the comparison (mind-reading scores too),
-saves ``runs/{env}__{algo}__{seed}__{time}/`` (:mod:`agents.run_folder`). Ctrl-C stops at a checkpoint;
-``--resume RUN`` continues it. Read top to bottom: :class:`Args` (tyro; field docstrings are the ``--help``; checked by
-:mod:`agents.trainer.train_args`), training (:mod:`agents.trainer.run`), the report (:mod:`agents.trainer.run_report`).
+``python train.py`` trains PPO on ``CoopGym/SitToStandHard-v2`` (training personas only; ``--seeds N``: N seeds, the
+best on the validation people kept), scores it and every scripted baseline on the same 1000 seeded episodes of the
+held-out personas, prints the comparison and saves ``runs/{env}__{algo}__{seed}__{time}/``. Ctrl-C stops at a
+checkpoint; ``--resume RUN`` continues it. Read top to bottom: :class:`Args` (its ``--help``), training, the report.
 """
 
 from __future__ import annotations
@@ -35,6 +33,8 @@ class Args:
     """parallel training envs; None: the algorithm's (agents/hyperparams.py; --framework rllib: 64 in all)"""
     seed: int = 0
     """seed of training (envs, network init, sampling)"""
+    seeds: int | None = None
+    """seeds trained (--seed, --seed+1, ...), the best on the validation people kept; None: 2 for jax ppo, else 1"""
     out: str = "runs"
     """folder that receives the run folder {env}__{algo}__{seed}__{time}"""
     resume: str | None = None

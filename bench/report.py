@@ -20,7 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from report_format import Results
-from report_learners import learners, learners_across_cpus, selection_people, training_budget
+from report_learners import best_of_seeds, learners, learners_across_cpus, selection_people, training_budget
 from report_quality import (
     library_defaults,
     outside_learners,
@@ -64,6 +64,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     learners_across_cpus,
     training_budget,
     selection_people,
+    best_of_seeds,
     library_defaults,
     outside_learners,
     rllib,

@@ -270,3 +270,79 @@ are recorded only to report; nothing is chosen on them.
 
 {chr(10).join(tables)}
 """
+
+
+def _kept_of_seeds(row: dict[str, Any]) -> dict[int, tuple[float, float, float]]:
+    """Per training seed: (its kept policy's validation-people success, held-out success, held-out unsafe rate).
+
+    Empty where the runs' scored policies carry no validation-people score (``bench/learners.py`` without ``--people``).
+    """
+    kept = {}
+    for run in row["per_seed"]:
+        scored = [c for c in run.get("candidates", []) if c["timesteps"] == run["kept_step"] and "validation" in c]
+        if not scored:
+            return {}
+        kept[run["training_seed"]] = (scored[0]["validation"]["success_rate"], run["success_rate"], run["unsafe_rate"])
+    return kept
+
+
+def _best_of(kept: dict[int, tuple[float, float, float]], subsets: list[tuple[int, ...]]) -> list[tuple[float, float]]:
+    """Held-out (success, unsafe) of the seed each subset keeps: best on the validation people, ties to the lower."""
+    chosen = [max(subset, key=lambda seed: (kept[seed][0], -seed)) for subset in subsets]
+    return [kept[seed][1:] for seed in chosen]
+
+
+def _iqm_cell(success: list[float], report: dict[str, Any]) -> str:
+    """IQM of runs' held-out success with its interval, and the mind-reading score of that IQM."""
+    from agents.evaluate.headroom import iqm_across_runs
+
+    if len(success) < 2:
+        return "—"
+    found = iqm_across_runs({report["env_id"]: success})
+    blind, oracle = (report["scripted"][name]["success_rate"] for name in ("blind", "oracle"))
+    score = f"{(found.iqm - blind) / (oracle - blind):.2f}" if oracle > blind else "—"
+    return f"{_pct(found.iqm)} {_ci(found.ci95)}; {score}"
+
+
+_SEEDS_COMMAND = "python train.py --seeds N (its seeds' records: " + _PEOPLE_COMMAND + ")"
+
+
+@_from_results("selection_people", "### Best of N seeds: `train.py --seeds N`", _SEEDS_COMMAND)
+def best_of_seeds(report: dict[str, Any], record: dict[str, Any]) -> str:
+    """What ``train.py --seeds N`` keeps, from the per-seed records of ``bench/learners.py --people``."""
+    import itertools
+
+    belief, prober = (report["scripted"][name]["success_rate"] for name in ("belief", "prober"))
+    row_name = "jax-kalman-lag"
+    kept = _kept_of_seeds(report["rows"].get(row_name, {"per_seed": []}))
+    if not kept:
+        return f"The record has no `{row_name}` row with validation-people scores (`{_PEOPLE_COMMAND} --save`).\n"
+    seeds = sorted(kept)
+    rows = []
+    for n in range(1, min(4, len(seeds)) + 1):
+        every = _best_of(kept, list(itertools.combinations(seeds, n)))
+        runs = _best_of(kept, [tuple(seeds[i : i + n]) for i in range(0, len(seeds) - n + 1, n)])
+        success = sorted(s for s, _ in every)
+        rows.append(
+            [
+                str(n),
+                f"{_pct(statistics.mean(success))} / {_pct(success[len(success) // 10])} / {_pct(success[0])}",
+                f"{_pct(sum(s < belief for s in success) / len(success))}",
+                f"{_pct(sum(s < prober for s in success) / len(success))}",
+                f"{_pct(statistics.mean(u for _, u in every))}",
+                ", ".join(_pct(s) for s, _ in runs),
+                _iqm_cell([s for s, _ in runs], report),
+            ]
+        )
+    header = ["N", "held-out success: mean / 10th percentile / lowest", f"below belief ({_pct(belief)})"]
+    header += [f"below prober ({_pct(prober)})", "unsafe (mean)", "`--seed 0, N, 2N, ...`: held-out success"]
+    header += ["their IQM [95 % CI]; mind-reading score"]
+    return f"""`train.py --seeds N` trains seeds `--seed` .. `--seed + N - 1`, each as `train.py --seed S` does (its
+own selection on the training personas' validation episodes), scores each kept policy on 1000 episodes of the validation
+people and keeps the best. Since a seed trains the same policy alone or in a `--seeds` run, what `--seeds N` keeps
+follows from the {len(seeds)} seeds of `{row_name}` above: every set of N of them (the first three columns), and
+the runs `--seed 0`, `--seed N`, ... (the last). Held-out success on the {report["episodes"]} test episodes, recorded
+only to report; nothing is chosen on them.
+
+{_table(header, rows)}
+"""

@@ -5,7 +5,8 @@
   and the run folder (the unfinished one being resumed, or a new one holding ``args.json``);
 * :func:`train` -- the training env, the model (restored from the last checkpoint, continued
   from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
-  checkpoints), ``learn``, then the saved agent and ``training.json``.
+  checkpoints), ``learn``, then the saved agent and ``training.json``; with ``--seeds N``, N such runs
+  in ``RUN/seeds/``, the one best on the validation people kept.
 
 What happens after training (the evaluation against the baselines, the report) is
 :func:`agents.trainer.run_report.evaluate_and_report`; the arguments are ``train.Args``.
@@ -13,8 +14,10 @@ What happens after training (the evaluation against the baselines, the report) i
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -40,24 +43,36 @@ from agents.rl import (
     save_agent,
     saved_model_problem,
 )
-from agents.run_folder import ARGS_FILE, CHECKPOINTS_DIR, TRAINING_FILE, is_unfinished_run
+from agents.run_folder import (
+    AGENT_FILE,
+    ARGS_FILE,
+    CHECKPOINTS_DIR,
+    MODEL_FILE,
+    TRAINING_FILE,
+    VECNORMALIZE_FILE,
+    is_unfinished_run,
+)
 from agents.trainer.run_report import new_run_folder
 from agents.trainer.train_args import (
     PROG,
     RunCannotContinue,
     RunProblem,
     personas_arg,
+    read_training,
     recorded_settings,
+    seeds_of,
     settings_framework,
 )
 from agents.trainer.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
 from coop_gym.io import write_json
 
-__all__ = ["plan_run", "train"]
+__all__ = ["SEEDS_DIR", "plan_run", "seed_folder", "train"]
 
 
-def plan_run(args: Any) -> Plan:
+def plan_run(args: Any, folder: Path | None = None) -> Plan:
     """The run's settings -- the algorithm's defaults overridden by the flags -- and its folder.
+
+    A new run's folder is ``folder`` where given (one seed of a ``--seeds`` run), else a new one in ``args.out``.
 
     Raises:
         RunProblem: a damaged saved model, or one that does not fit the env (before any folder is made).
@@ -87,10 +102,10 @@ def plan_run(args: Any) -> Plan:
     if problem:
         raise RunProblem(problem)
     plan = Plan(Path(), algo, env_id, config, timesteps, args.n_envs or config.n_envs, checkpoint_every, None)
-    return _open_run_folder(args, plan, in_place)
+    return _open_run_folder(args, plan, in_place, folder)
 
 
-def _open_run_folder(args: Any, plan: Plan, in_place: bool) -> Plan:
+def _open_run_folder(args: Any, plan: Plan, in_place: bool, folder: Path | None) -> Plan:
     """The run folder: the unfinished one being resumed, or a new one holding the run's settings."""
     if in_place:
         run_dir = Path(args.resume)
@@ -103,18 +118,22 @@ def _open_run_folder(args: Any, plan: Plan, in_place: bool) -> Plan:
         clean_leftovers(run_dir)
         print(f"resuming run folder: {run_dir}")
         return dataclasses.replace(plan, run_dir=run_dir, source_model=source_model)
-    run_dir = new_run_folder(args.out, plan.env_id, plan.algo, args.seed)
+    if folder is not None:
+        folder.mkdir(parents=True, exist_ok=True)  # a seed's folder left without args.json is begun again
+    run_dir = folder or new_run_folder(args.out, plan.env_id, plan.algo, args.seed)
     settings = dataclasses.asdict(args) | {
         "algo": plan.algo,
         "env": plan.env_id,
         "timesteps": plan.timesteps,
         "n_envs": plan.n_envs,
         "checkpoint_every": plan.checkpoint_every,
+        "seeds": seeds_of(args),
     }
     try:
         write_json(run_dir / ARGS_FILE, settings)
     except OSError:
-        run_dir.rmdir()  # still empty: no run to resume, so no folder left behind
+        with contextlib.suppress(OSError):
+            run_dir.rmdir()  # still empty: no run to resume, so no folder left behind
         raise
     print(f"run folder: {run_dir}")
     return dataclasses.replace(plan, run_dir=run_dir, source_model=args.resume)
@@ -123,12 +142,18 @@ def _open_run_folder(args: Any, plan: Plan, in_place: bool) -> Plan:
 def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     """Train to the step budget, checkpointing on the way; the training summary (also in ``training.json``).
 
+    With ``--seeds N``, each seed is a run of its own in ``RUN/seeds/seed_S/`` and the one that scores best on the
+    validation people (never the held-out personas) lends ``RUN`` its model, normaliser and monitor; ``training.json``
+    lists every seed's score. A stopped run resumes seed by seed: finished seeds are kept, a begun one continues.
+
     Raises:
         agents.trainer.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last
             rollout.
         RunProblem: a damaged saved model (the message names it).
         RunCannotContinue: a damaged or foreign checkpoint (the message names it).
     """
+    if seeds_of(args) > 1:
+        return _train_seeds(args, plan, stop)
     run_dir, config = plan.run_dir, plan.config
     checkpoint = latest_checkpoint(run_dir)
     # Training env: training personas only; observations normalised if the config says so.
@@ -168,6 +193,79 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     remove_checkpoints(run_dir)
     stop.check()  # the signal came after the last rollout boundary
     return finished
+
+
+SEEDS_DIR = "seeds"
+"""The folder of a ``--seeds`` run that holds one run folder per training seed."""
+
+KEPT_FILES = (MODEL_FILE, VECNORMALIZE_FILE, AGENT_FILE, "monitor.csv")
+"""What the kept seed's run folder lends the run: the saved agent and its training monitor."""
+
+
+def seed_folder(run_dir: Path, seed: int) -> Path:
+    """The run folder of one training seed of a ``--seeds`` run."""
+    return Path(run_dir) / SEEDS_DIR / f"seed_{seed}"
+
+
+def _train_seeds(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
+    """Train ``args.seeds`` seeds, keep the best on the validation people; the training summary (``training.json``).
+
+    Raises:
+        agents.trainer.training_run.Stopped: a signal stopped one seed's training (after its checkpoint).
+        RunProblem / RunCannotContinue: as :func:`agents.trainer.run.train`, for the seed that met it.
+    """
+    seeds = list(range(args.seed, args.seed + seeds_of(args)))
+    finished = {seed: _train_one(args, plan, seed, stop) for seed in seeds}
+    scores = [_validation_score(args, plan, seed) for seed in seeds]
+    stop.check()
+    kept = max(scores, key=lambda score: score["success_rate"])  # ties: the lowest seed
+    for name in KEPT_FILES:
+        source = seed_folder(plan.run_dir, kept["seed"]) / name
+        if source.exists():
+            shutil.copyfile(source, plan.run_dir / name)
+    summary = finished[kept["seed"]]
+    training = {**summary["training"], "kept_seed": kept["seed"], "seeds": scores}
+    print(
+        "kept seed "
+        + f"{kept['seed']} of {', '.join(str(s['seed']) for s in scores)}: validation success "
+        + ", ".join(f"{s['success_rate']:.1%}" for s in scores)
+        + f" on the validation people ({args.select_episodes} episodes)"
+    )
+    result = {**summary, "training": training}
+    write_json(plan.run_dir / TRAINING_FILE, result)
+    return result
+
+
+def _train_one(args: Any, plan: Plan, seed: int, stop: StopSignals) -> dict[str, Any]:
+    """One seed's training summary: read back if it finished, else trained (resumed in place if begun)."""
+    folder = seed_folder(plan.run_dir, seed)
+    finished = read_training(folder)
+    if finished is not None:
+        return finished
+    begun = is_unfinished_run(folder)
+    seed_args = dataclasses.replace(
+        args, seed=seed, seeds=1, out=str(folder.parent), resume=str(folder) if begun else plan.source_model
+    )
+    print(f"training seed {seed} ({seed - args.seed + 1} of {seeds_of(args)})")
+    seed_plan = plan_run(seed_args, folder=None if begun else folder)
+    return train(seed_args, seed_plan, stop)
+
+
+def _validation_score(args: Any, plan: Plan, seed: int) -> dict[str, Any]:
+    """One seed's saved policy scored on the validation people (the episodes the selection plays)."""
+    from agents.evaluate import evaluate
+    from agents.rl import load_agent
+    from agents.rl.callbacks import VALIDATION_SEED
+
+    agent = load_agent(seed_folder(plan.run_dir, seed))
+    result = evaluate(agent, plan.env_id, "validation", args.select_episodes, VALIDATION_SEED)
+    return {
+        "seed": seed,
+        "success_rate": result.success_rate,
+        "unsafe_rate": result.unsafe_rate,
+        "episodes": args.select_episodes,
+        "personas": "validation",
+    }
 
 
 def _model_to_train(args: Any, plan: Plan, env: Any, checkpoint: Path | None) -> tuple[Any, Any, dict[str, Any], int]:

@@ -45,6 +45,7 @@ __all__ = [
     "recorded_settings",
     "resume_settings",
     "run_problem",
+    "seeds_of",
     "settings_framework",
     "usage_error",
 ]
@@ -57,6 +58,7 @@ RUN_FIELDS = (
     "algo",
     "env",
     "seed",
+    "seeds",
     "timesteps",
     "n_envs",
     "eval_episodes",
@@ -97,6 +99,14 @@ def learner_framework(args: Any) -> str:
     if args.framework is not None:
         return str(args.framework)
     return "jax" if args.algo == "ppo" else "sb3"
+
+
+def seeds_of(args: Any) -> int:
+    """``--seeds``, or its default: 2 for PPO on the JAX learner (two runs fit ``train.py``'s five minutes), else 1."""
+    seeds = getattr(args, "seeds", None)
+    if seeds is not None:
+        return int(seeds)
+    return 2 if args.algo == "ppo" and learner_framework(args) == "jax" and not args.eval_only else 1
 
 
 def settings_framework(args: Any, algo: str) -> str:
@@ -164,7 +174,9 @@ def _problem_with_numbers(args: Any) -> str | None:
         return "--seed and --eval-seed must be >= 0"
     # Envs are seeded seed .. seed + n_envs - 1 and episodes eval_seed .. eval_seed + eval_episodes - 1.
     n_envs = args.n_envs or hyperparams_for(args.algo, None, settings_framework(args, args.algo)).n_envs
-    problem = seed_range_problem("--seed", args.seed, n_envs)
+    if getattr(args, "seeds", None) is not None and args.seeds < 1:
+        return f"--seeds must be >= 1, got {args.seeds}"
+    problem = seed_range_problem("--seed", args.seed, n_envs + seeds_of(args) - 1)
     problem = problem or seed_range_problem("--eval-seed", args.eval_seed, args.eval_episodes)
     if problem:
         return problem
@@ -232,6 +244,8 @@ def _problem_with_paths(args: Any) -> str | None:
 
     if args.eval_only and args.resume is not None:
         return "--eval-only and --resume exclude each other"
+    if (getattr(args, "seeds", None) or 1) > 1 and (args.eval_only or args.framework == "rllib"):
+        return f"--seeds {args.seeds} trains several seeds; not with --eval-only or --framework rllib"
     if args.eval_only and args.model is None:
         return "--eval-only needs --model PATH"
     if args.model is not None and not args.eval_only:
@@ -353,6 +367,7 @@ def recorded_settings(run_dir: Path, args_type: type[Any]) -> dict[str, Any]:
     settings = {name: recorded[name] for name in (*RUN_FIELDS, "resume") if name in recorded}
     settings.setdefault("framework", "sb3")  # written before there was a choice: SB3's run
     settings.setdefault("select_on", "train")  # likewise: selected on the training personas
+    settings.setdefault("seeds", 1)  # likewise: one training seed
     try:
         args_type(**settings)
     except BadArgs as exc:

@@ -15,7 +15,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[2]
 # PPO with one env: 512-step rollouts, so a checkpoint boundary every 512 steps.
 TINY = [
-    "--timesteps", "1536", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
+    "--seeds", "1", "--timesteps", "1536", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
     "--eval-points", "0", "--select-episodes", "64", "--baselines", "", "--no-progress", "--threads", "1",
 ]  # fmt: skip
 
@@ -201,7 +201,7 @@ def _settings(**changes: object) -> str:
 
     import train
 
-    args = train.Args(timesteps=64, n_envs=1, eval_episodes=2, eval_points=0, baselines="handbook", progress=False)
+    args = train.Args(seeds=1, timesteps=64, n_envs=1, eval_episodes=2, eval_points=0, baselines="handbook")
     return json.dumps(dataclasses.asdict(args) | changes)
 
 

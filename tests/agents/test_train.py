@@ -12,8 +12,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = [
-    "--timesteps", "256", "--n-envs", "2", "--eval-episodes", "8", "--eval-points", "1", "--select-episodes", "64",
-    "--no-progress",
+    "--seeds", "1", "--timesteps", "256", "--n-envs", "2", "--eval-episodes", "8", "--eval-points", "1",
+    "--select-episodes", "64", "--no-progress",
 ]  # fmt: skip
 
 
