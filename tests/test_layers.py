@@ -26,7 +26,7 @@ HEAVY = ("torch", "stable_baselines3", "ray")
 """Loaded only from ``agents`` up (STYLE.md "Layout")."""
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("estimator.compiled",),
+    ("estimator.compiled", "estimator.validate"),
     ("coop_gym.model", "estimator"),
     ("coop_gym",),
     ("coop_gym.experiment",),
@@ -36,8 +36,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 """The layer order, lowest first: a module may import its own group and any lower layer.
 
 Groups of one layer (e.g. the model and the filters) may not import each other.
-``estimator.compiled`` is its own group below the filters; ``coop_gym.model`` is its own group
-below the rest of ``coop_gym`` (the envs, registration, cli), and ``coop_gym.experiment`` above it;
+``estimator.compiled`` (the kernels' boundary) and ``estimator.validate`` (what counts as a number,
+for every validator: the model's parameters and the filters both use it) are groups below the
+filters; ``coop_gym.model`` is its own group below the rest of ``coop_gym`` (the envs,
+registration, cli), and ``coop_gym.experiment`` above it;
 ``agents`` sits above the experiment, so the web app's person role runs the paper's trial design.
 """
 
@@ -124,7 +126,7 @@ def test_importing_a_package_loads_no_higher_one(package: str) -> None:
     assert not loaded & higher, f"importing {package} loads {sorted(loaded & higher)}"
 
 
-def test_the_compiled_boundary_loads_no_other_project_module() -> None:
+def test_the_lowest_layer_loads_no_other_project_module() -> None:
     boundary = [n for n in _modules_of("estimator") if group_of(n)[0] == 0]
     loaded = _fresh_import(boundary)
     project = [n for n in loaded if n.partition(".")[0] in PACKAGES]
@@ -200,9 +202,10 @@ def test_the_checker_sees_cycles_and_upward_imports() -> None:
     assert [sorted(c) for c in _strongly_connected(graph)] == [["a", "b", "c"]]
     assert group_of("coop_gym.model.dynamics") == (1, "coop_gym.model")
     assert group_of("coop_gym.envs.core") == (2, "coop_gym")
-    assert group_of("estimator.identify") == (1, "estimator")
+    assert group_of("estimator.identification.identify") == (1, "estimator")
     assert group_of("coop_gym.experiment.protocol") == (3, "coop_gym.experiment")
     assert group_of("estimator.compiled.rng") == (0, "estimator.compiled")
+    assert group_of("estimator.validate") == (0, "estimator.validate")
 
 
 def test_no_module_imports_a_higher_package() -> None:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
 
-from estimator.compiled.checks import is_number, python_scalar
+from estimator.validate import is_number, python_scalar
 
 __all__ = [
     "ACTION_TYPES",

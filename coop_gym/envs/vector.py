@@ -17,8 +17,8 @@ from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import ConfiguredEnv, check_threads, render_state_for
 from coop_gym.envs.kernels.report import REPORT, count_steps_and_end_episodes
 from coop_gym.envs.kernels.seeding import MAX_BATCH_SEED
-from estimator.compiled.checks import is_integer
 from estimator.compiled.rng import G_STATE
+from estimator.validate import is_integer
 
 __all__ = ["SitToStandVectorEnv"]
 

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from estimator.compiled.checks import check_choice, check_flag, check_integer, check_number
+from estimator.validate import check_choice, check_flag, check_integer, check_number
 
 __all__ = [
     "EPISODE_CLOCK_TOLERANCE_S",
@@ -39,7 +39,7 @@ _RATE_RANGE = (0.0, 100.0)
 
 
 def _validate_ranges(obj: Any, ranges: dict[str, tuple[float, float]]) -> None:
-    """Check each field of ``obj`` named in ``ranges`` (:func:`estimator.compiled.checks.check_number`).
+    """Check each field of ``obj`` named in ``ranges`` (:func:`estimator.validate.check_number`).
 
     A NumPy scalar is stored as the Python number of the same value (the dataclass is frozen, so
     through ``object.__setattr__``, as in its own ``__init__``).
