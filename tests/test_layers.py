@@ -38,9 +38,11 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 Groups of one layer (e.g. the model and the filters) may not import each other.
 ``estimator.compiled`` (the kernels' boundary) and ``estimator.validate`` (what counts as a number,
 for every validator: the model's parameters and the filters both use it) are groups below the
-filters; ``coop_gym.model`` is its own group below the rest of ``coop_gym`` (the envs,
-registration, cli), and ``coop_gym.experiment`` above it;
-``agents`` sits above the experiment, so the web app's person role runs the paper's trial design.
+filters. The ``coop_gym`` package holds three layers: ``coop_gym.model`` below the rest (the envs,
+registration, cli, io), and ``coop_gym.experiment`` (the paper's experiment over the model, the envs'
+nominal model and the filters) above them, never loaded by them
+(:func:`test_importing_coop_gym_loads_not_its_experiment`). ``agents`` sits above the experiment, so
+the web app's person role runs the paper's trial design.
 """
 
 KNOWN_CYCLES: frozenset[frozenset[str]] = frozenset()
@@ -124,6 +126,24 @@ def test_importing_a_package_loads_no_higher_one(package: str) -> None:
     loaded = {name.partition(".")[0] for name in _fresh_import(_modules_of(package))}
     assert package in loaded
     assert not loaded & higher, f"importing {package} loads {sorted(loaded & higher)}"
+
+
+def test_importing_coop_gym_loads_not_its_experiment() -> None:
+    """``coop_gym.experiment`` is the top layer of the ``coop_gym`` package, above the envs, and held so at run time.
+
+    It stays inside ``coop_gym`` (the wheel installs no top-level name but the three packages,
+    ``scripts/check_installed.py``), so a package test cannot see it: importing every other module of
+    ``coop_gym`` in a fresh interpreter must not load it.
+    """
+    below = [n for n in _modules_of("coop_gym") if group_of(n)[1] != "coop_gym.experiment"]
+    loaded = _fresh_import(below)
+    assert below and "coop_gym.envs" in loaded
+    assert [n for n in loaded if group_of_or_none(n) == "coop_gym.experiment"] == []
+
+
+def group_of_or_none(name: str) -> str | None:
+    """The layer group of a project module, ``None`` for any other module."""
+    return group_of(name)[1] if name.partition(".")[0] in PACKAGES else None
 
 
 def test_the_lowest_layer_loads_no_other_project_module() -> None:
