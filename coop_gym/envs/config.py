@@ -58,7 +58,7 @@ class Outcome(IntEnum):
 
     @property
     def truncates(self) -> bool:
-        """The episode clock ran out: Gymnasium's ``truncated``."""
+        """The episode reached its length without a lift (Gymnasium's ``truncated``; ``episode_end`` sets it)."""
         return self is Outcome.TIMEOUT
 
 
