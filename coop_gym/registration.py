@@ -40,7 +40,7 @@ ENV_IDS: dict[str, dict[str, Any]] = {
     "CoopGym/SitToStandHardDiscrete-v1": {"difficulty": "hard", "action_type": "discrete"},
     "CoopGym/SitToStandHardIMM-v1": {"difficulty": "hard", "estimator": "imm"},
     "CoopGym/SitToStandHardHeldOut-v1": {"difficulty": "hard", "personas": "test"},
-    # v2: the hard level chosen again against the widened blind family (coop_gym.model.difficulty);
+    # v2: the hard-v2 level, two of hard's knobs changed (coop_gym.model.difficulty);
     # the variants that clients naming an env by id alone need (CleanRL's --env-id, RL Zoo, RLlib)
     # are ids, the others take it as difficulty="hard-v2".
     "CoopGym/SitToStandHard-v2": {"difficulty": "hard-v2"},

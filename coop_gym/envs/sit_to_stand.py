@@ -146,8 +146,8 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
 
     * v0: initial release.
     * v1: difficulty levels (``difficulty``) and the safety-priced reward.
-    * v2: the hard level chosen again (``difficulty="hard-v2"``): ``SitToStandHard-v2`` and its
-      ``Discrete``, ``HeldOut`` and ``Unit`` variants.
+    * v2: the ``hard-v2`` level, two of ``hard``'s knobs changed (``difficulty="hard-v2"``):
+      ``SitToStandHard-v2`` and its ``Discrete``, ``HeldOut`` and ``Unit`` variants.
     * ``Unit`` ids (``SitToStandUnit-v0``, ``SitToStandHardUnit-v1``, ...): the ids they
       scale, with ``observation_scale="unit"``; same task and dynamics, so same version
       (a new name, not a ``-v2``: Gymnasium warns that an id is out of date once a higher
