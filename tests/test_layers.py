@@ -4,13 +4,16 @@ Two checks. The packages: each is imported, every module of it, in a fresh inter
 ``sys.modules`` must then hold no higher package (a package's ``__init__`` runs at the import of
 any of its modules, which an ``ast`` scan of the module does not see). The modules: imports are
 read with ``ast`` from every module of the project, function-local imports included (a lazy
-import is still a dependency), and each must run down :data:`LAYERS`.
+import is still a dependency), and each must run down :data:`LAYERS`. ``docs/ARCHITECTURE.md`` is
+held to both: its layer and rooms tables are :data:`LAYERS` and :data:`AGENT_ROOMS` with the imports
+each group and room really has, and every path of its "Where does a new X go" table exists.
 """
 
 from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -335,3 +338,92 @@ def test_importing_a_room_of_agents_loads_no_higher_one(room: str) -> None:
     loaded = {_room(n) for n in _fresh_import(modules) if n.startswith("agents.")}
     higher = set(AGENT_ROOMS[AGENT_ROOMS.index(room) + 1 :])
     assert modules and not loaded & higher, f"importing agents.{room} loads {sorted(loaded & higher)}"
+
+
+# --- docs/ARCHITECTURE.md is drawn from the imports ---------------------------------
+
+ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
+
+
+def _table(title: str, text: str | None = None) -> list[list[str]]:
+    """The body rows of the first table under the page's ``## title``, as lists of cells."""
+    text = ARCHITECTURE.read_text(encoding="utf-8") if text is None else text
+    start = text.index(f"\n## {title}\n")
+    end = text.find("\n## ", start + 1)
+    lines = [line for line in text[start : end if end != -1 else None].splitlines() if line.startswith("|")]
+    return [[cell.strip() for cell in line.strip().strip("|").split("|")] for line in lines[2:]]
+
+
+def _names(cell: str) -> list[str]:
+    return re.findall(r"`([\w.]+)`", cell)
+
+
+def _drawn(per_group: str) -> list[set[str]]:
+    """One set of names per ``·``-separated part of a cell (``—``: none)."""
+    return [set(_names(part)) for part in per_group.split("·")]
+
+
+def _group_imports() -> dict[str, set[str]]:
+    found: dict[str, set[str]] = {}
+    for name, imported in import_graph().items():
+        group = group_of(name)[1]
+        found.setdefault(group, set()).update(group_of(t)[1] for t in imported if group_of(t)[1] != group)
+    return found
+
+
+def _room_imports() -> dict[str, set[str]]:
+    found: dict[str, set[str]] = {}
+    for name, imported in import_graph().items():
+        if name.startswith("agents.") and not name.endswith("__main__"):
+            room = _room(name)
+            rooms = {_room(t) for t in imported if t.startswith("agents.")}
+            found.setdefault(room, set()).update(rooms - {room})
+    return found
+
+
+def architecture_problems(text: str | None = None) -> list[str]:
+    """Where the page and the code disagree: the layers, the rooms, the paths of "Where does a new X go"."""
+    problems = []
+    layers = _table("Layers", text)
+    drawn = tuple(tuple(_names(row[1])) for row in layers)
+    if [row[0] for row in layers] != [str(i) for i in range(len(LAYERS))] or drawn != LAYERS:
+        problems.append(f"the layer table draws {drawn}, LAYERS is {LAYERS}")
+    imports = _group_imports()
+    for row in layers:
+        groups, parts = _names(row[1]), _drawn(row[2])
+        if len(parts) != len(groups):
+            problems.append(f"layer {row[0]}: {len(groups)} groups, {len(parts)} lists of imports")
+        for group, said in zip(groups, parts, strict=False):
+            if said != imports.get(group, set()):
+                problems.append(f"{group} imports {sorted(imports.get(group, set()))}, the page says {sorted(said)}")
+    rooms = _table("Rooms of agents", text)
+    if tuple(_names(row[0])[0] for row in rooms) != AGENT_ROOMS:
+        problems.append(f"the rooms table lists {[row[0] for row in rooms]}, AGENT_ROOMS is {AGENT_ROOMS}")
+    room_imports = _room_imports()
+    for row in rooms:
+        room = _names(row[0])[0]
+        if set(_names(row[1])) != room_imports.get(room, set()):
+            problems.append(f"agents.{room} imports {sorted(room_imports.get(room, set()))}, the page says {row[1]}")
+    for row in _table("Where does a new X go", text):
+        for cell in row[1:]:
+            for path in re.findall(r"`([\w./-]+/[\w./-]*)`", cell):
+                if not (ROOT / path).exists():
+                    problems.append(f"'Where does a new X go' names {path}, which does not exist")
+    return problems
+
+
+def test_the_architecture_page_is_drawn_from_the_imports() -> None:
+    assert architecture_problems() == []
+
+
+def test_the_architecture_check_sees_a_page_that_drifted() -> None:
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    drifted = {
+        "a layer": text.replace("| 3 | `coop_gym.experiment` |", "| 3 | `coop_gym.experiments` |"),
+        "an import": text.replace("| 3 | `coop_gym.experiment` | `coop_gym`, ", "| 3 | `coop_gym.experiment` | "),
+        "a room": text.replace("| `tune` | `base`, `caregivers`, `evaluate` |", "| `tuning` | `base` |"),
+        "a path": text.replace("`estimator/validate.py`", "`estimator/checks.py`"),
+    }
+    for what, page in drifted.items():
+        assert page != text, what
+        assert architecture_problems(page), f"a drifted {what} goes unnoticed"

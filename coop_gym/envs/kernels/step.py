@@ -52,10 +52,9 @@ def step_env(
 ) -> None:
     r"""One agent action of one env: cues -> (person -> sensors -> filter -> judgment) x substeps -> outcome -> reward.
 
-    A lift ends the episode, judged on the true state (§II); else the cues play for ``substeps``
-    filter steps (the episode's length is counted in steps after the step:
-    :func:`~coop_gym.envs.kernels.report.episode_end`). The reward is the sum of the named
-    terms (:func:`_write_reward`). ``row`` is the env's packed state (:data:`~coop_gym.envs.kernels.layout.BLOCKS`).
+    A lift ends the episode, judged on the true state (§II); else the cues play for ``substeps`` filter
+    steps (the episode's length: :func:`~coop_gym.envs.kernels.report.episode_end`). The reward sums the named
+    terms (:func:`_write_reward`); ``row`` is the env's packed state (:data:`~coop_gym.envs.kernels.layout.BLOCKS`).
     """
     substeps = int(consts[CONSTS.substeps])
     person = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
