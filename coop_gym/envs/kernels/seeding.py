@@ -39,9 +39,9 @@ MAX_BATCH_SEED = 2**63 - 1
 MIN_BATCH_ENVS = 10_000
 """Fewer envs than this are seeded with a ``Generator`` object each (the same numbers).
 
-On a fresh install :func:`seed_states` costs a compile of ~1 s (``python bench/cold_start.py
---num-envs 1024 --kernels``), about what 10^4 ``Generator`` objects cost (``python bench/reset.py``);
-a smaller batch would only pay it on the first step of every fresh install.
+On a fresh install :func:`seed_states` costs a compile (``python bench/cold_start.py --num-envs 1024
+--kernels``), about what 10^4 ``Generator`` objects cost (``python bench/reset.py``); a smaller
+batch would only pay it on the first step of every fresh install.
 """
 
 # NumPy's SeedSequence (numpy/random/bit_generator.pyx): a pool of 4 uint32 words hashed from
