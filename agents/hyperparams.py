@@ -23,7 +23,7 @@ from coop_gym.cli import SEED_LIMIT
 from coop_gym.io import write_text
 from coop_gym.model.personas import TEST_PERSONAS, resolve_personas
 from coop_gym.registration import HARD_ENV_ID
-from estimator.compiled.checks import check_integer
+from estimator.validate import check_integer
 
 __all__ = [
     "ALGORITHMS",

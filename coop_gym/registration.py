@@ -13,8 +13,9 @@ __all__ = ["ENV_IDS", "HARD_ENV_ID", "LEVEL_ENV_IDS", "register_envs", "unit_twi
 MAX_EPISODE_STEPS = Timing().max_episode_steps
 """30 s at one action per 0.1 s: the episode length of every registered id on its default timing.
 
-The ids register no ``TimeLimit``: each env ends its episodes by its own clock (``timing.episode_s``,
-truncated with outcome ``"timeout"``), so a custom ``timing`` gives the length it asks for. A
+The ids register no ``TimeLimit``: each env ends its episodes at their own length
+(``timing.max_episode_steps``, truncated with outcome ``"timeout"``), so a custom ``timing`` gives the
+length it asks for. A
 ``TimeLimit`` of 300 steps would cut a 60 s episode in half. ``env.spec.max_episode_steps`` still
 reports the length of the env's own timing (``SitToStandEnv.spec``), for clients that read it.
 ``gym.make(id, max_episode_steps=n)`` adds a ``TimeLimit`` of ``n`` steps as usual.
@@ -39,7 +40,7 @@ ENV_IDS: dict[str, dict[str, Any]] = {
     "CoopGym/SitToStandHardDiscrete-v1": {"difficulty": "hard", "action_type": "discrete"},
     "CoopGym/SitToStandHardIMM-v1": {"difficulty": "hard", "estimator": "imm"},
     "CoopGym/SitToStandHardHeldOut-v1": {"difficulty": "hard", "personas": "test"},
-    # v2: the hard level chosen again against the widened blind family (coop_gym.model.difficulty);
+    # v2: the hard-v2 level, two of hard's knobs changed (coop_gym.model.difficulty);
     # the variants that clients naming an env by id alone need (CleanRL's --env-id, RL Zoo, RLlib)
     # are ids, the others take it as difficulty="hard-v2".
     "CoopGym/SitToStandHard-v2": {"difficulty": "hard-v2"},
@@ -109,6 +110,6 @@ def register_envs() -> None:
             id=env_id,
             entry_point="coop_gym.envs.sit_to_stand:SitToStandEnv",
             vector_entry_point="coop_gym.envs.vector:SitToStandVectorEnv",
-            max_episode_steps=None,  # no TimeLimit: the env's clock truncates (see MAX_EPISODE_STEPS)
+            max_episode_steps=None,  # no TimeLimit: the env truncates at its length (see MAX_EPISODE_STEPS)
             kwargs=dict(kwargs),
         )

@@ -17,8 +17,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr
 
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.compiled.checks import is_number, python_scalar
 from estimator.compiled.schema import index_table
+from estimator.validate import is_number, python_scalar
 
 __all__ = [
     "JUDGE",

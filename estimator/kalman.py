@@ -379,7 +379,7 @@ class PaperKalmanFilter:
     def __init__(self, model: NominalModel, first_position_m: float = 0.0) -> None:
         """Create the filter centred on the first measurement."""
         self.model = model
-        # filterpy (and the scipy.stats it imports, ~2 s) loads only when the reference filter is built:
+        # filterpy (and the scipy.stats it imports, slow to load) loads only when the reference filter is built:
         # `import coop_gym` and the compiled filter never need it.
         from filterpy.kalman import KalmanFilter
 

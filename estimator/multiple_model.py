@@ -39,10 +39,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.compiled.checks import is_number
 from estimator.kalman import NOMINAL, NOMINAL_COLUMNS, nominal_row
 from estimator.mode_kernels import N_MODES, NON_FINITE_INPUT, STATE_WIDTH, filter_sequences
 from estimator.nominal import NominalModel
+from estimator.validate import is_number
 
 __all__ = [
     "MODE_VALUES",

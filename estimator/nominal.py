@@ -25,7 +25,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.compiled.checks import is_number, python_scalar
+from estimator.validate import is_number, python_scalar
 
 __all__ = ["EULER_FIELDS", "STATE_DIM", "NominalModel", "euler_step", "euler_transition"]
 
@@ -220,7 +220,7 @@ def euler_step(
     differently, and each keeps its recorded numbers: the paper filter's mean is ``A m + B u``
     (:func:`euler_transition`), the multiple-model filters' mode means
     (:func:`~estimator.mode_kernels.mode_mean_step`) and the nominal trials
-    (:mod:`estimator.nominal_trials`) are this form. Scalars or arrays of one shape (NumPy's
+    (:mod:`estimator.identification.nominal_trials`) are this form. Scalars or arrays of one shape (NumPy's
     element-wise operations, the same numbers); ``params`` = ``(dt, lambda1, k1, k2, k3, k4)``,
     the fields of :data:`EULER_FIELDS` (symbols as in :class:`NominalModel`).
     """

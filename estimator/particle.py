@@ -52,8 +52,8 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.compiled.checks import check_integer, check_number
 from estimator.compiled.rng import bit_generator_row, random, standard_normal
+from estimator.validate import check_integer, check_number
 
 __all__ = ["SwitchingParticleFilter", "reference_run"]
 

@@ -1,8 +1,8 @@
-"""Score candidate hard levels: the hard level's knobs changed, every baseline chosen again on it.
+"""Score candidate hard levels: the hard level's knobs changed, every baseline searched on each.
 
-The hard level's knobs (:class:`coop_gym.model.difficulty.Difficulty`) were chosen against the
-one-routine blind family; a level's headroom has to be measured against the best blind policy
-*for that level*, so each candidate here gets the whole choice again, on the TRAINING personas:
+A level's headroom is measured against the best blind policy *for that level*
+(:class:`coop_gym.model.difficulty.Difficulty` holds the knobs), so each candidate gets the
+baselines' searches of its own, on the TRAINING personas:
 
 * the widened blind search (:func:`agents.tune.baselines.search_blind`, ``--final-episodes``
   per finalist);
@@ -18,8 +18,7 @@ best reader's gain over blind. A candidate is the shipped level with some knobs 
     python scripts/level_candidates.py --knobs '{}' '{"pushed_lapse_rate_per_s": 2.0}'
 
 The candidate replaces ``DIFFICULTIES["hard"]`` in this process only (every env made here with
-``difficulty="hard"`` plays it); the registered ids are untouched. A candidate takes about ten
-minutes of one core.
+``difficulty="hard"`` plays it); the registered ids are untouched.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python scripts/make_readme_figures.py                       # every figure, about 30 s on 2 cores
+    python scripts/make_readme_figures.py                       # every figure
     python scripts/make_readme_figures.py --only scene,timeline  # a subset
     python scripts/make_readme_figures.py --out /tmp/img --episodes 100
 

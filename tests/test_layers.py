@@ -4,13 +4,16 @@ Two checks. The packages: each is imported, every module of it, in a fresh inter
 ``sys.modules`` must then hold no higher package (a package's ``__init__`` runs at the import of
 any of its modules, which an ``ast`` scan of the module does not see). The modules: imports are
 read with ``ast`` from every module of the project, function-local imports included (a lazy
-import is still a dependency), and each must run down :data:`LAYERS`.
+import is still a dependency), and each must run down :data:`LAYERS`. ``docs/ARCHITECTURE.md`` is
+held to both: its layer and rooms tables are :data:`LAYERS` and :data:`AGENT_ROOMS` with the imports
+each group and room really has, and every path of its "Where does a new X go" table exists.
 """
 
 from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,7 +29,7 @@ HEAVY = ("torch", "stable_baselines3", "ray")
 """Loaded only from ``agents`` up (STYLE.md "Layout")."""
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("estimator.compiled",),
+    ("estimator.compiled", "estimator.validate"),
     ("coop_gym.model", "estimator"),
     ("coop_gym",),
     ("coop_gym.experiment",),
@@ -36,9 +39,13 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 """The layer order, lowest first: a module may import its own group and any lower layer.
 
 Groups of one layer (e.g. the model and the filters) may not import each other.
-``estimator.compiled`` is its own group below the filters; ``coop_gym.model`` is its own group
-below the rest of ``coop_gym`` (the envs, registration, cli), and ``coop_gym.experiment`` above it;
-``agents`` sits above the experiment, so the web app's person role runs the paper's trial design.
+``estimator.compiled`` (the kernels' boundary) and ``estimator.validate`` (what counts as a number,
+for every validator: the model's parameters and the filters both use it) are groups below the
+filters. The ``coop_gym`` package holds three layers: ``coop_gym.model`` below the rest (the envs,
+registration, cli, io), and ``coop_gym.experiment`` (the paper's experiment over the model, the envs'
+nominal model and the filters) above them, never loaded by them
+(:func:`test_importing_coop_gym_loads_not_its_experiment`). ``agents`` sits above the experiment, so
+the web app's person role runs the paper's trial design.
 """
 
 KNOWN_CYCLES: frozenset[frozenset[str]] = frozenset()
@@ -124,7 +131,25 @@ def test_importing_a_package_loads_no_higher_one(package: str) -> None:
     assert not loaded & higher, f"importing {package} loads {sorted(loaded & higher)}"
 
 
-def test_the_compiled_boundary_loads_no_other_project_module() -> None:
+def test_importing_coop_gym_loads_not_its_experiment() -> None:
+    """``coop_gym.experiment`` is the top layer of the ``coop_gym`` package, above the envs, and held so at run time.
+
+    It stays inside ``coop_gym`` (the wheel installs no top-level name but the three packages,
+    ``scripts/check_installed.py``), so a package test cannot see it: importing every other module of
+    ``coop_gym`` in a fresh interpreter must not load it.
+    """
+    below = [n for n in _modules_of("coop_gym") if group_of(n)[1] != "coop_gym.experiment"]
+    loaded = _fresh_import(below)
+    assert below and "coop_gym.envs" in loaded
+    assert [n for n in loaded if group_of_or_none(n) == "coop_gym.experiment"] == []
+
+
+def group_of_or_none(name: str) -> str | None:
+    """The layer group of a project module, ``None`` for any other module."""
+    return group_of(name)[1] if name.partition(".")[0] in PACKAGES else None
+
+
+def test_the_lowest_layer_loads_no_other_project_module() -> None:
     boundary = [n for n in _modules_of("estimator") if group_of(n)[0] == 0]
     loaded = _fresh_import(boundary)
     project = [n for n in loaded if n.partition(".")[0] in PACKAGES]
@@ -200,9 +225,10 @@ def test_the_checker_sees_cycles_and_upward_imports() -> None:
     assert [sorted(c) for c in _strongly_connected(graph)] == [["a", "b", "c"]]
     assert group_of("coop_gym.model.dynamics") == (1, "coop_gym.model")
     assert group_of("coop_gym.envs.core") == (2, "coop_gym")
-    assert group_of("estimator.identify") == (1, "estimator")
+    assert group_of("estimator.identification.identify") == (1, "estimator")
     assert group_of("coop_gym.experiment.protocol") == (3, "coop_gym.experiment")
     assert group_of("estimator.compiled.rng") == (0, "estimator.compiled")
+    assert group_of("estimator.validate") == (0, "estimator.validate")
 
 
 def test_no_module_imports_a_higher_package() -> None:
@@ -312,3 +338,92 @@ def test_importing_a_room_of_agents_loads_no_higher_one(room: str) -> None:
     loaded = {_room(n) for n in _fresh_import(modules) if n.startswith("agents.")}
     higher = set(AGENT_ROOMS[AGENT_ROOMS.index(room) + 1 :])
     assert modules and not loaded & higher, f"importing agents.{room} loads {sorted(loaded & higher)}"
+
+
+# --- docs/ARCHITECTURE.md is drawn from the imports ---------------------------------
+
+ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
+
+
+def _table(title: str, text: str | None = None) -> list[list[str]]:
+    """The body rows of the first table under the page's ``## title``, as lists of cells."""
+    text = ARCHITECTURE.read_text(encoding="utf-8") if text is None else text
+    start = text.index(f"\n## {title}\n")
+    end = text.find("\n## ", start + 1)
+    lines = [line for line in text[start : end if end != -1 else None].splitlines() if line.startswith("|")]
+    return [[cell.strip() for cell in line.strip().strip("|").split("|")] for line in lines[2:]]
+
+
+def _names(cell: str) -> list[str]:
+    return re.findall(r"`([\w.]+)`", cell)
+
+
+def _drawn(per_group: str) -> list[set[str]]:
+    """One set of names per ``·``-separated part of a cell (``—``: none)."""
+    return [set(_names(part)) for part in per_group.split("·")]
+
+
+def _group_imports() -> dict[str, set[str]]:
+    found: dict[str, set[str]] = {}
+    for name, imported in import_graph().items():
+        group = group_of(name)[1]
+        found.setdefault(group, set()).update(group_of(t)[1] for t in imported if group_of(t)[1] != group)
+    return found
+
+
+def _room_imports() -> dict[str, set[str]]:
+    found: dict[str, set[str]] = {}
+    for name, imported in import_graph().items():
+        if name.startswith("agents.") and not name.endswith("__main__"):
+            room = _room(name)
+            rooms = {_room(t) for t in imported if t.startswith("agents.")}
+            found.setdefault(room, set()).update(rooms - {room})
+    return found
+
+
+def architecture_problems(text: str | None = None) -> list[str]:
+    """Where the page and the code disagree: the layers, the rooms, the paths of "Where does a new X go"."""
+    problems = []
+    layers = _table("Layers", text)
+    drawn = tuple(tuple(_names(row[1])) for row in layers)
+    if [row[0] for row in layers] != [str(i) for i in range(len(LAYERS))] or drawn != LAYERS:
+        problems.append(f"the layer table draws {drawn}, LAYERS is {LAYERS}")
+    imports = _group_imports()
+    for row in layers:
+        groups, parts = _names(row[1]), _drawn(row[2])
+        if len(parts) != len(groups):
+            problems.append(f"layer {row[0]}: {len(groups)} groups, {len(parts)} lists of imports")
+        for group, said in zip(groups, parts, strict=False):
+            if said != imports.get(group, set()):
+                problems.append(f"{group} imports {sorted(imports.get(group, set()))}, the page says {sorted(said)}")
+    rooms = _table("Rooms of agents", text)
+    if tuple(_names(row[0])[0] for row in rooms) != AGENT_ROOMS:
+        problems.append(f"the rooms table lists {[row[0] for row in rooms]}, AGENT_ROOMS is {AGENT_ROOMS}")
+    room_imports = _room_imports()
+    for row in rooms:
+        room = _names(row[0])[0]
+        if set(_names(row[1])) != room_imports.get(room, set()):
+            problems.append(f"agents.{room} imports {sorted(room_imports.get(room, set()))}, the page says {row[1]}")
+    for row in _table("Where does a new X go", text):
+        for cell in row[1:]:
+            for path in re.findall(r"`([\w./-]+/[\w./-]*)`", cell):
+                if not (ROOT / path).exists():
+                    problems.append(f"'Where does a new X go' names {path}, which does not exist")
+    return problems
+
+
+def test_the_architecture_page_is_drawn_from_the_imports() -> None:
+    assert architecture_problems() == []
+
+
+def test_the_architecture_check_sees_a_page_that_drifted() -> None:
+    text = ARCHITECTURE.read_text(encoding="utf-8")
+    drifted = {
+        "a layer": text.replace("| 3 | `coop_gym.experiment` |", "| 3 | `coop_gym.experiments` |"),
+        "an import": text.replace("| 3 | `coop_gym.experiment` | `coop_gym`, ", "| 3 | `coop_gym.experiment` | "),
+        "a room": text.replace("| `tune` | `base`, `caregivers`, `evaluate` |", "| `tuning` | `base` |"),
+        "a path": text.replace("`estimator/validate.py`", "`estimator/checks.py`"),
+    }
+    for what, page in drifted.items():
+        assert page != text, what
+        assert architecture_problems(page), f"a drifted {what} goes unnoticed"

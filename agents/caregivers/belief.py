@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from agents.base import LIFT, PUSH_NONE, PUSH_SOFT, VERBAL_FORWARD, VERBAL_NONE, WAIT
 from agents.caregivers.scripted_base import EPS_S, PhaseState, ScriptedAgent
-from estimator.compiled.checks import check_flag, check_number
+from estimator.validate import check_flag, check_number
 
 __all__ = ["TUNED_BELIEF", "BeliefCaregiver", "BeliefSettings"]
 

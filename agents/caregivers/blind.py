@@ -21,7 +21,7 @@ from agents.base import LIFT, PUSH_BY_NAME, PUSH_NONE, VERBAL_BY_NAME, VERBAL_NO
 from agents.caregivers.scripted_base import EPS_S as _EPS_S
 from agents.caregivers.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.envs.config import LiftCriteria
-from estimator.compiled.checks import check_flag, check_number
+from estimator.validate import check_flag, check_number
 
 __all__ = ["TUNED_BLIND", "BlindAgent", "BlindSettings", "CuePhase"]
 

@@ -39,8 +39,8 @@ from agents.caregivers.scripted_base import EPS_S as _EPS_S
 from agents.caregivers.scripted_base import PhaseState, ScriptedAgent
 from coop_gym.envs.config import LiftCriteria
 from coop_gym.model.difficulty import Difficulty
-from estimator.compiled.checks import check_number
 from estimator.judgment import ThresholdJudgment
+from estimator.validate import check_number
 
 __all__ = [
     "SCRIPTED_AGENTS",

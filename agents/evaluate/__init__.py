@@ -60,7 +60,7 @@ from agents.evaluate.results import (
 )
 from coop_gym.cli import SEED_LIMIT, output_path_problem
 from coop_gym.model.personas import Persona, resolve_personas
-from estimator.compiled.checks import check_integer
+from estimator.validate import check_integer
 
 __all__ = [
     "BLIND_AGENTS",

@@ -1,30 +1,18 @@
 r"""PPO with its update compiled by JAX and its rollout policy in NumPy: SB3's PPO, faster.
 
-:class:`JaxPPO` is Stable-Baselines3's :class:`~stable_baselines3.PPO` with two methods
-replaced: ``collect_rollouts`` (the policy's action, value and log-probability computed in
-NumPy, into SB3's rollout buffer, whose GAE computes the advantages) and ``train`` (all
-epochs and minibatches of one update in one jitted ``lax.scan``, with the loss and optimiser
-of SB3's PPO: clipped surrogate, per-minibatch advantage normalisation, unclipped value
-loss, entropy bonus, global-norm gradient clipping, Adam with ``eps=1e-5``;
-:mod:`agents.rl.jax_update`). Everything else is SB3's: the constructor and its
-hyperparameters, the torch policy that starts the weights (SB3's orthogonal initialisation)
-and receives them after every update, ``learn``, callbacks, ``VecNormalize``,
-``save``/``load``. A saved ``JaxPPO`` is a PPO ``model.zip``: it loads, plays and is scored
-(:func:`agents.evaluate.evaluate`) without JAX. The optimiser's moments and the random
-streams are saved with it, so a checkpoint continues exactly.
+:class:`JaxPPO` is Stable-Baselines3's :class:`~stable_baselines3.PPO` with ``collect_rollouts``
+(the policy in NumPy, into SB3's rollout buffer and its GAE) and ``train`` (every epoch and
+minibatch of an update in one jitted ``lax.scan``, SB3's loss and Adam: :mod:`agents.rl.jax_update`)
+replaced; the rest -- constructor, hyperparameters, the torch policy's initial weights,
+callbacks, ``VecNormalize``, ``save``/``load`` -- is SB3's. A saved ``JaxPPO`` is a PPO
+``model.zip`` that loads and plays without JAX; a checkpoint (optimiser moments and random
+streams included) continues exactly.
 
-Only ``MlpPolicy`` (separate policy and value networks of ``Linear`` layers and a ``Tanh``
-or ``ReLU`` activation) on a ``Discrete`` or ``MultiDiscrete`` action space; the number of
-samples per update (``n_envs * n_steps``) must be a multiple of ``batch_size`` (or at most one
-minibatch: then the whole rollout is one, as in SB3).
-
-With ``policy_lag=1`` each update runs on JAX's own thread while the next rollout plays with
-the weights it started from (:meth:`JaxTraining.train`): on two cores a run takes about the
-longer of rollout and update instead of their sum.
-
-XLA runs on one thread (added to ``XLA_FLAGS`` on first use, unless the caller's flags set it)
-and the initial weights are drawn on one torch thread: a seed trains the same weights
-whatever ``torch.set_num_threads`` and the machine's core count.
+Only ``MlpPolicy`` on a ``Discrete`` or ``MultiDiscrete`` action space; ``n_envs * n_steps`` a
+multiple of ``batch_size`` (or at most one minibatch). With ``policy_lag=1`` each update runs on
+its own thread while the next rollout plays with the weights it started from
+(:meth:`JaxTraining.train`). XLA runs on one thread and the initial weights are drawn on one
+torch thread, so a seed trains the same weights whatever the thread and core counts.
 
 Example:
     >>> from agents.rl import make_train_env

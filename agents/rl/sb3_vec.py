@@ -32,7 +32,7 @@ from agents.rl.normalize import update_and_normalize, update_returns
 from coop_gym.cli import SEED_LIMIT
 from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
-from estimator.compiled.checks import check_integer
+from estimator.validate import check_integer
 
 __all__ = ["STEP_INFOS", "SB3VecEnvAdapter", "fused_step", "make_sb3_vec_env"]
 

@@ -26,7 +26,7 @@ import coop_gym  # noqa: F401 -- registers the env ids
 from agents.hyperparams import ALGORITHMS, TrainingConfig, hyperparams_for
 from agents.rl.sb3_vec import make_sb3_vec_env
 from coop_gym.cli import SEED_LIMIT
-from estimator.compiled.checks import check_integer
+from estimator.validate import check_integer
 
 __all__ = [
     "VEC_NORMALIZE_KWARGS",

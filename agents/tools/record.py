@@ -55,7 +55,7 @@ from coop_gym.cli import (
     parse,
 )
 from coop_gym.io import atomic_path
-from estimator.compiled.checks import check_integer
+from estimator.validate import check_integer
 
 __all__ = [
     "DEFAULT_ENV_ID",

@@ -4,51 +4,26 @@ Every headline figure (value of reading the mind, achieved insight, mind-reading
 measured against the best mental-state-blind policy, so the blind search must be wide.
 
 **The blind family** (:class:`agents.caregivers.scripted.BlindSettings`): a fixed schedule of cue
-phases -- each a push (none/soft/firm), words (none/"lean forward"/"lean back"), a duration
-and whether a lift may come in it -- played in order from the start, then either repeated
-or followed by a final phase held to the end; and a lift rule on the shoulder estimate and
-the clock (lean threshold, hold time, earliest lift, release on lean, a last-call lift).
-It reads ``elapsed_s``, ``verbal_cue`` (its own utterance) and ``x_hat_m``, never a mind
-feature. The grid searched here (``python -m agents.tune.baselines blind --level LEVEL``):
-
-* **schedules** (:func:`schedule_grid`, 1,605): the 5 one-routine schedules of the original
-  family (push x words held from the start); openings of one or two phases followed by a
-  held final phase (silence, words, soft push or soft push + words); repeated cycles of two
-  phases; and repeated cycles "words, a push, words or silence". Phase cues are silence,
-  words, soft push, soft push + words and firm push + words, durations 0.5, 1, 2 or 4 s;
-  "lean back" is in the family but not searched (it only confuses: every level's chain
-  moves the person one level down while it is heard);
-* **lift rules** (:func:`lift_rules`, 336 per schedule, 168 where every phase pushes or none
-  does): lean threshold 0.12-0.4 m (7) x earliest lift 0/4/10/20 s x hold 0/1/2 s x release
-  on lean x lift in any phase or only in the phases without a push; then a last-call lift
-  (none, or from 25 s / 28 s on any lean of 0.16 m).
-
-Schedules x lift rules is 486,024 settings (:func:`blind_grid`; x3 with the last calls),
-too many to score whole, so the search is **coarse-to-fine with successive halving**
-(:func:`search_blind`), every round on the same seeded episodes of the *training*
-personas from :data:`TUNING_SEED` (common random numbers: candidates meet identical people):
-
-1. every schedule under 2-4 coarse lift rules (lean 0.2/0.3 m x any/unpushed phases; 5,786
-   candidates) on 30 episodes; the top 10 % on 100; their top 10 % on 300; the best 10
-   distinct schedules go on;
-2. those schedules x every lift rule, plus the 648 settings of the original family
-   (:func:`original_blind_grid`, so the original winner competes on the same episodes),
-   about 3,900 settings on 40 episodes; the top 10 % on 200; the top 10, each with the three
-   last-call choices, on 1000, beside the original family's winner
-   (:data:`ORIGINAL_BLIND_WINNERS`, its 648 settings on 300 episodes each), so the widened
-   winner scores at least as well as the original one on the final episodes;
-3. the winner: the best on those 1000 episodes (success, then fewer unsafe lifts).
-
-About 490,000 episodes a level, about 5 minutes of one core (the batched env's step is ~3 us
-per env and agent step; ``time python -m agents.tune.baselines blind --level hard``).
+phases (each a push, words, a duration and whether a lift may come in it), played in order and
+then repeated or followed by a final phase held to the end, and a lift rule on the shoulder
+estimate and the clock. It reads ``elapsed_s``, ``verbal_cue`` (its own utterance) and
+``x_hat_m``, never a mind feature. ``python -m agents.tune.baselines blind --level LEVEL``
+searches :func:`blind_grid`: the schedules of :func:`schedule_grid` (1,605; "lean back" is in
+the family but not searched: while it is heard every level moves the person one level down)
+under the lift rules of :func:`lift_rules` (up to 336 each), 486,024 settings, with the 648
+one-routine settings of :func:`original_blind_grid` beside them. :func:`search_blind` scores
+them coarse to fine by successive halving, every round on the same seeded episodes of the
+*training* personas from :data:`TUNING_SEED` (common random numbers: candidates meet identical
+people), and keeps the best on the final 1000 episodes (success, then fewer unsafe lifts).
 Candidates are scored many at a time in one natively batched vector env
 (:func:`play_population`: slot ``i`` plays candidate ``i // episodes`` on episode
-``i % episodes``, the episodes :func:`agents.evaluate.evaluate` would play). The winners
-are kept in :data:`agents.caregivers.scripted.TUNED_BLIND` and scored by :mod:`agents.evaluate` on the
+``i % episodes``, the episodes :func:`agents.evaluate.evaluate` would play).
+
+``python -m agents.tune.baselines prober --level LEVEL`` scores
+:class:`agents.caregivers.scripted.ProbingCaregiver`'s 36 settings on 300 training episodes
+each. The winners are kept in :data:`agents.caregivers.scripted.TUNED_BLIND` and
+:data:`agents.caregivers.scripted.TUNED_PROBER`, and scored by :mod:`agents.evaluate` on the
 held-out personas with fresh seeds (``--personas test``, seeds from 0).
-``python -m agents.tune.baselines prober --level LEVEL`` searches
-:class:`agents.caregivers.scripted.ProbingCaregiver` (36 settings, 300 episodes each of the training
-personas); the winners are kept in :data:`agents.caregivers.scripted.TUNED_PROBER`. Rerun both after a model change.
 """
 
 from __future__ import annotations
@@ -347,7 +322,7 @@ def search_blind(
     log: Any = print,
     **play: Any,
 ) -> list[tuple[BlindSettings, float, float]]:
-    """The coarse-to-fine successive-halving search of the module docstring, on the training personas.
+    """The blind family's coarse-to-fine successive-halving search, on the training personas.
 
     ``incumbent`` (e.g. the original family's winner) joins the final round whatever its
     earlier scores.

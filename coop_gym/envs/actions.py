@@ -15,8 +15,8 @@ from coop_gym.envs.config import (
 )
 from coop_gym.model.params import Cues
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.compiled.checks import is_integer
 from estimator.compiled.schema import index_table
+from estimator.validate import is_integer
 
 __all__ = [
     "ACTION_SHAPE",

@@ -33,8 +33,8 @@ from coop_gym.envs.observation import (
 from coop_gym.model.difficulty import Difficulty, get_difficulty
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona, resolve_personas
-from estimator.compiled.checks import check_choice
 from estimator.judgment import ThresholdJudgment
+from estimator.validate import check_choice
 
 __all__ = [
     "EnvArguments",

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
 
-from estimator.compiled.checks import is_number, python_scalar
+from estimator.validate import is_number, python_scalar
 
 __all__ = [
     "ACTION_TYPES",
@@ -58,7 +58,7 @@ class Outcome(IntEnum):
 
     @property
     def truncates(self) -> bool:
-        """The episode clock ran out: Gymnasium's ``truncated``."""
+        """The episode reached its length without a lift (Gymnasium's ``truncated``; ``episode_end`` sets it)."""
         return self is Outcome.TIMEOUT
 
 

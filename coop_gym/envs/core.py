@@ -56,11 +56,11 @@ from coop_gym.envs.observation import FEATURES
 from coop_gym.model.dynamics import DELAY_LINE_LENGTH, PARAM_COLUMNS, STATE_COLUMNS
 from coop_gym.model.params import Cues, Realism, Timing
 from coop_gym.model.personas import Persona
-from estimator.compiled.checks import is_integer
 from estimator.compiled.rng import G_STATE
 from estimator.judgment import JUDGMENT_COLUMNS, ThresholdJudgment
 from estimator.kalman import NOMINAL_COLUMNS
 from estimator.nominal import STATE_DIM, NominalModel
+from estimator.validate import is_integer
 
 __all__ = [
     "FEATURES",  # the env contract's (coop_gym.envs.contract), for the importers of this module

@@ -100,13 +100,15 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
 
     ## Episode End
 
-    Termination: the robot lifts (``info["outcome"]`` says how it went). Truncation: the env's
-    own clock, ``timing.episode_s`` -- 30 s (300 steps) by the ``TimeLimit`` rule (a lift on the
-    last step is truncated too) but from the env, so any ``timing`` gives the episode it asks
-    for (``timing={"episode_s": 60}``: 600 steps); ``info["outcome"]`` is ``"timeout"`` on that
-    step. The registered ids add no ``TimeLimit`` wrapper; ``env.spec.max_episode_steps`` reports
-    the length (``Timing.max_episode_steps``), and ``gym.make(id, max_episode_steps=n)`` adds a
-    ``TimeLimit`` of ``n`` steps. Stepping after either end raises ``RuntimeError`` until ``reset()``.
+    Termination: the robot lifts (``info["outcome"]`` says how it went). Truncation: the
+    episode's length, ``timing.max_episode_steps`` (the steps of ``timing.episode_s``):
+    30 s (300 steps) by the ``TimeLimit`` rule (a lift on the last step is truncated too) but from
+    the env, so any ``timing`` gives the episode it asks for (``timing={"episode_s": 60}``: 600 steps);
+    ``info["outcome"]`` is ``"timeout"`` on that step. Both envs end episodes by one rule,
+    :func:`coop_gym.envs.kernels.report.episode_end`. The registered ids add no ``TimeLimit``
+    wrapper; ``env.spec.max_episode_steps`` reports the length (``Timing.max_episode_steps``), and
+    ``gym.make(id, max_episode_steps=n)`` adds a ``TimeLimit`` of ``n`` steps. Stepping after
+    either end raises ``RuntimeError`` until ``reset()``.
 
     ## Arguments
 
@@ -144,8 +146,8 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
 
     * v0: initial release.
     * v1: difficulty levels (``difficulty``) and the safety-priced reward.
-    * v2: the hard level chosen again (``difficulty="hard-v2"``): ``SitToStandHard-v2`` and its
-      ``Discrete``, ``HeldOut`` and ``Unit`` variants.
+    * v2: the ``hard-v2`` level, two of ``hard``'s knobs changed (``difficulty="hard-v2"``):
+      ``SitToStandHard-v2`` and its ``Discrete``, ``HeldOut`` and ``Unit`` variants.
     * ``Unit`` ids (``SitToStandUnit-v0``, ``SitToStandHardUnit-v1``, ...): the ids they
       scale, with ``observation_scale="unit"``; same task and dynamics, so same version
       (a new name, not a ``-v2``: Gymnasium warns that an id is out of date once a higher
@@ -192,7 +194,7 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
     def spec(self) -> EnvSpec | None:
         """The registration's spec, its ``max_episode_steps`` the episode length of this env's ``timing``.
 
-        The ids register no ``TimeLimit`` (the env's clock truncates), so ``gym.make`` hands over a
+        The ids register no ``TimeLimit`` (the env truncates at its length), so ``gym.make`` hands over a
         spec without a length; clients that read ``env.spec.max_episode_steps`` (sb3-contrib's
         ``TimeFeatureWrapper``, ``gym.make(env.spec)``) get the length the env really has.
         """
@@ -229,9 +231,12 @@ class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
             raise RuntimeError("SitToStandEnv.step() called before reset() or after the episode ended; call reset()")
         self.core.step_commands(self._actions.single(action, self._cmd))
         r = self._report_row.tolist()
-        self._outcome = outcome = int(r[REPORT.outcome])
         self._episode_steps += 1
-        terminated, truncated = episode_end(outcome, self._episode_steps, self._max_episode_steps)
+        outcome, terminated, truncated = episode_end(
+            int(r[REPORT.outcome]), self._episode_steps, self._max_episode_steps, self._max_episode_steps
+        )
+        self._outcome = outcome
+        self._report_row[REPORT.outcome] = r[REPORT.outcome] = outcome
         self._last_lift = terminated
         self._needs_reset = terminated or truncated
         self._stepped = True

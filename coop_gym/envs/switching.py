@@ -33,9 +33,9 @@ from coop_gym.model.dynamics import (
 )
 from coop_gym.model.params import PersonParams, Realism, Timing
 from coop_gym.model.personas import PERSONAS, TRAIN_PERSONAS, get_persona, sample_person
-from estimator.compiled.checks import check_flag, check_integer, check_number
 from estimator.kalman import NOMINAL_COLUMNS
 from estimator.particle import SwitchingParticleFilter
+from estimator.validate import check_flag, check_integer, check_number
 
 __all__ = [
     "NOISES_PER_PARTICLE",

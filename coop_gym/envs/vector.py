@@ -17,8 +17,8 @@ from coop_gym.envs.arguments import EnvArguments, parse_reset_options
 from coop_gym.envs.core import ConfiguredEnv, check_threads, render_state_for
 from coop_gym.envs.kernels.report import REPORT, count_steps_and_end_episodes
 from coop_gym.envs.kernels.seeding import MAX_BATCH_SEED
-from estimator.compiled.checks import is_integer
 from estimator.compiled.rng import G_STATE
+from estimator.validate import is_integer
 
 __all__ = ["SitToStandVectorEnv"]
 
@@ -115,6 +115,7 @@ class SitToStandVectorEnv(ConfiguredEnv, VectorEnv):
         self.num_envs = n = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self._take_config(config, n)
+        self._episode_length = config.timing.max_episode_steps
         self.core.set_threads(threads)
         self.threads = threads
         self.single_observation_space = config.observation_space()
@@ -217,11 +218,10 @@ class SitToStandVectorEnv(ConfiguredEnv, VectorEnv):
         rewards = np.empty(n)
         terminated = np.empty(n, dtype=bool)
         truncated = np.empty(n, dtype=bool)
-        # Truncated by the step limit or by the episode clock of ``timing``, whichever comes first
-        # (report.count_steps_and_end_episodes, with the step count, in one compiled pass).
-        count_steps_and_end_episodes(
-            report, cmd, self._episode_steps, self.max_episode_steps, rewards, terminated, truncated
-        )
+        # Truncated by the step limit or at the episode's length of ``timing``, whichever comes first
+        # (report.count_steps_and_end_episodes: report.episode_end with the step count, in one compiled pass).
+        steps, length, limit = self._episode_steps, self._episode_length, self.max_episode_steps
+        count_steps_and_end_episodes(report, cmd, steps, length, limit, rewards, terminated, truncated)
         done = terminated | truncated
         final = None
         if mode == AutoresetMode.NEXT_STEP:

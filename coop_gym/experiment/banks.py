@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from coop_gym.envs.core import nominal_model_for
 from coop_gym.experiment.simulation import ExperimentData
 from coop_gym.model.params import PersonParams, Timing
-from estimator.identify import Trial, identify
+from estimator.identification.identify import Trial, identify
 from estimator.kalman import NOMINAL_COLUMNS, FastKalmanFilter
 from estimator.nominal import NominalModel
 from estimator.paper import XI_VALUES
@@ -170,7 +170,7 @@ def identified_banks(
 ) -> tuple[tuple[NominalModel, ...], ...]:
     """Fit each subject's per-mode models to its labelled calibration session (maximum likelihood).
 
-    For each subject and each ``xi``, :func:`estimator.identify.identify` fits
+    For each subject and each ``xi``, :func:`estimator.identification.identify.identify` fits
     :data:`IDENTIFIED_FIELDS` to that subject's calibration trials of that ``xi``, on the
     delay-aware inputs (:func:`intention_drive` with the persona's typical delay). Each
     mode thus learns the subject's own dynamics, compliance (stiffness in that state)

@@ -23,7 +23,7 @@ when confident:
   learned on a separate labelled calibration session of that subject
   (:func:`fit_recalibration`): the subject's history, used discriminatively.
 * ``identified`` -- per-subject, per-``xi`` models fitted by maximum likelihood
-  (:func:`estimator.identify.identify`) on the calibration session
+  (:func:`estimator.identification.identify.identify`) on the calibration session
   (:func:`~coop_gym.experiment.banks.identified_banks`): the subject's history, used
   generatively.
 * ``switching`` -- the switching particle filter the belief caregiver reads

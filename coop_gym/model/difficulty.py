@@ -28,9 +28,10 @@ The anatomical range is widened (``Intention.max_m`` 0.45 m) so a person who is 
 leaning has room to answer. Unsafe lifts are priced so that no gamble pays
 (:attr:`Difficulty.reward`).
 
-``hard-v2`` (``CoopGym/SitToStandHard-v2``) is the hard level chosen again against the widest
-blind search: a guided push recruits more slowly and willingness, once won, lapses half as
-often. An id's level never changes; a new choice of knobs is a new level and a new id.
+``hard-v2`` (``CoopGym/SitToStandHard-v2``) is ``hard`` with two knobs changed: a guided push
+recruits more slowly and willingness, once won, lapses half as often (docs/HARD_LEVEL.md: the
+knobs and the command that scores them). An id's level never changes; other knobs are a new
+level and a new id.
 """
 
 from __future__ import annotations

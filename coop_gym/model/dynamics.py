@@ -31,8 +31,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from coop_gym.model.params import MAX_REACTION_DELAY_S, PersonParams, Timing
-from estimator.compiled.checks import check_choice
 from estimator.compiled.schema import field_names, field_values, index_table
+from estimator.validate import check_choice
 
 __all__ = [
     "DELAY_LINE_LENGTH",

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from estimator.compiled.checks import check_choice, check_flag, check_integer, check_number
+from estimator.validate import check_choice, check_flag, check_integer, check_number
 
 __all__ = [
     "EPISODE_CLOCK_TOLERANCE_S",
@@ -39,7 +39,7 @@ _RATE_RANGE = (0.0, 100.0)
 
 
 def _validate_ranges(obj: Any, ranges: dict[str, tuple[float, float]]) -> None:
-    """Check each field of ``obj`` named in ``ranges`` (:func:`estimator.compiled.checks.check_number`).
+    """Check each field of ``obj`` named in ``ranges`` (:func:`estimator.validate.check_number`).
 
     A NumPy scalar is stored as the Python number of the same value (the dataclass is frozen, so
     through ``object.__setattr__``, as in its own ``__init__``).
@@ -317,7 +317,7 @@ class Cues:
 
 
 EPISODE_CLOCK_TOLERANCE_S = 1e-9
-"""An episode's clock (a float sum of action periods) has reached ``episode_s`` within this [s]."""
+"""A step ends at ``episode_s`` if it is within this of it [s] (:attr:`Timing.max_episode_steps`)."""
 
 
 @dataclass(frozen=True)
@@ -352,12 +352,13 @@ class Timing:
 
     @property
     def max_episode_steps(self) -> int:
-        """Agent steps in one full episode: the first step whose clock reaches ``episode_s``.
+        """Agent steps in one full episode: the first step at or past ``episode_s`` (to within a tolerance).
 
-        The step kernel adds ``action_period_s`` to the clock each step and ends the episode
-        once it is within :data:`EPISODE_CLOCK_TOLERANCE_S` of ``episode_s`` (the sum's rounding
-        stays far below it); an ``episode_s`` that is not a whole number of actions ends on the
-        step that passes it.
+        The tolerance is :data:`EPISODE_CLOCK_TOLERANCE_S`.
+
+        The envs end an episode after this many steps
+        (:func:`coop_gym.envs.kernels.report.episode_end`, the one rule); an ``episode_s`` that is
+        not a whole number of actions ends on the step that passes it.
         """
         return max(1, math.ceil((self.episode_s - EPISODE_CLOCK_TOLERANCE_S) / self.action_period_s))
 

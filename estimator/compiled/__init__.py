@@ -4,8 +4,6 @@
   compiles in (:func:`~estimator.compiled.cache.guard_kernel_cache`).
 - :mod:`estimator.compiled.background`: a kernel missing from that cache runs as Python while a
   background process compiles it (a fresh install's first step without waiting for the compile).
-- :mod:`estimator.compiled.checks`: what counts as a number (NumPy scalars yes, bools and arrays no) for
-  every validator of the project.
 - :mod:`estimator.compiled.rng`: NumPy's random streams inside kernels, number for number the
   ``Generator``'s.
 
@@ -19,7 +17,8 @@ cache (``estimator/particle.py``).
 
 Imports nothing else of the project: it sits in :mod:`estimator`, the lowest package, so the
 filters import it without loading the envs, and the model and the envs (``coop_gym``, above)
-import it too.
+import it too. The validators every layer shares (plain Python, nothing compiled) sit beside it
+on the lowest layer, in :mod:`estimator.validate`.
 """
 
 from estimator.compiled.cache import guard_kernel_cache

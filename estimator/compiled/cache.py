@@ -4,7 +4,7 @@ Numba's cache (``@njit(cache=True)``) checks only the file that defines a kernel
 kernel inlines the functions it calls and freezes the module-level constants it reads,
 from other files too: ``coop_gym.envs.kernels.step.step_env`` compiles in the person
 (``coop_gym.model.dynamics``), the filter and the judgment, and
-``estimator.identify`` the multiple-model steps. After an edit there Numba would
+``estimator.identification.identify`` the multiple-model steps. After an edit there Numba would
 keep running the old machine code.
 
 :func:`guard_kernel_cache` fixes this for every cached kernel of a module: before the

@@ -2,8 +2,8 @@
 
 Skipped without the ``[rllib]`` extra, so the README's test command runs this file in an
 ``[rllib]`` venv of its own, the slow test included (``scripts/test_other_installs.sh``).
-The end-to-end run starts a local Ray instance with two env runners; actor start-up alone
-took ~3 min on the loaded 2-core development machine, so it is marked ``slow``.
+The end-to-end run starts a local Ray instance with two env runners, whose actors take
+minutes to start, so it is marked ``slow``.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ after the job ends) that the env runners ran one on each node, scores the checkp
 
 Skipped without the ``[rllib]`` extra, so the README's test command runs it in the
 ``[rllib]`` venv of ``scripts/test_other_installs.sh``; marked ``slow`` (node start-up,
-actor start-up and the node drain take minutes on a loaded 2-core machine).
+actor start-up and the node drain take minutes).
 
 Addresses: every command is given ``127.0.0.1``. Ray itself replaces a loopback address
 by the machine's own outward IP (``ray._private.services.resolve_ip_for_localhost``, by

@@ -39,7 +39,7 @@ def test_the_env_kernels_are_keyed_by_the_model_filter_judgment_and_rng_sources(
 
 
 def test_identification_kernel_is_keyed_by_the_multiple_model_steps_it_inlines() -> None:
-    assert "estimator/mode_kernels.py" in _relative(project_sources("estimator.identify"))
+    assert "estimator/mode_kernels.py" in _relative(project_sources("estimator.identification.identify"))
 
 
 def _project_modules() -> list[str]:
@@ -75,9 +75,10 @@ def _run(code: str, path: Path) -> str:
 def test_importing_the_project_touches_no_cache_file() -> None:
     code = textwrap.dedent(
         """
-        import coop_gym.envs, estimator.identify, estimator.multiple_model
+        import coop_gym.envs, estimator.identification.identify, estimator.multiple_model
         from estimator.compiled.cache import guarded_kernels
-        names = ["coop_gym.envs.core", "coop_gym.model.dynamics", "estimator.identify", "estimator.compiled.rng"]
+        names = ["coop_gym.envs.core", "coop_gym.model.dynamics", "estimator.identification.identify",
+                 "estimator.compiled.rng"]
         print(any(k._cache.source_guard.checked for n in names for k in guarded_kernels(n)))
         """
     )
@@ -102,7 +103,9 @@ def test_editing_an_inlined_dependency_recompiles_the_kernel(tmp_path: Path) -> 
     assert _run(code, tmp_path).split()[0] == "20"
 
 
-@pytest.mark.parametrize("module", ["coop_gym.envs.core", "estimator.identify", "coop_gym.model.dynamics"])
+@pytest.mark.parametrize(
+    "module", ["coop_gym.envs.core", "estimator.identification.identify", "coop_gym.model.dynamics"]
+)
 def test_project_sources_stay_inside_the_project(module: str) -> None:
     assert all(ROOT in p.parents for p in project_sources(module))
 

@@ -14,7 +14,6 @@ from coop_gym.envs.config import ACTION_TYPES, Outcome
 from coop_gym.envs.contract import (
     ACTION_SHAPE,
     CMD,
-    EPISODE_END,
     FEATURE_BOUNDS,
     FEATURES,
     REPORT,
@@ -26,6 +25,7 @@ from coop_gym.envs.contract import (
     count_steps_and_end_episodes,
     decode_actions,
     encode_actions,
+    episode_end,
     report_info,
 )
 from coop_gym.envs.vector import SitToStandVectorEnv
@@ -64,30 +64,41 @@ def test_the_fast_paths_decode_as_decode_actions(action_type: str) -> None:
         assert np.array_equal(got[0, : CMD.active], want[k])
 
 
-def _episode_ends(outcome: np.ndarray, stepped: np.ndarray, out_of_steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(terminated, truncated) of count_steps_and_end_episodes for envs at (or not at) their step limit."""
-    n, limit = len(outcome), 2
+def _episode_ends(
+    outcome: np.ndarray, stepped: np.ndarray, steps_before: int, length: int = 2, limit: int = 2
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(outcome, terminated, truncated) of count_steps_and_end_episodes for envs ``steps_before`` steps in."""
+    n = len(outcome)
     report = np.zeros((n, len(REPORT_COLUMNS)))
     report[:, REPORT.outcome] = outcome
     cmd = np.zeros((n, len(CMD)))
     cmd[:, CMD.active] = stepped
-    steps = np.where(out_of_steps, limit - 1, 0).astype(np.int64)
+    steps = np.full(n, steps_before, dtype=np.int64)
     rewards, terminated, truncated = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
-    count_steps_and_end_episodes(report, cmd, steps, limit, rewards, terminated, truncated)
-    return terminated, truncated
+    count_steps_and_end_episodes(report, cmd, steps, length, limit, rewards, terminated, truncated)
+    return report[:, REPORT.outcome].astype(np.int64), terminated, truncated
 
 
-def test_episode_end_comes_from_the_outcome() -> None:
-    assert EPISODE_END == tuple((o.terminates, o.truncates) for o in Outcome)
+def test_only_a_lift_or_the_episodes_length_ends_an_episode() -> None:
+    lifts = [o.terminates for o in Outcome]
     outcome = np.array([float(o) for o in Outcome] * 2)
     stepped = np.array([True] * len(Outcome) + [False] * len(Outcome))
-    terminated, truncated = _episode_ends(outcome, stepped, np.zeros(len(outcome), dtype=bool))
-    assert terminated.tolist() == [o.terminates for o in Outcome] + [False] * len(Outcome)
-    assert truncated.tolist() == [o.truncates for o in Outcome] + [False] * len(Outcome)
-    # A step limit truncates every stepped env, a terminated one too (as Gymnasium's TimeLimit).
-    terminated, truncated = _episode_ends(outcome, stepped, np.ones(len(outcome), dtype=bool))
-    assert terminated.tolist() == [o.terminates for o in Outcome] + [False] * len(Outcome)
+    codes, terminated, truncated = _episode_ends(outcome, stepped, steps_before=0)
+    assert codes.tolist() == outcome.tolist() and terminated.tolist() == lifts + [False] * len(Outcome)
+    assert not truncated.any()
+    # The step that reaches the episode's length truncates every stepped env, a terminated one too (as
+    # Gymnasium's TimeLimit); the ones that did not lift time out.
+    codes, terminated, truncated = _episode_ends(outcome, stepped, steps_before=1)
+    timed_out = [int(o) if o.terminates else int(Outcome.TIMEOUT) for o in Outcome]
+    assert codes.tolist() == timed_out + outcome[len(Outcome) :].tolist()
+    assert terminated.tolist() == lifts + [False] * len(Outcome)
     assert truncated.tolist() == [True] * len(Outcome) + [False] * len(Outcome)
+    # A step limit under the length truncates with the step's own outcome (no timeout yet).
+    codes, _, truncated = _episode_ends(outcome, stepped, steps_before=1, length=5, limit=2)
+    assert codes.tolist() == outcome.tolist() and truncated.tolist() == [True] * len(Outcome) + [False] * len(Outcome)
+    # A step limit over the length: the length ends the episode.
+    assert episode_end(int(Outcome.NONE), 5, 5, 9) == (int(Outcome.TIMEOUT), False, True)
+    assert episode_end(int(Outcome.SUCCESS), 5, 5, 9) == (int(Outcome.SUCCESS), True, True)
 
 
 @pytest.mark.parametrize("lift", [0, 1])
@@ -128,24 +139,28 @@ def test_the_compiled_multidiscrete_decoding_takes_any_integer_dtype_and_refuses
         decoder.batch(np.array([[0, 0, 0], [-1, 0, 0]]), np.zeros((2, len(CMD))))
 
 
-def test_the_compiled_episode_end_and_step_count_follow_the_outcome_tables() -> None:
+def test_the_compiled_episode_end_is_the_single_envs_rule() -> None:
     rng = np.random.default_rng(5)
-    n, limit = 400, 3
+    n = 400
     report = np.zeros((n, len(REPORT_COLUMNS)))
-    steps = rng.integers(0, limit + 1, n)
-    for _ in range(4):
-        report[:, REPORT.outcome] = rng.integers(0, len(Outcome), n)
+    steps = rng.integers(0, 5, n)
+    for length, limit in ((3, 3), (3, 2), (2, 4)):
+        report[:, REPORT.outcome] = rng.choice([int(o) for o in Outcome if o is not Outcome.TIMEOUT], n)
         report[:, REPORT.reward] = rng.normal(size=n)
         cmd = np.zeros((n, len(CMD)))
         cmd[:, CMD.active] = rng.random(n) < 0.7
         stepped = cmd[:, CMD.active] > 0.5
         want_steps = steps + stepped
         codes = report[:, REPORT.outcome].astype(np.int64)
-        want = (stepped & TERMINATES[codes], stepped & ((want_steps >= limit) | TRUNCATES[codes]))
+        ends = [episode_end(int(c), int(k), length, limit) for c, k in zip(codes, want_steps, strict=True)]
+        want_codes = np.where(stepped, [e[0] for e in ends], codes)
+        want = (stepped & TERMINATES[codes], stepped & np.array([e[2] for e in ends]))
         rewards, terminated, truncated = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
-        count_steps_and_end_episodes(report, cmd, steps, limit, rewards, terminated, truncated)
+        count_steps_and_end_episodes(report, cmd, steps, length, limit, rewards, terminated, truncated)
         assert np.array_equal(steps, want_steps)
+        assert np.array_equal(report[:, REPORT.outcome], want_codes)
         assert np.array_equal(terminated, want[0]) and np.array_equal(truncated, want[1])
+        assert np.array_equal(TRUNCATES[want_codes] & stepped, stepped & ~want[0] & (want_steps >= length))
         assert np.array_equal(rewards, np.where(stepped, report[:, REPORT.reward], 0.0))
 
 

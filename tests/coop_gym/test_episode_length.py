@@ -1,6 +1,6 @@
 """Episodes last what their ``timing`` says, through the registered ids, single and vector.
 
-The ids register no ``TimeLimit``: the env's own clock truncates, so a longer, shorter or
+The ids register no ``TimeLimit``: the env truncates at its own length, so a longer, shorter or
 finer ``timing`` is honoured (a ``TimeLimit`` of the default 300 steps used to cut a 60 s
 episode at 30 s with outcome ``"none"``).
 """

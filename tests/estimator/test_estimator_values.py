@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from estimator.identify import Trial
+from estimator.identification.identify import Trial
 from estimator.judgment import ThresholdJudgment
 from estimator.multiple_model import (
     IMMEstimator,

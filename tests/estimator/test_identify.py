@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.identify import (
+from estimator.identification.identify import (
     DEFAULT_FITTED_FIELDS,
     Trial,
     identify,
     trial_log_likelihoods,
 )
+from estimator.identification.nominal_trials import simulate_nominal, simulate_nominal_trials
 from estimator.kalman import FastKalmanFilter
 from estimator.nominal import NominalModel
-from estimator.nominal_trials import simulate_nominal, simulate_nominal_trials
 
 # The known model these tests identify: the filter's pre-calibration tuning, whose small velocity noise keeps
 # the dynamics gains well identified from 25 trials.

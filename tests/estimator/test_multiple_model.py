@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from estimator.identification.nominal_trials import simulate_nominal, simulate_nominal_trials
 from estimator.kalman import FastKalmanFilter, PaperKalmanFilter, nominal_row
 from estimator.metrics import accuracy, brier_score, expected_calibration_error, log_loss
 from estimator.multiple_model import (
@@ -19,7 +20,6 @@ from estimator.multiple_model import (
     switching_transition_matrix,
 )
 from estimator.nominal import NominalModel
-from estimator.nominal_trials import simulate_nominal, simulate_nominal_trials
 
 # A noisier model than the default, so posteriors stay away from 0/1 for a while and
 # the comparison below tests more than saturated probabilities.

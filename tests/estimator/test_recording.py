@@ -10,7 +10,7 @@ import pytest
 
 from coop_gym.experiment import protocol
 from estimator import estimate
-from estimator.identify import Trial, identify
+from estimator.identification.identify import Trial, identify
 from estimator.recording import Recording, RecordingError, format_recording, parse_recording, read_recording
 
 HEADER = "time_s,shoulder_position_m,force_n,verbal_cue,requested_xi\n"

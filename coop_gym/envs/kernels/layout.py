@@ -1,6 +1,6 @@
 """The packed rows the compiled step reads: one float row per env, one of constants, one per persona.
 
-A compiled call costs ~0.1 us per argument, as much as a whole env step's arithmetic, so the
+Each argument of a compiled call costs about as much as a whole env step's arithmetic, so the
 kernels take few arrays: each env's whole state in one row of blocks (:data:`BLOCKS`), the
 settings in one constants row (:data:`CONSTS`, filled by :func:`pack_consts` from the settings
 dataclasses) and the personas in one table (:data:`PERSONA_BLOCKS`, :func:`pack_personas`).

@@ -1,4 +1,4 @@
-"""The report row the step kernel writes for each env, and the episode end read from its outcome code."""
+"""The report row the step kernel writes for each env, and the one rule that ends an episode."""
 
 from __future__ import annotations
 
@@ -17,7 +17,6 @@ from estimator.compiled.cache import guard_kernel_cache
 from estimator.compiled.schema import index_table
 
 __all__ = [
-    "EPISODE_END",
     "REPORT",
     "REPORT_COLUMNS",
     "REWARD_TERMS",
@@ -70,29 +69,36 @@ def check_outcome_codes(outcome: type[IntEnum]) -> None:
 
 check_outcome_codes(Outcome)
 
-EPISODE_END: tuple[tuple[bool, bool], ...] = tuple((o.terminates, o.truncates) for o in Outcome)
-"""``(terminated, truncated)`` of each outcome code (the single env's step looks it up)."""
 TERMINATES = np.array([o.terminates for o in Outcome])
 """Indexed by outcome code: does the episode terminate (the robot lifted)?"""
 TRUNCATES = np.array([o.truncates for o in Outcome])
-"""Indexed by outcome code: does the episode clock truncate it?"""
+"""Indexed by outcome code: was the episode truncated at its length (``"timeout"``)?"""
+_LIFTS: tuple[bool, ...] = tuple(o.terminates for o in Outcome)  # what the compiled rule indexes
+_TIMEOUT = int(Outcome.TIMEOUT)
 
 
-def episode_end(outcome: int, episode_steps: int, max_episode_steps: int) -> tuple[bool, bool]:
-    """``(terminated, truncated)`` of a step: the episode-end rule of the single and the vector env.
+def episode_end(outcome: int, episode_steps: int, length: int, limit: int) -> tuple[int, bool, bool]:
+    """``(outcome, terminated, truncated)`` of a step: the one rule that ends an episode, in either env.
 
-    The step's outcome code terminates (a lift) or truncates (the episode clock,
-    :data:`EPISODE_END`), and a step that leaves the episode out of steps truncates it too -- also
-    when it terminated: a lift on the last allowed step is ``terminated`` and ``truncated``,
-    exactly as Gymnasium's ``TimeLimit`` reports it.
+    The step kernel judges a lift (its outcome code terminates the episode) and never ends one
+    otherwise: the episode's length is counted here, in steps. A step that reaches ``length``
+    without a lift times out (the outcome becomes ``TIMEOUT``, ``"timeout"`` in the info); the
+    step that reaches ``length`` or ``limit`` truncates the episode -- also when it terminated it:
+    a lift on the last allowed step is ``terminated`` and ``truncated``, exactly as Gymnasium's
+    ``TimeLimit`` reports it. A ``limit`` under ``length`` truncates as a ``TimeLimit`` would, with
+    the step's own outcome.
 
     Args:
-        outcome: The step's outcome code (:class:`~coop_gym.envs.config.Outcome`).
+        outcome: The step kernel's outcome code (:class:`~coop_gym.envs.config.Outcome`).
         episode_steps: Steps of the episode, this one included.
-        max_episode_steps: Steps an episode may take.
+        length: Steps of a full episode (``Timing.max_episode_steps``).
+        limit: A step limit from outside (the vector env's ``max_episode_steps``; ``length`` for
+            the single env, whose ``TimeLimit`` is Gymnasium's wrapper).
     """
-    terminated, truncated = EPISODE_END[outcome]
-    return terminated, truncated or episode_steps >= max_episode_steps
+    terminated = _LIFTS[outcome]
+    if not terminated and episode_steps >= length:
+        outcome = _TIMEOUT
+    return outcome, terminated, episode_steps >= min(length, limit)
 
 
 # The same rule inside the vector env's compiled pass (the single env calls the Python function).
@@ -104,23 +110,27 @@ def count_steps_and_end_episodes(
     report: NDArray[np.float64],
     cmd: NDArray[np.float64],
     episode_steps: NDArray[np.int64],
-    max_episode_steps: int,
+    length: int,
+    limit: int,
     rewards: NDArray[np.float64],
     terminated: NDArray[np.bool_],
     truncated: NDArray[np.bool_],
 ) -> None:
     """The episode end of a batch of envs after a step, with the step count, in one pass.
 
-    Each env stepped (``cmd`` active) counts a step in ``episode_steps`` and is out of steps at
-    ``max_episode_steps``; ``rewards`` gets the report's reward of stepped envs, 0 elsewhere. A
-    stepped env ends by :func:`episode_end`; envs not stepped neither terminate nor truncate.
+    Each env stepped (``cmd`` active) counts a step in ``episode_steps``; ``rewards`` gets the
+    report's reward of stepped envs, 0 elsewhere. A stepped env ends by :func:`episode_end`, whose
+    outcome (``TIMEOUT`` at the episode's length) goes back into the report; envs not stepped
+    neither terminate nor truncate.
     """
     for i in range(report.shape[0]):
         if cmd[i, CMD.active] > 0.5:
             episode_steps[i] += 1
-            code = int(report[i, REPORT.outcome])
             rewards[i] = report[i, REPORT.reward]
-            terminated[i], truncated[i] = _episode_end_kernel(code, episode_steps[i], max_episode_steps)
+            code, terminated[i], truncated[i] = _episode_end_kernel(
+                int(report[i, REPORT.outcome]), episode_steps[i], length, limit
+            )
+            report[i, REPORT.outcome] = code
         else:
             rewards[i] = 0.0
             terminated[i] = False

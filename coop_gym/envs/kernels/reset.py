@@ -77,7 +77,7 @@ def _vary_people(
         persona = persona_table[int(draws[r, DRAWS.persona])]
         params = state[indices[r], BLOCKS.params : BLOCKS.params + len(PARAM_COLUMNS)]
         # Element loops, not slice assignments: those compile numba's shape-mismatch error
-        # formatting (~4 s of every cold start); the copies are the same.
+        # formatting into every cold start (python bench/cold_start.py); the copies are the same.
         for j in range(len(PARAM_COLUMNS)):
             params[j] = persona[PERSONA_BLOCKS.params + j]
         if consts[CONSTS.vary] > 0.5:

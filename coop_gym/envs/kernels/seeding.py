@@ -1,8 +1,9 @@
 """Many seeded generators at once: ``PCG64(seed)`` for every env of a batch in one compiled call.
 
-``numpy.random.Generator(PCG64(seed))`` costs ~10-20 µs of Python per env (the ``SeedSequence``,
-the bit generator object, its ctypes interface): 2-7 s for 10^5 envs, where one step of them
-costs ~0.3 s. :class:`EnvGenerators` holds the generators of ``N`` envs instead as NumPy's own
+``numpy.random.Generator(PCG64(seed))`` costs Python work per env (the ``SeedSequence``, the bit
+generator object, its ctypes interface), many times what a step of the env costs, so seeding
+many envs that way takes longer than stepping them (``python bench/reset.py``).
+:class:`EnvGenerators` holds the generators of ``N`` envs instead as NumPy's own
 C state structs in two arrays, seeded by :func:`seed_states` -- NumPy's ``SeedSequence`` hash and
 PCG64 seeding repeated step for step (tests/coop_gym/test_seeding.py holds them equal, seed by
 seed) -- and the kernels draw from them through NumPy's PCG64 C functions, exactly as from a
@@ -38,9 +39,9 @@ MAX_BATCH_SEED = 2**63 - 1
 MIN_BATCH_ENVS = 10_000
 """Fewer envs than this are seeded with a ``Generator`` object each (the same numbers).
 
-On a fresh install :func:`seed_states` costs a compile of ~1 s (``python bench/cold_start.py
---num-envs 1024 --kernels``), about what 10^4 ``Generator`` objects cost (``python bench/reset.py``);
-a smaller batch would only pay it on the first step of every fresh install.
+On a fresh install :func:`seed_states` costs a compile (``python bench/cold_start.py --num-envs 1024
+--kernels``), about what 10^4 ``Generator`` objects cost (``python bench/reset.py``); a smaller
+batch would only pay it on the first step of every fresh install.
 """
 
 # NumPy's SeedSequence (numpy/random/bit_generator.pyx): a pool of 4 uint32 words hashed from

@@ -26,7 +26,6 @@ from coop_gym.model.dynamics import (
     measure,
     person_substep,
 )
-from coop_gym.model.params import EPISODE_CLOCK_TOLERANCE_S
 from estimator.compiled.cache import guard_kernel_cache
 from estimator.compiled.rng import G_STATE, standard_normal
 from estimator.judgment import JUDGE, JUDGMENT_COLUMNS, judgment_substep
@@ -40,7 +39,6 @@ _NONE = int(Outcome.NONE)
 _SUCCESS = int(Outcome.SUCCESS)
 _UNSAFE = int(Outcome.UNSAFE)
 _PREMATURE = int(Outcome.PREMATURE)
-_TIMEOUT = int(Outcome.TIMEOUT)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -54,9 +52,9 @@ def step_env(
 ) -> None:
     r"""One agent action of one env: cues -> (person -> sensors -> filter -> judgment) x substeps -> outcome -> reward.
 
-    A lift ends the episode, judged on the true state (§II); else the cues play for ``substeps``
-    filter steps and the episode times out at ``episode_s``. The reward is the sum of the named
-    terms (:func:`_write_reward`). ``row`` is the env's packed state (:data:`~coop_gym.envs.kernels.layout.BLOCKS`).
+    A lift ends the episode, judged on the true state (§II); else the cues play for ``substeps`` filter
+    steps (the episode's length: :func:`~coop_gym.envs.kernels.report.episode_end`). The reward sums the named
+    terms (:func:`_write_reward`); ``row`` is the env's packed state (:data:`~coop_gym.envs.kernels.layout.BLOCKS`).
     """
     substeps = int(consts[CONSTS.substeps])
     person = row[BLOCKS.person : BLOCKS.person + len(STATE_COLUMNS)]
@@ -97,8 +95,8 @@ def step_env(
             cue[CUES.verbal_remaining_s] = cue[CUES.verbal_value] = 0.0
         cue[CUES.elapsed_s] += substeps * dt
         _report_belief(row, consts[CONSTS.episode_s])
-        # The episode clock ends the episode (Timing.max_episode_steps counts the same steps).
-        outcome = _TIMEOUT if cue[CUES.elapsed_s] >= consts[CONSTS.episode_s] - EPISODE_CLOCK_TOLERANCE_S else _NONE
+        # Only a lift ends an episode here; its length is counted in steps (report.episode_end).
+        outcome = _NONE
     report = row[BLOCKS.report : BLOCKS.report + len(REPORT_COLUMNS)]
     _write_reward(report, outcome, lift, cue[CUES.impulse_n_s], consts)
     _report_truth(report, person, outcome, 0.0 if lift else push_force_n)

@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 from coop_gym.envs.kernels.atomics import atomic_add, atomic_cas, atomic_load
 from coop_gym.envs.kernels.step import step_envs
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.compiled.checks import is_integer
 from estimator.compiled.rng import G_STATE
+from estimator.validate import is_integer
 
 __all__ = [
     "ENVS_PER_BLOCK",

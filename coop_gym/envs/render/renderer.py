@@ -78,7 +78,7 @@ from coop_gym.envs.render.canvas import (
     rounded_rect,
 )
 from coop_gym.envs.render.state import OUTCOMES, RenderState
-from estimator.compiled.checks import is_integer
+from estimator.validate import is_integer
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pygame

@@ -1,4 +1,4 @@
-"""Checks for the scalars a user hands in before they are packed into a kernel's rows.
+"""The validators of the scalars a user hands in (plain Python: what counts as a number, and its range).
 
 One place decides what counts as a number, so every validator of the project agrees:
 
@@ -12,6 +12,10 @@ One place decides what counts as a number, so every validator of the project agr
 Accepted NumPy scalars come back as the Python number of the same value (:func:`python_scalar`),
 so a frozen dataclass stores ``0.019999999552965164``, not an ``np.float32`` that would turn later
 arithmetic into float32.
+
+On the lowest layer, beside :mod:`estimator.compiled` (``tests/test_layers.py``): the person's
+parameters (``coop_gym.model``) and the filters (``estimator``) both validate with it, and
+neither may import the other. It imports nothing of the project.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Trials simulated from the estimator's own nominal linear model: data whose true model is known.
 
-System identification (:mod:`estimator.identify`) is checked by fitting such trials back, and
+System identification (:mod:`estimator.identification.identify`) is checked by fitting such trials back, and
 the multiple-model estimators by reading them: ``s_t = A(c_t) s_{t-1} + B c_{p,t} + w_t``,
 ``y_t = x_t + v_t`` with :class:`~estimator.nominal.NominalModel`'s ``A``, ``B``, ``Q`` and ``R``.
 """
@@ -13,7 +13,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from estimator.identify import Trial
+from estimator.identification.identify import Trial
 from estimator.nominal import NominalModel, euler_step
 
 __all__ = ["simulate_nominal", "simulate_nominal_trials"]
@@ -150,7 +150,7 @@ def simulate_nominal_trials(
     (so the person drifts toward a random intention at first); ``"rest"`` starts seated at
     rest (``x = xdot = eta = 0``), which a broad filter prior misdescribes -- with the default
     prior that biases the fitted ``lambda1`` and ``k2`` upward (fit ``"rest"`` trials of a known
-    model with :func:`estimator.identify.identify` to see by how much).
+    model with :func:`estimator.identification.identify.identify` to see by how much).
 
     Args:
         model: Nominal model to simulate (A, B, Q, R as the filter assumes).

@@ -39,11 +39,11 @@ from numba import njit
 from numpy.typing import NDArray
 
 from estimator.compiled.cache import guard_kernel_cache
-from estimator.compiled.checks import is_integer, is_number, python_scalar
 from estimator.kalman import NOMINAL, nominal_row
 from estimator.mode_kernels import N_MODES, mode_covariance_step, mode_mean_step
 from estimator.nominal import NominalModel
 from estimator.recording import Recording
+from estimator.validate import is_integer, is_number, python_scalar
 
 __all__ = [
     "DEFAULT_FITTED_FIELDS",
@@ -361,7 +361,7 @@ def identify(
         The best run's fitted model and diagnostics.
 
     Example:
-        >>> from estimator.nominal_trials import simulate_nominal_trials
+        >>> from estimator.identification.nominal_trials import simulate_nominal_trials
         >>> trials = simulate_nominal_trials(NominalModel(), 5, 300, np.random.default_rng(0))
         >>> result = identify(trials, restarts=1)
         >>> result.success, result.model.dt_s, sorted(result.standard_errors) == sorted(result.fitted_fields)
