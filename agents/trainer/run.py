@@ -225,12 +225,8 @@ def _train_seeds(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
             shutil.copyfile(source, plan.run_dir / name)
     summary = finished[kept["seed"]]
     training = {**summary["training"], "kept_seed": kept["seed"], "seeds": scores}
-    print(
-        "kept seed "
-        + f"{kept['seed']} of {', '.join(str(s['seed']) for s in scores)}: validation success "
-        + ", ".join(f"{s['success_rate']:.1%}" for s in scores)
-        + f" on the validation people ({args.select_episodes} episodes)"
-    )
+    rates = ", ".join(f"seed {s['seed']} {s['success_rate']:.1%}" for s in scores)
+    print(f"kept seed {kept['seed']}: validation people's success {rates} ({args.select_episodes} episodes)")
     result = {**summary, "training": training}
     write_json(plan.run_dir / TRAINING_FILE, result)
     return result
