@@ -218,6 +218,15 @@ ROWS: dict[str, Row] = {
         env_id=CLEANRL_ENV_ID,
         script_args=TRAINPY_FLAGS,
     ),
+    "cleanrl-ppo-trainpy-ent05": Row(
+        "ppo",
+        {},
+        "CleanRL's ppo.py with train.py's PPO settings as its flags but a larger entropy bonus (--ent-coef 0.05), "
+        "its personas, no selection",
+        "cleanrl",
+        env_id=CLEANRL_ENV_ID,
+        script_args=(*TRAINPY_FLAGS[:13], "0.05", *TRAINPY_FLAGS[14:]),
+    ),
     "cleanrl-ppo-rollout": Row(
         "ppo",
         {},
@@ -290,6 +299,10 @@ def _rows(text: str) -> list[str]:
     return names
 
 
+VALIDATION_PEOPLE_KEYS = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
+"""What a ``cleanrl-*`` run records of its policy on the validation people (``personas="validation"``)."""
+
+
 def train_cleanrl(
     name: str, script: Path, seed: int, timesteps: int, episodes: int, folder: Path, validation: int
 ) -> dict[str, Any]:
@@ -306,6 +319,8 @@ def train_cleanrl(
     state = agent.module.state_dict()
     save_with(folder / f"{name}__{seed}__{timesteps}.pt", lambda temp: torch.save(state, temp))
     checked = evaluate(agent, row.env_id, VALIDATION_PERSONAS, validation, VALIDATION_SEED)
+    # The validation people, not the training personas' episodes: what a choice of flags is made on.
+    people = evaluate(agent, row.env_id, "validation", validation, VALIDATION_SEED).summary()
     result = evaluate(agent, row.env_id, "test", episodes, 0, name=f"{name}:{seed}")
     return {
         **result.summary(),
@@ -315,6 +330,7 @@ def train_cleanrl(
         "train_wall_s": run["wall_time_s"],
         "kept_step": timesteps,
         "validation_success_rate": checked.success_rate,
+        "validation_people": {key: people[key] for key in VALIDATION_PEOPLE_KEYS},
         "script_command": run["script_command"],
         "script_sha256": run["script_sha256"],
     }

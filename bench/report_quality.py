@@ -221,17 +221,35 @@ def _seeds_row(name: str, per_seed: list[dict[str, Any]], success: dict[str, Any
     return [name, str(len(per_seed)), f"{_pct(success['iqm'])} {_ci(success['ci95'])}", "; ".join(cells)]
 
 
+CLEANRL_SEEDS = "cleanrl_seeds_SitToStandHard-v2"
+"""CleanRL's ``ppo.py`` over seeds on the hard level, its rows alone: ``bench/learners.py --rows cleanrl-...
+--save bench/results/cleanrl_seeds_SitToStandHard-v2.json``. Without it the section takes ``learners.json``'s
+``cleanrl-ppo`` and ``cleanrl-ppo-trainpy``."""
+
+
+def _cleanrl_rows(results: Results) -> tuple[dict[str, Any] | None, list[tuple[str, dict[str, Any]]]]:
+    """The record the CleanRL rows come from and its rows: every row of :data:`CLEANRL_SEEDS`, else two of learners'."""
+    record = results.get(CLEANRL_SEEDS)
+    if record is not None:
+        return record, list(record["results"]["rows"].items())
+    record = results.get("learners")
+    rows = record["results"]["rows"] if record else {}
+    return record, [(name, rows[name]) for name in ("cleanrl-ppo", "cleanrl-ppo-trainpy") if name in rows]
+
+
 def outside_learners(results: Results) -> str:
     """SB3 and CleanRL over training seeds on the hard level, as their users run them."""
     head = "### Outside learners over seeds on the hard level\n"
-    record, cleanrl = results.get("library_seeds_SitToStandHard-v2"), results.get("learners")
+    record = results.get("library_seeds_SitToStandHard-v2")
     if record is None:
         return head + "\n" + _missing("python bench/library_defaults.py --seeds 0,1,2,3,4") + "\n"
     report = record["results"]
+    cleanrl, cleanrl_rows = _cleanrl_rows(results)
     rows = [_seeds_row(f"SB3 `{n}`: {r['what']}", r["per_seed"], r["success"]) for n, r in report["rows"].items()]
-    for name in ("cleanrl-ppo", "cleanrl-ppo-trainpy") if cleanrl else ():
-        if (row := cleanrl["results"]["rows"].get(name)) is not None:
-            rows.append(_seeds_row(f"`{name}`: {row['what']}", row["per_seed"], row["success"]))
+    steps = f", {_count(cleanrl['results']['timesteps'])} steps" if cleanrl else ""
+    rows += [
+        _seeds_row(f"`{name}`: {row['what']}{steps}", row["per_seed"], row["success"]) for name, row in cleanrl_rows
+    ]
     rows += [[f"{a} (scripted)", "", _pct(r["success_rate"]), ""] for a, r in report["scripted"].items()]
     header = ["learner, as its user runs it", "seeds", "success, IQM [95 % CI]", "per seed: success / never lifts (%)"]
     cleanrl_line = f"\n\nThe `cleanrl-*` rows: {_provenance(cleanrl)}" if cleanrl else ""

@@ -390,3 +390,47 @@ def test_training_budget_rows_are_one_cpus_budgets_and_not_another_cpu() -> None
     assert [row.split(" | ")[0] for row in rows] == ["| **1,000,000**", "| 2,000,000"], page
     cpus = report.learners_across_cpus(results)
     assert "2,000,000" not in cpus and cpus.count("| `jax-kalman-lag` |") == 2  # the two CPUs' 1M rows only
+
+
+def test_outside_learners_take_the_cleanrl_seeds_record_over_the_learners_one() -> None:
+    """``cleanrl_seeds_SitToStandHard-v2.json`` gives the CleanRL rows, every row of it, with its budget."""
+    quality = _bench("report_quality")
+    results = {
+        stem: json.loads((BENCH / "results" / f"{stem}.json").read_text(encoding="utf-8"))
+        for stem in ("library_seeds_SitToStandHard-v2", "learners")
+    }
+    before = quality.outside_learners(results)
+    assert "| `cleanrl-ppo-trainpy`: " in before and "| `cleanrl-ppo-wide`: " not in before
+    seeds = json.loads(json.dumps(results["learners"]))
+    rows = seeds["results"]["rows"]
+    seeds["results"]["rows"] = {"cleanrl-ppo-wide": rows["cleanrl-ppo-wide"]}
+    seeds["results"]["timesteps"] = 2_000_000
+    page = quality.outside_learners({**results, quality.CLEANRL_SEEDS: seeds})
+    lines = [line for line in page.splitlines() if line.startswith("| `cleanrl-")]
+    assert len(lines) == 1 and lines[0].startswith("| `cleanrl-ppo-wide`: "), page
+    assert ", 2,000,000 steps | 5 | " in lines[0]
+    assert "/ 100.0" in lines[0]  # the never-lift rate of each seed (the record's timeout rate)
+
+
+def test_a_cleanrl_runs_record_scores_the_validation_people(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What a choice of flags is made on: the run's policy on ``personas="validation"``, beside the held-out score."""
+    pytest.importorskip("torch")
+    learners = _bench("learners")
+    (tmp_path / "standin.py").write_text(_CLEANRL_STANDIN)
+    monkeypatch.chdir(tmp_path)
+    seen: list[str] = []
+    evaluate = __import__("agents.evaluate", fromlist=["evaluate"]).evaluate
+
+    def spy(agent: Any, env_id: str, personas: str, *args: Any, **kwargs: Any) -> Any:
+        seen.append(personas)
+        return evaluate(agent, env_id, personas, *args, **kwargs)
+
+    monkeypatch.setattr("agents.evaluate.evaluate", spy)
+    run = learners.train_cleanrl("cleanrl-ppo-trainpy-ent05", tmp_path / "standin.py", 0, 64, 4, tmp_path, 4)
+    assert seen == ["train", "validation", "test"]
+    assert set(run["validation_people"]) == set(learners.VALIDATION_PEOPLE_KEYS)
+    assert sum(run["validation_people"][key] for key in learners.VALIDATION_PEOPLE_KEYS) == pytest.approx(1.0)
+    # The row is TRAINPY_FLAGS with only the entropy bonus changed.
+    flags = run["script_command"][run["script_command"].index("--num-envs") :]
+    assert [f for f, t in zip(flags, learners.TRAINPY_FLAGS, strict=True) if f != t] == ["0.05"]
+    assert flags[flags.index("--ent-coef") + 1] == "0.05"
