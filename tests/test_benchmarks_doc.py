@@ -434,3 +434,33 @@ def test_a_cleanrl_runs_record_scores_the_validation_people(tmp_path: Path, monk
     flags = run["script_command"][run["script_command"].index("--num-envs") :]
     assert [f for f, t in zip(flags, learners.TRAINPY_FLAGS, strict=True) if f != t] == ["0.05"]
     assert flags[flags.index("--ent-coef") + 1] == "0.05"
+
+
+def test_the_rl_zoo_learner_runs_the_documented_command_and_keeps_its_layout(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``library_defaults.py --learners rl-zoo``: the integrations page's command, a seed added; RL Zoo's files where
+    the package's loader looks for them (a model ``X.zip`` with ``X/vecnormalize.pkl``)."""
+    pytest.importorskip("stable_baselines3")
+    from agents.run_folder import VECNORMALIZE_FILE
+
+    defaults = _bench("library_defaults")
+    page = (ROOT / "docs" / "integrations.md").read_text(encoding="utf-8")
+    assert f"python {' '.join(defaults.ZOO_COMMAND)} -f logs/" in page
+    commands: list[list[str]] = []
+
+    def zoo(command: list[str], **kwargs: Any) -> None:  # what RL Zoo writes
+        commands.append(command)
+        run = Path(command[command.index("-f") + 1]) / "ppo" / "CoopGym-SitToStandHard-v2_1"
+        (run / "CoopGym-SitToStandHard-v2").mkdir(parents=True)
+        (run / "CoopGym-SitToStandHard-v2.zip").write_bytes(b"model")
+        (run / "CoopGym-SitToStandHard-v2" / VECNORMALIZE_FILE).write_bytes(b"statistics")
+
+    monkeypatch.setattr(defaults.subprocess, "run", zoo)
+    model = tmp_path / "rl-zoo__3.zip"
+    defaults._train_zoo(3, model, None)
+    defaults._train_zoo(4, tmp_path / "rl-zoo__4.zip", 4096)
+    assert commands[0][1:] == [*defaults.ZOO_COMMAND, "--seed", "3", "-f", str(tmp_path / "rl-zoo__3_logs")]
+    assert commands[1][-2:] == ["-n", "4096"]
+    assert model.read_bytes() == b"model"
+    assert (model.with_suffix("") / VECNORMALIZE_FILE).read_bytes() == b"statistics"
