@@ -218,15 +218,6 @@ ROWS: dict[str, Row] = {
         env_id=CLEANRL_ENV_ID,
         script_args=TRAINPY_FLAGS,
     ),
-    "cleanrl-ppo-trainpy-ent05": Row(
-        "ppo",
-        {},
-        "CleanRL's ppo.py with train.py's PPO settings as its flags but a larger entropy bonus (--ent-coef 0.05), "
-        "its personas, no selection",
-        "cleanrl",
-        env_id=CLEANRL_ENV_ID,
-        script_args=(*TRAINPY_FLAGS[:13], "0.05", *TRAINPY_FLAGS[14:]),
-    ),
     "cleanrl-ppo-rollout": Row(
         "ppo",
         {},
