@@ -193,13 +193,14 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
     runs = Path(args.runs)
     runs.mkdir(parents=True, exist_ok=True)
     walls_path = runs / "train_wall_s.json"
-    walls = json.loads(walls_path.read_text()) if walls_path.exists() else {}
     for name in learners:
         for seed in args.seeds:
             path = runs / f"{name}__{seed}.zip"
             if not path.exists() and not args.no_train:
                 started = time.perf_counter()
                 LEARNERS[name][1](seed, path, args.timesteps)
+                # Read again: another process may train other seeds into the same --runs.
+                walls = json.loads(walls_path.read_text()) if walls_path.exists() else {}
                 walls[path.stem] = time.perf_counter() - started
                 walls_path.write_text(json.dumps(walls, indent=2) + "\n")
                 print(f"{path.stem}: trained in {walls[path.stem]:.0f} s", flush=True)
