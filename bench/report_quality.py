@@ -260,7 +260,8 @@ What a user of SB3 or CleanRL gets on `{report["env_id"]}`: each learner trained
 its final policy scored greedy on the same {report["episodes"]} held-out episodes as the scripted
 caregivers (`python -m agents.evaluate`, the test personas). *Never lifts* is the share of episodes
 that end in a timeout. The SB3 rows are `bench/library_defaults.py --seeds` (SB3's defaults; the
-package's settings from `agents.rl.sb3_settings`); the CleanRL rows are `bench/learners.py`'s
+package's settings from `agents.rl.sb3_settings`; RL Zoo's command of docs/integrations.md, its
+final model loaded by the package's loader); the CleanRL rows are `bench/learners.py`'s
 (CleanRL's `ppo.py` unmodified: its defaults; the flags of docs/integrations.md). The interquartile
 mean over seeds and its stratified bootstrap interval follow rliable.
 
