@@ -56,7 +56,9 @@ the training wall time.
 
 Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with the kept
 model beside it) as soon as it is done; a rerun with the same ``--runs`` skips what is
-there, so an interrupted sweep loses only the run in progress; ``--no-train`` reports the runs
+there, so an interrupted sweep loses only the run in progress (a ``cleanrl-*`` run's file also holds its
+policy's score on the validation people, ``validation_people``: what a choice of the script's flags is
+made on, never the held-out score); ``--no-train`` reports the runs
 there and trains none (rows may then have different seeds). ``--save`` writes the report
 to ``bench/results/learners.json`` (``bench/result_files.py``). ``--people`` has every scored policy also
 play the validation people and the held-out episodes: each row's ``people`` says how well each selecting
