@@ -223,18 +223,22 @@ def _seeds_row(name: str, per_seed: list[dict[str, Any]], success: dict[str, Any
 
 CLEANRL_SEEDS = "cleanrl_seeds_SitToStandHard-v2"
 """CleanRL's ``ppo.py`` over seeds on the hard level, its rows alone: ``bench/learners.py --rows cleanrl-...
---save bench/results/cleanrl_seeds_SitToStandHard-v2.json``. Without it the section takes ``learners.json``'s
-``cleanrl-ppo`` and ``cleanrl-ppo-trainpy``."""
+--save bench/results/cleanrl_seeds_SitToStandHard-v2.json`` (another budget: ``..._<steps>.json``). Without
+one the section takes ``learners.json``'s ``cleanrl-ppo`` and ``cleanrl-ppo-trainpy``."""
 
 
-def _cleanrl_rows(results: Results) -> tuple[dict[str, Any] | None, list[tuple[str, dict[str, Any]]]]:
-    """The record the CleanRL rows come from and its rows: every row of :data:`CLEANRL_SEEDS`, else two of learners'."""
-    record = results.get(CLEANRL_SEEDS)
-    if record is not None:
-        return record, list(record["results"]["rows"].items())
+def _cleanrl_records(results: Results) -> list[tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]]:
+    """Each record the CleanRL rows come from, with its rows: every row of the :data:`CLEANRL_SEEDS` files (the
+    budgets in order), else two of learners'."""
+    stems = sorted((s for s in results if s == CLEANRL_SEEDS or s.startswith(CLEANRL_SEEDS + "_")), key=len)
+    records = [results[stem] for stem in stems]
+    if records:
+        return [(record, list(record["results"]["rows"].items())) for record in records]
     record = results.get("learners")
-    rows = record["results"]["rows"] if record else {}
-    return record, [(name, rows[name]) for name in ("cleanrl-ppo", "cleanrl-ppo-trainpy") if name in rows]
+    if record is None:
+        return []
+    rows = record["results"]["rows"]
+    return [(record, [(name, rows[name]) for name in ("cleanrl-ppo", "cleanrl-ppo-trainpy") if name in rows])]
 
 
 def outside_learners(results: Results) -> str:
@@ -244,15 +248,14 @@ def outside_learners(results: Results) -> str:
     if record is None:
         return head + "\n" + _missing("python bench/library_defaults.py --seeds 0,1,2,3,4") + "\n"
     report = record["results"]
-    cleanrl, cleanrl_rows = _cleanrl_rows(results)
     rows = [_seeds_row(f"SB3 `{n}`: {r['what']}", r["per_seed"], r["success"]) for n, r in report["rows"].items()]
-    steps = f", {_count(cleanrl['results']['timesteps'])} steps" if cleanrl else ""
-    rows += [
-        _seeds_row(f"`{name}`: {row['what']}{steps}", row["per_seed"], row["success"]) for name, row in cleanrl_rows
-    ]
+    cleanrl_line = ""
+    for cleanrl, cleanrl_rows in _cleanrl_records(results):
+        steps = f"{_count(cleanrl['results']['timesteps'])} steps"
+        rows += [_seeds_row(f"`{n}`: {r['what']}, {steps}", r["per_seed"], r["success"]) for n, r in cleanrl_rows]
+        cleanrl_line += f"\n\nThe `cleanrl-*` rows of {steps}: {_provenance(cleanrl)}"
     rows += [[f"{a} (scripted)", "", _pct(r["success_rate"]), ""] for a, r in report["scripted"].items()]
     header = ["learner, as its user runs it", "seeds", "success, IQM [95 % CI]", "per seed: success / never lifts (%)"]
-    cleanrl_line = f"\n\nThe `cleanrl-*` rows: {_provenance(cleanrl)}" if cleanrl else ""
     return f"""{head}
 {_provenance(record)}{cleanrl_line}
 

@@ -404,12 +404,18 @@ def test_outside_learners_take_the_cleanrl_seeds_record_over_the_learners_one() 
     seeds = json.loads(json.dumps(results["learners"]))
     rows = seeds["results"]["rows"]
     seeds["results"]["rows"] = {"cleanrl-ppo-wide": rows["cleanrl-ppo-wide"]}
-    seeds["results"]["timesteps"] = 2_000_000
-    page = quality.outside_learners({**results, quality.CLEANRL_SEEDS: seeds})
+    longer = json.loads(json.dumps(seeds))
+    longer["results"]["timesteps"] = 2_000_000
+    longer["results"]["rows"] = {"cleanrl-ppo-trainpy": rows["cleanrl-ppo-trainpy"]}
+    # Another budget's file renders after the first, each row with its budget and each file its provenance.
+    page = quality.outside_learners(
+        {**results, f"{quality.CLEANRL_SEEDS}_2000000": longer, quality.CLEANRL_SEEDS: seeds}
+    )
     lines = [line for line in page.splitlines() if line.startswith("| `cleanrl-")]
-    assert len(lines) == 1 and lines[0].startswith("| `cleanrl-ppo-wide`: "), page
-    assert ", 2,000,000 steps | 5 | " in lines[0]
-    assert "/ 100.0" in lines[0]  # the never-lift rate of each seed (the record's timeout rate)
+    assert len(lines) == 2 and lines[0].startswith("| `cleanrl-ppo-wide`: "), page
+    assert ", 1,000,000 steps | 5 | " in lines[0] and "/ 100.0" in lines[0]  # never lifts: the timeout rate
+    assert lines[1].startswith("| `cleanrl-ppo-trainpy`: ") and ", 2,000,000 steps | 8 | " in lines[1]
+    assert "rows of 1,000,000 steps: *Measured by*" in page and "rows of 2,000,000 steps: *Measured by*" in page
 
 
 def test_a_cleanrl_runs_record_scores_the_validation_people(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
