@@ -56,7 +56,9 @@ the training wall time.
 
 Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with the kept
 model beside it) as soon as it is done; a rerun with the same ``--runs`` skips what is
-there, so an interrupted sweep loses only the run in progress; ``--no-train`` reports the runs
+there, so an interrupted sweep loses only the run in progress (a ``cleanrl-*`` run's file also holds its
+policy's score on the validation people, ``validation_people``: what a choice of the script's flags is
+made on, never the held-out score); ``--no-train`` reports the runs
 there and trains none (rows may then have different seeds). ``--save`` writes the report
 to ``bench/results/learners.json`` (``bench/result_files.py``). ``--people`` has every scored policy also
 play the validation people and the held-out episodes: each row's ``people`` says how well each selecting
@@ -290,6 +292,10 @@ def _rows(text: str) -> list[str]:
     return names
 
 
+VALIDATION_PEOPLE_KEYS = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
+"""What a ``cleanrl-*`` run records of its policy on the validation people (``personas="validation"``)."""
+
+
 def train_cleanrl(
     name: str, script: Path, seed: int, timesteps: int, episodes: int, folder: Path, validation: int
 ) -> dict[str, Any]:
@@ -306,6 +312,8 @@ def train_cleanrl(
     state = agent.module.state_dict()
     save_with(folder / f"{name}__{seed}__{timesteps}.pt", lambda temp: torch.save(state, temp))
     checked = evaluate(agent, row.env_id, VALIDATION_PERSONAS, validation, VALIDATION_SEED)
+    # The validation people, not the training personas' episodes: what a choice of flags is made on.
+    people = evaluate(agent, row.env_id, "validation", validation, VALIDATION_SEED).summary()
     result = evaluate(agent, row.env_id, "test", episodes, 0, name=f"{name}:{seed}")
     return {
         **result.summary(),
@@ -315,6 +323,7 @@ def train_cleanrl(
         "train_wall_s": run["wall_time_s"],
         "kept_step": timesteps,
         "validation_success_rate": checked.success_rate,
+        "validation_people": {key: people[key] for key in VALIDATION_PEOPLE_KEYS},
         "script_command": run["script_command"],
         "script_sha256": run["script_sha256"],
     }

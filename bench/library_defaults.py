@@ -30,7 +30,9 @@ it (:data:`LEARNERS`), on ``CoopGym/SitToStandHard-v2``::
   300k steps: SB3's defaults, no normalisation, the id's own personas;
 - ``sb3-settings``: the package's settings as an SB3 script takes them
   (:func:`agents.rl.sb3_settings`): ``PPO(settings.policy, settings.make_env(seed), seed=seed,
-  **settings.hyperparams).learn(settings.total_timesteps)``.
+  **settings.hyperparams).learn(settings.total_timesteps)``;
+- ``rl-zoo``: RL Zoo's command of docs/integrations.md (:data:`ZOO_COMMAND`, ``-conf agents.zoo.ppo``:
+  the shipped hyperparameters) with ``--seed``, its final model loaded by the package's loader.
 
 ``--timesteps N`` trains every learner N steps instead (a quick check of the script); ``--no-train``
 scores the models already in ``--runs`` (a learner's row then holds the seeds it has).
@@ -117,9 +119,36 @@ def _train_settings(seed: int, path: Path, timesteps: int | None) -> None:
     save_model_bundle(model, path, algo="ppo", env_id=HARD_ID, vec_normalize=find_vec_normalize(env))
 
 
+ZOO_COMMAND = (
+    "-m", "rl_zoo3.train", "--algo", "ppo", "--env", HARD_ID, "--gym-packages", "coop_gym",
+    "-conf", "agents.zoo.ppo", "--num-threads", "1",
+)  # fmt: skip
+"""RL Zoo's training command of docs/integrations.md (after ``python``), its seed and folder added."""
+
+
+def _train_zoo(seed: int, path: Path, timesteps: int | None) -> None:
+    """:data:`ZOO_COMMAND` with ``--seed``; the model and its statistics kept in RL Zoo's layout.
+
+    RL Zoo writes ``logs/ppo/<env>_1/<env>.zip`` and ``<env>_1/<env>/vecnormalize.pkl``; the model
+    goes to ``path`` and the statistics to ``path``'s stem folder, the same layout, where the package's
+    loader looks (:func:`agents.rl.load_agent`). In a subprocess: importing rl_zoo3 patches gymnasium.
+    """
+    import shutil
+
+    logs = path.with_name(f"{path.stem}_logs").resolve()  # the command runs in the checkout
+    command = [sys.executable, *ZOO_COMMAND, "--seed", str(seed), "-f", str(logs)]
+    subprocess.run([*command, *(["-n", str(timesteps)] if timesteps else [])], cwd=ROOT, check=True)
+    name = HARD_ID.replace("/", "-")
+    run = logs / "ppo" / f"{name}_1"
+    path.with_suffix("").mkdir(exist_ok=True)
+    shutil.copyfile(run / name / "vecnormalize.pkl", path.with_suffix("") / "vecnormalize.pkl")
+    shutil.copyfile(run / f"{name}.zip", path)
+
+
 LEARNERS: dict[str, tuple[str, Callable[[int, Path, int | None], None]]] = {
     "sb3-defaults": ('PPO("MlpPolicy", make_vec_env(id, n_envs=8)): SB3 defaults, 300k steps', _train_defaults),
     "sb3-settings": ("PPO(**sb3_settings(id).hyperparams) on settings.make_env(): package settings", _train_settings),
+    "rl-zoo": ("python -m rl_zoo3.train --algo ppo -conf agents.zoo.ppo: the shipped hyperparameters", _train_zoo),
 }
 
 
@@ -129,6 +158,7 @@ def _score_seeds(learners: list[str], seeds: list[int], runs: Path, episodes: in
 
     walls = json.loads((runs / "train_wall_s.json").read_text())
     seeds_of = {name: [seed for seed in seeds if (runs / f"{name}__{seed}.zip").exists()] for name in learners}
+    learners = [name for name in learners if seeds_of[name]]  # --no-train: a learner with no model has no row
     models = [str(runs / f"{name}__{seed}.zip") for name in learners for seed in seeds_of[name]]
     command = [sys.executable, "-m", "agents.evaluate", "--compare", ",".join([*models, *SCRIPTED]), "--env", HARD_ID]
     command += ["--personas", "test", "--episodes", str(episodes), "--json"]
@@ -163,13 +193,14 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
     runs = Path(args.runs)
     runs.mkdir(parents=True, exist_ok=True)
     walls_path = runs / "train_wall_s.json"
-    walls = json.loads(walls_path.read_text()) if walls_path.exists() else {}
     for name in learners:
         for seed in args.seeds:
             path = runs / f"{name}__{seed}.zip"
             if not path.exists() and not args.no_train:
                 started = time.perf_counter()
                 LEARNERS[name][1](seed, path, args.timesteps)
+                # Read again: another process may train other seeds into the same --runs.
+                walls = json.loads(walls_path.read_text()) if walls_path.exists() else {}
                 walls[path.stem] = time.perf_counter() - started
                 walls_path.write_text(json.dumps(walls, indent=2) + "\n")
                 print(f"{path.stem}: trained in {walls[path.stem]:.0f} s", flush=True)

@@ -221,20 +221,41 @@ def _seeds_row(name: str, per_seed: list[dict[str, Any]], success: dict[str, Any
     return [name, str(len(per_seed)), f"{_pct(success['iqm'])} {_ci(success['ci95'])}", "; ".join(cells)]
 
 
+CLEANRL_SEEDS = "cleanrl_seeds_SitToStandHard-v2"
+"""CleanRL's ``ppo.py`` over seeds on the hard level, its rows alone: ``bench/learners.py --rows cleanrl-...
+--save bench/results/cleanrl_seeds_SitToStandHard-v2.json`` (another budget: ``..._<steps>.json``). Without
+one the section takes ``learners.json``'s ``cleanrl-ppo`` and ``cleanrl-ppo-trainpy``."""
+
+
+def _cleanrl_records(results: Results) -> list[tuple[dict[str, Any], list[tuple[str, dict[str, Any]]]]]:
+    """Each record the CleanRL rows come from, with its rows: every row of the :data:`CLEANRL_SEEDS` files (the
+    budgets in order), else two of learners'."""
+    stems = sorted((s for s in results if s == CLEANRL_SEEDS or s.startswith(CLEANRL_SEEDS + "_")), key=len)
+    records = [results[stem] for stem in stems]
+    if records:
+        return [(record, list(record["results"]["rows"].items())) for record in records]
+    record = results.get("learners")
+    if record is None:
+        return []
+    rows = record["results"]["rows"]
+    return [(record, [(name, rows[name]) for name in ("cleanrl-ppo", "cleanrl-ppo-trainpy") if name in rows])]
+
+
 def outside_learners(results: Results) -> str:
     """SB3 and CleanRL over training seeds on the hard level, as their users run them."""
     head = "### Outside learners over seeds on the hard level\n"
-    record, cleanrl = results.get("library_seeds_SitToStandHard-v2"), results.get("learners")
+    record = results.get("library_seeds_SitToStandHard-v2")
     if record is None:
         return head + "\n" + _missing("python bench/library_defaults.py --seeds 0,1,2,3,4") + "\n"
     report = record["results"]
     rows = [_seeds_row(f"SB3 `{n}`: {r['what']}", r["per_seed"], r["success"]) for n, r in report["rows"].items()]
-    for name in ("cleanrl-ppo", "cleanrl-ppo-trainpy") if cleanrl else ():
-        if (row := cleanrl["results"]["rows"].get(name)) is not None:
-            rows.append(_seeds_row(f"`{name}`: {row['what']}", row["per_seed"], row["success"]))
+    cleanrl_line = ""
+    for cleanrl, cleanrl_rows in _cleanrl_records(results):
+        steps = f"{_count(cleanrl['results']['timesteps'])} steps"
+        rows += [_seeds_row(f"`{n}`: {r['what']}, {steps}", r["per_seed"], r["success"]) for n, r in cleanrl_rows]
+        cleanrl_line += f"\n\nThe `cleanrl-*` rows of {steps}: {_provenance(cleanrl)}"
     rows += [[f"{a} (scripted)", "", _pct(r["success_rate"]), ""] for a, r in report["scripted"].items()]
     header = ["learner, as its user runs it", "seeds", "success, IQM [95 % CI]", "per seed: success / never lifts (%)"]
-    cleanrl_line = f"\n\nThe `cleanrl-*` rows: {_provenance(cleanrl)}" if cleanrl else ""
     return f"""{head}
 {_provenance(record)}{cleanrl_line}
 
@@ -242,7 +263,8 @@ What a user of SB3 or CleanRL gets on `{report["env_id"]}`: each learner trained
 its final policy scored greedy on the same {report["episodes"]} held-out episodes as the scripted
 caregivers (`python -m agents.evaluate`, the test personas). *Never lifts* is the share of episodes
 that end in a timeout. The SB3 rows are `bench/library_defaults.py --seeds` (SB3's defaults; the
-package's settings from `agents.rl.sb3_settings`); the CleanRL rows are `bench/learners.py`'s
+package's settings from `agents.rl.sb3_settings`; RL Zoo's command of docs/integrations.md, its
+final model loaded by the package's loader); the CleanRL rows are `bench/learners.py`'s
 (CleanRL's `ppo.py` unmodified: its defaults; the flags of docs/integrations.md). The interquartile
 mean over seeds and its stratified bootstrap interval follow rliable.
 

@@ -390,3 +390,80 @@ def test_training_budget_rows_are_one_cpus_budgets_and_not_another_cpu() -> None
     assert [row.split(" | ")[0] for row in rows] == ["| **1,000,000**", "| 2,000,000"], page
     cpus = report.learners_across_cpus(results)
     assert "2,000,000" not in cpus and cpus.count("| `jax-kalman-lag` |") == 2  # the two CPUs' 1M rows only
+
+
+def test_outside_learners_take_the_cleanrl_seeds_record_over_the_learners_one() -> None:
+    """``cleanrl_seeds_SitToStandHard-v2.json`` gives the CleanRL rows, every row of it, with its budget."""
+    quality = _bench("report_quality")
+    results = {
+        stem: json.loads((BENCH / "results" / f"{stem}.json").read_text(encoding="utf-8"))
+        for stem in ("library_seeds_SitToStandHard-v2", "learners")
+    }
+    before = quality.outside_learners(results)
+    assert "| `cleanrl-ppo-trainpy`: " in before and "| `cleanrl-ppo-wide`: " not in before
+    seeds = json.loads(json.dumps(results["learners"]))
+    rows = seeds["results"]["rows"]
+    seeds["results"]["rows"] = {"cleanrl-ppo-wide": rows["cleanrl-ppo-wide"]}
+    longer = json.loads(json.dumps(seeds))
+    longer["results"]["timesteps"] = 2_000_000
+    longer["results"]["rows"] = {"cleanrl-ppo-trainpy": rows["cleanrl-ppo-trainpy"]}
+    # Another budget's file renders after the first, each row with its budget and each file its provenance.
+    page = quality.outside_learners(
+        {**results, f"{quality.CLEANRL_SEEDS}_2000000": longer, quality.CLEANRL_SEEDS: seeds}
+    )
+    lines = [line for line in page.splitlines() if line.startswith("| `cleanrl-")]
+    assert len(lines) == 2 and lines[0].startswith("| `cleanrl-ppo-wide`: "), page
+    assert ", 1,000,000 steps | 5 | " in lines[0] and "/ 100.0" in lines[0]  # never lifts: the timeout rate
+    assert lines[1].startswith("| `cleanrl-ppo-trainpy`: ") and ", 2,000,000 steps | 8 | " in lines[1]
+    assert "rows of 1,000,000 steps: *Measured by*" in page and "rows of 2,000,000 steps: *Measured by*" in page
+
+
+def test_a_cleanrl_runs_record_scores_the_validation_people(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What a choice of flags is made on: the run's policy on ``personas="validation"``, beside the held-out score."""
+    pytest.importorskip("torch")
+    learners = _bench("learners")
+    (tmp_path / "standin.py").write_text(_CLEANRL_STANDIN)
+    monkeypatch.chdir(tmp_path)
+    seen: list[str] = []
+    evaluate = __import__("agents.evaluate", fromlist=["evaluate"]).evaluate
+
+    def spy(agent: Any, env_id: str, personas: str, *args: Any, **kwargs: Any) -> Any:
+        seen.append(personas)
+        return evaluate(agent, env_id, personas, *args, **kwargs)
+
+    monkeypatch.setattr("agents.evaluate.evaluate", spy)
+    run = learners.train_cleanrl("cleanrl-ppo-trainpy", tmp_path / "standin.py", 0, 64, 4, tmp_path, 4)
+    assert seen == ["train", "validation", "test"]
+    assert set(run["validation_people"]) == set(learners.VALIDATION_PEOPLE_KEYS)
+    assert sum(run["validation_people"][key] for key in learners.VALIDATION_PEOPLE_KEYS) == pytest.approx(1.0)
+    assert tuple(run["script_command"][-len(learners.TRAINPY_FLAGS) :]) == learners.TRAINPY_FLAGS
+
+
+def test_the_rl_zoo_learner_runs_the_documented_command_and_keeps_its_layout(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``library_defaults.py --learners rl-zoo``: the integrations page's command, a seed added; RL Zoo's files where
+    the package's loader looks for them (a model ``X.zip`` with ``X/vecnormalize.pkl``)."""
+    pytest.importorskip("stable_baselines3")
+    from agents.run_folder import VECNORMALIZE_FILE
+
+    defaults = _bench("library_defaults")
+    page = (ROOT / "docs" / "integrations.md").read_text(encoding="utf-8")
+    assert f"python {' '.join(defaults.ZOO_COMMAND)} -f logs/" in page
+    commands: list[list[str]] = []
+
+    def zoo(command: list[str], **kwargs: Any) -> None:  # what RL Zoo writes
+        commands.append(command)
+        run = Path(command[command.index("-f") + 1]) / "ppo" / "CoopGym-SitToStandHard-v2_1"
+        (run / "CoopGym-SitToStandHard-v2").mkdir(parents=True)
+        (run / "CoopGym-SitToStandHard-v2.zip").write_bytes(b"model")
+        (run / "CoopGym-SitToStandHard-v2" / VECNORMALIZE_FILE).write_bytes(b"statistics")
+
+    monkeypatch.setattr(defaults.subprocess, "run", zoo)
+    model = tmp_path / "rl-zoo__3.zip"
+    defaults._train_zoo(3, model, None)
+    defaults._train_zoo(4, tmp_path / "rl-zoo__4.zip", 4096)
+    assert commands[0][1:] == [*defaults.ZOO_COMMAND, "--seed", "3", "-f", str(tmp_path / "rl-zoo__3_logs")]
+    assert commands[1][-2:] == ["-n", "4096"]
+    assert model.read_bytes() == b"model"
+    assert (model.with_suffix("") / VECNORMALIZE_FILE).read_bytes() == b"statistics"

@@ -44,6 +44,23 @@ def test_sb3_settings_are_a_dict_ppo_takes_with_its_wrappers_named():
         env.close()
 
 
+def test_rl_zoos_entry_for_the_hard_level_is_the_sb3_settings():
+    """docs/integrations.md: RL Zoo with ``-conf agents.zoo.ppo`` and ``--seed S`` trains what ``sb3_settings`` does."""
+    from agents.rl import sb3_settings
+    from agents.zoo import ppo
+
+    settings = sb3_settings(HARD_ENV_ID)
+    entry = dict(ppo.hyperparams[HARD_ENV_ID])
+    assert entry.pop("n_envs") == settings.n_envs and entry.pop("n_timesteps") == settings.total_timesteps
+    assert entry.pop("policy") == settings.policy and entry.pop("env_kwargs") == settings.env_kwargs
+    assert entry.pop("normalize") == settings.vec_normalize
+    learning_rate = entry.pop("learning_rate")
+    hyperparams = dict(settings.hyperparams)
+    schedule = hyperparams.pop("learning_rate")
+    assert learning_rate == "lin_3e-4" and [schedule(p) for p in (1.0, 0.5, 0.0)] == pytest.approx([3e-4, 1.5e-4, 0])
+    assert entry == hyperparams
+
+
 def test_zoo_module_holds_every_hard_training_id_and_the_generated_yaml_entries():
     from agents.zoo import ppo
 
