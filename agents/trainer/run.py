@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import shutil
 import time
@@ -64,7 +65,7 @@ from agents.trainer.train_args import (
     settings_framework,
 )
 from agents.trainer.training_run import Plan, StopSignals, clean_leftovers, remove_checkpoints
-from coop_gym.io import write_json
+from coop_gym.io import save_with, write_json
 
 __all__ = ["SEEDS_DIR", "plan_run", "seed_folder", "train"]
 
@@ -221,8 +222,8 @@ def _train_seeds(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     kept = max(scores, key=lambda score: score["success_rate"])  # ties: the lowest seed
     for name in KEPT_FILES:
         source = seed_folder(plan.run_dir, kept["seed"]) / name
-        if source.exists():
-            shutil.copyfile(source, plan.run_dir / name)
+        if source.exists():  # written whole or not at all, as every file of a run folder
+            save_with(plan.run_dir / name, functools.partial(shutil.copyfile, source))
     summary = finished[kept["seed"]]
     training = {**summary["training"], "kept_seed": kept["seed"], "seeds": scores}
     rates = ", ".join(f"seed {s['seed']} {s['success_rate']:.1%}" for s in scores)

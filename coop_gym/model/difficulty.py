@@ -168,8 +168,8 @@ DIFFICULTIES: dict[str, Difficulty] = {
             words_alone_scale=0.5,
         ),
         _HARD,
-        # The hard level again, against the widened blind family (docs/HARD_LEVEL.md, "Choosing the
-        # knobs again"): recruiting slower makes a pushed lean more often not yet cooperation (what
+        # The hard level again, against the widened blind family (docs/HARD_LEVEL.md, "The knobs of
+        # hard-v2"): recruiting slower makes a pushed lean more often not yet cooperation (what
         # costs blind), willingness steadier once won gives the readers back the lapses between
         # their reading and the lift. Oracle - best blind >= 30 points with the belief caregiver
         # the best reader.

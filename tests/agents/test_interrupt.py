@@ -13,7 +13,7 @@ import pytest
 import torch
 
 ROOT = Path(__file__).resolve().parents[2]
-# PPO with one env: 512-step rollouts, so a checkpoint boundary every 512 steps.
+# PPO with one env: 256-step rollouts, so a checkpoint boundary every 512 steps (every second rollout).
 TINY = [
     "--seeds", "1", "--timesteps", "1536", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
     "--eval-points", "0", "--select-episodes", "64", "--baselines", "", "--no-progress", "--threads", "1",

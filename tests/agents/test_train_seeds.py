@@ -13,7 +13,8 @@ import pytest
 import torch
 
 ROOT = Path(__file__).resolve().parents[2]
-# PPO with one env: 512-step rollouts; --select-points 1 scores the final policy on the validation people.
+# PPO with one env: 256-step rollouts, a checkpoint every 512 steps.
+# --select-points 1 scores the final policy on the validation people.
 TINY = [
     "--timesteps", "1536", "--n-envs", "1", "--checkpoint-every", "512", "--eval-episodes", "4",
     "--eval-points", "0", "--select-points", "1", "--select-episodes", "32", "--baselines", "",
