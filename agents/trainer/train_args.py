@@ -244,7 +244,7 @@ def _problem_with_paths(args: Any) -> str | None:
 
     if args.eval_only and args.resume is not None:
         return "--eval-only and --resume exclude each other"
-    if (getattr(args, "seeds", None) or 1) > 1 and (args.eval_only or args.framework == "rllib"):
+    if seeds_of(args) > 1 and (args.eval_only or args.framework == "rllib"):  # only a --seeds given asks for it
         return f"--seeds {args.seeds} trains several seeds; not with --eval-only or --framework rllib"
     if args.eval_only and args.model is None:
         return "--eval-only needs --model PATH"
