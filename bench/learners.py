@@ -157,6 +157,13 @@ ROWS: dict[str, Row] = {
         "jax",
         algo_kwargs={"policy_lag": 1},
     ),
+    "ppo-lag": Row(
+        "ppo",
+        {},
+        "agents.ppo (flax networks, optax, the update jitted), policy_lag=1, Kalman estimate + measurements",
+        "ppo",
+        algo_kwargs={"policy_lag": 1},
+    ),
     "jax-kalman-lag-population": Row(
         "ppo",
         {},
@@ -361,13 +368,13 @@ def train_one(
 
     from agents.evaluate import evaluate
     from agents.hyperparams import hyperparams_for
-    from agents.rl import SelectionCallback, load_agent, make_model, make_train_env, save_agent
+    from agents.rl import SelectionCallback, load_agent, make_train_env, save_agent
     from agents.rl.callbacks import VALIDATION_SEED
 
     torch.set_num_threads(1)  # as train.py --threads
     row, size = _row(name)
-    config = hyperparams_for(row.algo, ENV_ID, row.framework)
-    sequential = {"policy_lag": 0} if row.algo == "ppo" and row.framework == "jax" else {}
+    config = hyperparams_for(row.algo, ENV_ID, "jax" if row.framework == "ppo" else row.framework)
+    sequential = {"policy_lag": 0} if row.algo == "ppo" and row.framework in ("jax", "ppo") else {}
     config = config.replace(
         total_timesteps=timesteps,
         personas=row.personas,
@@ -385,7 +392,6 @@ def train_one(
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
     if row.frame_stack > 1:  # normalised frames stacked (what the saved agent rebuilds when it plays)
         env = VecFrameStack(env, row.frame_stack)
-    model = make_model(config, env, seed)
     half = timesteps // 2
     every = max(1, (timesteps - half) // 8)
     checkpoints = folder / f"{name}__{seed}__{timesteps}_checkpoints"
@@ -394,8 +400,7 @@ def train_one(
         checkpoints, row.algo, ENV_ID, validation, 8, half, every, row.env_kwargs, recorded=recorded if people else None
     )
     started = time.perf_counter()
-    model.learn(timesteps, callback=selection)
-    selected = selection.finish(model)
+    model, selected = _learn(row, config, env, seed, timesteps, selection)
     wall_s = time.perf_counter() - started
     saved = save_agent(model, folder / f"{name}__{seed}__{timesteps}", algo=row.algo, env_id=ENV_ID)
     agent = load_agent(saved)  # what a user loads, not the object in memory
@@ -411,6 +416,24 @@ def train_one(
         "validation_success_rate": selected["validation_success_rate"],
         **({"candidates": selected["scores"]} if people else {}),
     }
+
+
+def _learn(row: Row, config: Any, env: Any, seed: int, timesteps: int, selection: Any) -> tuple[Any, dict[str, Any]]:
+    """``(model, selected)``: row ``row`` trained on ``env`` (a ``ppo`` row: on its own vector env), the policy kept."""
+    from agents.rl import make_model
+
+    if row.framework != "ppo":
+        model = make_model(config, env, seed)
+        model.learn(timesteps, callback=selection)
+        return model, selection.finish(model)
+    from agents.ppo import PPO, PPOConfig
+    from agents.rl.ppo_selection import learn_selected
+
+    env.close()  # agents.ppo's learner steps coop_gym's vector env itself
+    learner = PPO(ENV_ID, PPOConfig.from_training(config), seed, {"personas": config.personas, **row.env_kwargs})
+    model, selected = learn_selected(learner, timesteps, selection)
+    learner.env.close()
+    return model, selected  # type: ignore[return-value]
 
 
 def people_report(runs: list[dict[str, Any]]) -> dict[str, Any] | None:

@@ -18,6 +18,8 @@ other (or ``--jobs`` at a time, each in its own process):
 - ``jax-lag``: ``jax`` with ``policy_lag=1`` (each update runs on its own thread while the
   next rollout plays; :meth:`agents.rl.jax_ppo.JaxTraining.train`): ``train.py``'s learner on
   the hard level ``-v2``;
+- ``ppo`` / ``ppo-lag``: :class:`agents.ppo.PPO` (flax networks, optax, its own vector env) on
+  ``jax``'s and ``jax-lag``'s settings;
 - ``default@N`` / ``jax@N`` / ``jax-lag@N``: any of these on ``N`` envs with ``n_steps`` scaled so each update still
   takes ``n_envs * n_steps`` samples (``default@N`` at the jax sizing's env count is SB3 on the
   same configuration as ``jax``); ``@N-eE`` also sets ``E`` epochs per update;
@@ -62,7 +64,7 @@ from result_files import add_save_argument, save
 
 from coop_gym.cli import output_path_problem, positive_int, seed_list
 
-CONTENDERS: tuple[str, ...] = ("default", "jax", "jax-lag", "first_script")
+CONTENDERS: tuple[str, ...] = ("default", "jax", "jax-lag", "ppo", "ppo-lag", "first_script")
 _CONFIGURED = ("default", "jax", "jax-lag")
 """The contenders built from ``train.py``'s settings (:func:`_config`), which take a sizing ``@N``."""
 
@@ -120,7 +122,7 @@ def _config(kind: str, env_id: str) -> Any:
 
     config = hyperparams_for("ppo", env_id, "sb3" if kind == "default" else "jax")
     if kind != "default":
-        config = config.replace(algo_kwargs={**config.algo_kwargs, "policy_lag": int(kind == "jax-lag")})
+        config = config.replace(algo_kwargs={**config.algo_kwargs, "policy_lag": int(kind.endswith("-lag"))})
     return config
 
 
@@ -217,6 +219,10 @@ def _train_with_clock(
 
     torch.set_num_threads(1)
     background.wait()  # on a fresh cache: train on compiled kernels, not their Python twins
+    if contender in ("ppo", "ppo-lag"):
+        return _train_ppo_with_clock(
+            contender, env_id, seed, budget_s, every_s, episodes, eval_seed, targets, budget_steps
+        )
     model = _build(contender, env_id, seed)
     points: list[dict[str, Any]] = []
 
@@ -248,6 +254,61 @@ def _train_with_clock(
         "timesteps": int(model.num_timesteps),
         "train_s": clock.train_s,
         "steps_per_s": int(model.num_timesteps) / clock.train_s if clock.train_s > 0 else None,
+        "load_before": load_before,
+        "load_after": os.getloadavg(),
+    }
+
+
+def _train_ppo_with_clock(
+    contender: str,
+    env_id: str,
+    seed: int,
+    budget_s: float,
+    every_s: float,
+    episodes: int,
+    eval_seed: int,
+    targets: dict[str, float],
+    budget_steps: int | None,
+) -> dict[str, Any]:
+    """:func:`_train_with_clock` for :class:`agents.ppo.PPO`: the clock and the scores at its rollout ends."""
+    from agents.evaluate import evaluate
+    from agents.ppo import PPO, PPOConfig
+    from agents.ppo.sb3_format import to_sb3
+    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
+
+    config = _config(contender.replace("ppo", "jax"), env_id)
+    learner = PPO(env_id, PPOConfig.from_training(config), seed, {"personas": config.personas})
+    points: list[dict[str, Any]] = []
+
+    def score() -> dict[str, Any]:
+        model = to_sb3(learner, learner.acting_params)  # the policy the next rollout plays
+        agent = SB3Agent(model, "ppo", env_id, ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env())))
+        result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
+        return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
+
+    clock = _clock(f"{contender} seed {seed}", budget_s, every_s, targets, score, points)
+    clock.model = learner  # the clock reads wait_for_update and num_timesteps
+
+    def at_rollout_end(trained: PPO) -> bool:
+        clock.num_timesteps = trained.num_timesteps
+        clock.on_rollout_end()
+        return clock.train_s < budget_s
+
+    load_before = os.getloadavg()
+    clock.since = time.perf_counter()
+    learner.learn(budget_steps or 10**12, at_rollout_end)
+    if not points or points[-1]["timesteps"] != learner.num_timesteps:
+        clock.final = True
+        clock.on_rollout_end()  # a final point where training stopped
+    return {
+        "contender": contender,
+        "seed": seed,
+        "n_envs": learner.config.n_envs,
+        "curve": points,
+        "time_to_targets_s": clock.reached,
+        "timesteps": learner.num_timesteps,
+        "train_s": clock.train_s,
+        "steps_per_s": learner.num_timesteps / clock.train_s if clock.train_s > 0 else None,
         "load_before": load_before,
         "load_after": os.getloadavg(),
     }

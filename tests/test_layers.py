@@ -301,7 +301,7 @@ def test_the_single_and_the_vector_env_do_not_import_each_other() -> None:
 
 
 AGENT_ROOMS: tuple[str, ...] = (
-    "base", "pretrained", "caregivers", "zoo", "evaluate", "rl", "tools", "trainer", "tune",
+    "base", "pretrained", "caregivers", "zoo", "evaluate", "ppo", "rl", "tools", "trainer", "tune",
 )  # fmt: skip
 """The rooms of ``agents/``, lowest first: a module may import its own room and the rooms before it.
 ``base`` is the modules directly in ``agents/`` (``base.py``, ``run_folder.py``). A ``__main__`` (what

@@ -237,8 +237,12 @@ class SelectionCallback(BaseCallback):
         """Continue the selection a checkpoint's :meth:`state` describes."""
         self.history, self._next = copy.deepcopy(state["history"]), state["next"]
 
+    def due(self, num_timesteps: int) -> bool:
+        """Whether a rollout starting at ``num_timesteps`` is scored."""
+        return len(self.history) < self.points and num_timesteps >= self._next
+
     def _on_rollout_start(self) -> None:
-        if len(self.history) < self.points and self.num_timesteps >= self._next:
+        if self.due(self.num_timesteps):
             self._next = self.num_timesteps + self.every
             self._score(save=True)
 

@@ -1,0 +1,563 @@
+r"""PPO on a Gymnasium vector env, read top to bottom: settings, rollout, advantages, update, loop.
+
+The algorithm of CleanRL's ``ppo.py`` and PureJaxRL's, with SB3's conventions where they differ
+(the value target is not clipped, the value loss has no 1/2, advantages are normalised per
+minibatch with the unbiased std, a time-limit end adds ``gamma * V(final observation)`` to its
+reward)::
+
+    ratio   = exp(log pi(a|s) - log pi_old(a|s))
+    L       = -mean(min(A ratio, A clip(ratio, 1 - eps, 1 + eps)))
+              - ent_coef mean(H(pi(.|s))) + vf_coef mean((R - V(s))^2)
+    theta  <- Adam(clip_by_global_norm(grad L, max_grad_norm), lr, eps=1e-5)
+
+for ``n_epochs`` passes over random minibatches of ``batch_size``. The networks are flax's
+(:mod:`agents.ppo.networks`), the optimiser optax's; an update is one jitted ``lax.scan`` over
+its epochs and minibatches. The rollout's policy runs in NumPy on the same weights, because on a
+few dozen envs a NumPy forward pass costs less than a call into XLA -- and XLA's single thread is
+then free for the update: with ``policy_lag=1`` each update runs there while the next rollout
+plays the weights of the update before it (PPO's ratio is to the policy that played).
+
+A seed trains the same weights in any process and at any thread count: the envs are seeded
+``seed .. seed + n_envs - 1``, the network's initial weights by ``jax.random`` from ``seed``, the
+actions and the minibatches by two NumPy streams spawned from ``seed``, and XLA runs on one
+thread (:func:`jax_modules`).
+
+Example:
+    >>> import coop_gym
+    >>> learner = PPO("CoopGym/SitToStandHard-v2", PPOConfig(n_envs=4, n_steps=32, batch_size=64), seed=0)
+    >>> learner.learn(256).num_timesteps
+    256
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import pickle
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, NamedTuple
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
+
+from coop_gym.envs.kernels.report import REPORT
+
+__all__ = ["PPO", "PPOConfig", "Rollout", "jax_modules"]
+
+
+def jax_modules() -> tuple[Any, Any, Any]:
+    """``(jax, jax.numpy, optax)`` with XLA held to one thread (set before JAX's first use)."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_cpu_multi_thread_eigen" not in flags:
+        os.environ["XLA_FLAGS"] = f"{flags} --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1".strip()
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    return jax, jnp, optax
+
+
+# --- 1. settings ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO's settings; the defaults are ``train.py``'s on the hard level (:mod:`agents.hyperparams`)."""
+
+    n_envs: int = 16
+    n_steps: int = 256
+    """Steps per env per rollout: an update reads ``n_envs * n_steps`` samples."""
+    batch_size: int = 512
+    n_epochs: int = 10
+    learning_rate: float = 3e-4
+    anneal_lr: bool = True
+    """The learning rate falls linearly to 0 over the run."""
+    gamma: float = 0.995
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.02
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    hidden: tuple[int, ...] = (64, 64)
+    activation: str = "tanh"
+    normalize_obs: bool = True
+    """Observations scaled by their running mean and std (SB3's ``VecNormalize``: clipped to +-10)."""
+    policy_lag: int = 1
+
+    def __post_init__(self) -> None:
+        """Refuse settings the loop cannot run."""
+        samples = self.n_envs * self.n_steps
+        if samples % self.batch_size:
+            raise ValueError(
+                f"PPOConfig: n_envs * n_steps ({samples}) must be a multiple of batch_size ({self.batch_size})"
+            )
+        if self.policy_lag not in (0, 1):
+            raise ValueError(f"PPOConfig.policy_lag must be 0 or 1, got {self.policy_lag!r}")
+        if self.activation not in ("tanh", "relu"):
+            raise ValueError(f"PPOConfig.activation must be 'tanh' or 'relu', got {self.activation!r}")
+
+    def replace(self, **changes: Any) -> PPOConfig:
+        """A copy with ``changes``."""
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_training(cls, config: Any) -> PPOConfig:
+        """The settings of a PPO :class:`agents.hyperparams.TrainingConfig` (``"lin_X"``: X, annealed).
+
+        Raises:
+            ValueError: a setting this learner does not have.
+        """
+        kwargs = dict(config.algo_kwargs)
+        rate = kwargs.pop("learning_rate", cls.learning_rate)
+        anneal = isinstance(rate, str) and rate.startswith("lin_")
+        policy_kwargs = dict(config.policy_kwargs or {})
+        hidden = tuple(policy_kwargs.pop("net_arch", cls.hidden))
+        fields = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(kwargs) - fields) + sorted(policy_kwargs)
+        if config.algo != "ppo" or unknown:
+            raise ValueError(f"PPOConfig.from_training: {config.algo!r} settings {unknown} are not this PPO's")
+        return cls(
+            n_envs=config.n_envs,
+            learning_rate=float(rate[4:] if anneal else rate),
+            anneal_lr=anneal,
+            hidden=hidden,
+            normalize_obs=bool(config.normalize),
+            **kwargs,
+        )
+
+
+class ObsNormalizer:
+    """Observations scaled by their running mean and standard deviation, clipped (SB3's ``VecNormalize``).
+
+    The statistics start at mean 0 and variance 1 with a weight of 1e-4 observations and
+    take every observation the envs return, as sums of ``x`` and ``x**2`` in float64.
+    """
+
+    def __init__(self, shape: tuple[int, ...], clip: float = 10.0, epsilon: float = 1e-8) -> None:
+        """Mean 0, variance 1, a count of 1e-4."""
+        self.count, self.sum, self.sum_sq = 1e-4, np.zeros(shape), np.full(shape, 1e-4)
+        self.clip, self.epsilon = clip, epsilon
+        self.mean, self.var = np.zeros(shape), np.ones(shape)
+        self._scale = 1.0 / np.sqrt(self.var + epsilon)
+
+    def update(self, batch: np.ndarray) -> None:
+        """Fold a batch of observations (one per row) into the statistics."""
+        self.count += batch.shape[0]
+        self.sum += batch.sum(axis=0, dtype=np.float64)
+        self.sum_sq += np.square(batch, dtype=np.float64).sum(axis=0)
+        self.mean = self.sum / self.count
+        self.var = np.maximum(self.sum_sq / self.count - self.mean * self.mean, 0.0)
+        self._scale = (self.var + self.epsilon) ** -0.5
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """``obs`` scaled and clipped."""
+        scaled = (obs - self.mean) * self._scale
+        return np.clip(scaled, -self.clip, self.clip, out=scaled).astype(np.float32)
+
+
+# --- 2. the rollout --------------------------------------------------------------------
+
+
+class Rollout(NamedTuple):
+    """``n_steps`` steps of every env: arrays of shape (n_steps, n_envs, ...)."""
+
+    obs: np.ndarray
+    actions: np.ndarray
+    log_probs: np.ndarray
+    values: np.ndarray
+    rewards: np.ndarray
+    starts: np.ndarray
+    """1 where the step began an episode."""
+    last_values: np.ndarray
+    """V of the observations after the last step, (n_envs,)."""
+    last_starts: np.ndarray
+    """1 where an episode begins after the last step, (n_envs,)."""
+
+
+class NumpyPolicy:
+    """The actor-critic's forward pass in NumPy over flax's weights, and its sampling.
+
+    The logits are laid out as a (dims, widest) table, padded with -inf, so that every action
+    dimension is sampled at once.
+    """
+
+    def __init__(self, params: Any, nvec: tuple[int, ...], activation: str) -> None:
+        """Weights as NumPy (``params``: ``{"params": {"pi": {...}, "vf": {...}}}`` of :class:`ActorCritic`)."""
+
+        def layers(net: dict[str, Any]) -> list[tuple[np.ndarray, np.ndarray]]:
+            names = sorted(net, key=lambda name: int(name.split("_")[1]))
+            return [(np.asarray(net[n]["kernel"]), np.asarray(net[n]["bias"])) for n in names]
+
+        self.pi, self.vf = layers(params["params"]["pi"]), layers(params["params"]["vf"])
+        self.act_fn = np.tanh if activation == "tanh" else (lambda x: np.maximum(x, 0.0))
+        n_logits, widest, bounds = int(sum(nvec)), max(nvec), np.cumsum([0, *nvec])
+        self.columns = np.full((len(nvec), widest), n_logits)  # column n_logits: the -inf pad
+        for head, n in enumerate(nvec):
+            self.columns[head, :n] = np.arange(bounds[head], bounds[head] + n)
+        self.last = np.asarray(nvec) - 1
+        self.offsets = np.arange(len(nvec)) * widest  # of each dimension's row in the flattened table
+
+    def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
+        for weight, bias in layers[:-1]:
+            x = self.act_fn(x @ weight + bias)
+        weight, bias = layers[-1]
+        return x @ weight + bias
+
+    def value(self, obs: np.ndarray) -> np.ndarray:
+        """V(s) of each row."""
+        return self._mlp(self.vf, obs)[:, 0]
+
+    def act(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(actions (n, dims), log pi(a|s), V(s))``: each dimension drawn by its inverse CDF."""
+        n = len(obs)
+        logits = self._mlp(self.pi, obs)
+        padded = np.concatenate([logits, np.full((n, 1), -np.inf, np.float32)], axis=1)[:, self.columns]
+        weights = np.exp(padded - padded.max(axis=2, keepdims=True))  # unnormalised probabilities
+        cdf = np.cumsum(weights, axis=2)
+        total = cdf[:, :, -1]
+        actions = np.minimum((rng.random((n, len(self.last), 1)) * total[:, :, None] >= cdf).sum(axis=2), self.last)
+        chosen = weights.reshape(n, -1)[np.arange(n)[:, None], self.offsets + actions]
+        log_prob = np.log(chosen / total).sum(axis=1)
+        return actions, log_prob.astype(np.float32), self.value(obs).astype(np.float32)
+
+
+# --- 3. the advantages ------------------------------------------------------------------
+
+
+def advantages(rollout: Rollout, gamma: float, gae_lambda: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(advantages, returns)`` by generalised advantage estimation, both (n_steps, n_envs)."""
+    next_values = np.concatenate([rollout.values[1:], rollout.last_values[None]])
+    next_live = 1.0 - np.concatenate([rollout.starts[1:], rollout.last_starts[None]])
+    adv = np.zeros_like(rollout.rewards)
+    last = np.zeros_like(rollout.rewards[0])
+    for t in reversed(range(rollout.rewards.shape[0])):
+        delta = rollout.rewards[t] + gamma * next_values[t] * next_live[t] - rollout.values[t]
+        last = delta + gamma * gae_lambda * next_live[t] * last
+        adv[t] = last
+    return adv, adv + rollout.values
+
+
+# --- 4. the update ------------------------------------------------------------------------
+
+
+def make_update(network: Any, config: PPOConfig, nvec: tuple[int, ...], samples: int) -> tuple[Any, Any]:
+    """``(optimiser, update)``: ``update(params, opt_state, orders, batch, lr, clip) -> (params, opt_state, stats)``.
+
+    ``batch``: ``(obs, actions, old_log_probs, advantages, returns)``, one row per sample;
+    ``orders``: one permutation of the samples per epoch, (n_epochs, samples), cut into the
+    epoch's minibatches in order. (NumPy draws them: ``jax.random.permutation`` on the CPU costs
+    as much as a fifth of the update.)
+    """
+    jax, jnp, optax = jax_modules()
+    from agents.ppo.networks import log_prob_entropy
+
+    optimizer = optax.inject_hyperparams(
+        lambda learning_rate: optax.chain(
+            optax.clip_by_global_norm(config.max_grad_norm), optax.adam(learning_rate, eps=1e-5)
+        )
+    )(learning_rate=config.learning_rate)
+    minibatches = samples // config.batch_size
+
+    def loss(params: Any, batch: tuple[Any, ...], clip: Any) -> tuple[Any, dict[str, Any]]:
+        obs, actions, old_log_prob, adv, returns = batch
+        logits, values = network.apply(params, obs)
+        log_prob, entropy = log_prob_entropy(logits, actions, nvec)
+        adv = (adv - adv.mean()) / (adv.std(ddof=1) + 1e-8)
+        log_ratio = log_prob - old_log_prob
+        ratio = jnp.exp(log_ratio)
+        policy_loss = -jnp.minimum(adv * ratio, adv * jnp.clip(ratio, 1 - clip, 1 + clip)).mean()
+        value_loss = ((returns - values) ** 2).mean()
+        total = policy_loss - config.ent_coef * entropy.mean() + config.vf_coef * value_loss
+        return total, {
+            "policy_gradient_loss": policy_loss,
+            "value_loss": value_loss,
+            "entropy_loss": -entropy.mean(),
+            "approx_kl": ((ratio - 1) - log_ratio).mean(),
+            "clip_fraction": (jnp.abs(ratio - 1) > clip).mean(),
+        }
+
+    @jax.jit
+    def update(params: Any, opt_state: Any, orders: Any, batch: Any, lr: Any, clip: Any) -> Any:
+        opt_state.hyperparams["learning_rate"] = lr
+
+        def minibatch(carry: Any, index: Any) -> Any:
+            params, opt_state = carry
+            (_, stats), grads = jax.value_and_grad(loss, has_aux=True)(params, [c[index] for c in batch], clip)
+            updates, opt_state = optimizer.update(grads, opt_state, params)
+            return (optax.apply_updates(params, updates), opt_state), stats
+
+        def epoch(carry: Any, order: Any) -> Any:
+            return jax.lax.scan(minibatch, carry, order.reshape(minibatches, config.batch_size))
+
+        (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), orders)
+        return params, opt_state, jax.tree_util.tree_map(jnp.mean, stats)
+
+    return optimizer, update
+
+
+# --- 5. the loop ---------------------------------------------------------------------------
+
+
+def make_vector_env(env_id: str, n_envs: int, env_kwargs: dict[str, Any] | None = None) -> gym.vector.VectorEnv:
+    """``n_envs`` envs of ``env_id`` as one vector env that resets a finished env on the same step.
+
+    A ``CoopGym/`` id gets coop_gym's batched env; any other, Gymnasium's ``SyncVectorEnv``.
+    """
+    same_step: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP}
+    if env_id.startswith("CoopGym/"):
+        return gym.make_vec(env_id, n_envs, "vector_entry_point", **{**same_step, **(env_kwargs or {})})
+    return gym.make_vec(env_id, n_envs, "sync", vector_kwargs=same_step, **(env_kwargs or {}))
+
+
+class PPO:
+    """The learner: ``PPO(env_id, config, seed).learn(total_timesteps)``; :attr:`params` are the weights.
+
+    ``on_rollout`` (given to :meth:`learn`) is called after each rollout with the learner; it
+    returns False to stop. The episodes finished meanwhile: :meth:`take_episodes`.
+    """
+
+    def __init__(
+        self, env_id: str, config: PPOConfig | None = None, seed: int = 0, env_kwargs: dict[str, Any] | None = None
+    ) -> None:
+        """Build the envs (seeded ``seed .. seed + n_envs - 1``), the network and the optimiser."""
+        from agents.ppo.networks import ActorCritic
+
+        jax, _, _ = jax_modules()
+        self.env_id, self.config, self.seed = env_id, config or PPOConfig(), int(seed)
+        self.env_kwargs = dict(env_kwargs or {})
+        cfg = self.config
+        self.env = make_vector_env(env_id, cfg.n_envs, self.env_kwargs)
+        space = self.env.single_action_space
+        if isinstance(space, spaces.Discrete):
+            self.nvec: tuple[int, ...] = (int(space.n),)
+        elif isinstance(space, spaces.MultiDiscrete):
+            self.nvec = tuple(int(n) for n in space.nvec)
+        else:
+            raise ValueError(f"PPO needs a Discrete or MultiDiscrete action space, got {space}")
+        obs_shape = tuple(self.env.single_observation_space.shape or ())
+        self.network = ActorCritic(self.nvec, cfg.hidden, cfg.activation)
+        self.params = self.network.init(jax.random.PRNGKey(self.seed % 2**31), np.zeros((1, *obs_shape), np.float32))
+        self.optimizer, self._update = make_update(self.network, cfg, self.nvec, cfg.n_envs * cfg.n_steps)
+        self.opt_state = self.optimizer.init(self.params)
+        # Two streams from the seed: the actions' and the minibatches'.
+        streams = np.random.PCG64(self.seed).spawn(2)
+        self.rng, self.minibatch_rng = np.random.Generator(streams[0]), np.random.Generator(streams[1])
+        self.normalizer = ObsNormalizer(obs_shape) if cfg.normalize_obs else None
+        self.num_timesteps, self.stats = 0, dict[str, float]()
+        self._finished: list[tuple[np.ndarray, ...]] = []
+        self._act_with(self.params)
+        self._pending: Any = None
+        self._started = time.time()
+        self._discrete = isinstance(space, spaces.Discrete)
+        self._env_step = self._step_rows if hasattr(self.env, "step_rows") else self._step_infos
+        raw, _ = self.env.reset(seed=[self.seed + i for i in range(cfg.n_envs)])  # type: ignore[arg-type]
+        self._obs = self._observe(raw)
+        self._starts = np.ones(cfg.n_envs, dtype=np.float32)
+        self._returns, self._lengths = np.zeros(cfg.n_envs), np.zeros(cfg.n_envs, dtype=np.int64)
+
+    def _observe(self, raw: np.ndarray) -> np.ndarray:
+        """The policy's input: ``raw`` scaled by the statistics (which take it in first)."""
+        if self.normalizer is None:
+            return np.asarray(raw, dtype=np.float32)
+        self.normalizer.update(raw)
+        return self.normalizer(raw)
+
+    def _step_rows(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any]:
+        """One step of coop_gym's vector env, no info dicts built: ``(obs, rewards, terminated, truncated, final)``.
+
+        ``final``: None, or ``(done, final observations, outcome codes)`` where episodes ended.
+        """
+        obs, rewards, terminated, truncated, final = self.env.step_rows(actions)  # type: ignore[attr-defined]
+        if final is not None:
+            final = (final[0], final[1], final[2][:, REPORT.outcome])
+        return obs, rewards, terminated, truncated, final
+
+    def _step_infos(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any]:
+        """:meth:`_step_rows` on any vector env that resets on the same step, from its infos."""
+        obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        done = np.logical_or(terminated, truncated)
+        if not done.any():
+            return obs, rewards, terminated, truncated, None
+        final_obs = np.stack([infos["final_obs"][i] if d else obs[i] for i, d in enumerate(done)])
+        outcomes = infos["final_info"].get("outcome_code", np.zeros(len(done), np.int64))
+        return obs, rewards, terminated, truncated, (done, final_obs, outcomes)
+
+    def _record(self, final: Any) -> None:
+        """Keep the episodes that just ended (:meth:`take_episodes`)."""
+        done, _, outcomes = final
+        now = np.full(int(done.sum()), time.time() - self._started)
+        self._finished.append((self._returns[done], self._lengths[done], now, outcomes[done].astype(np.int64)))
+        self._returns[done], self._lengths[done] = 0.0, 0
+
+    def take_episodes(self) -> dict[str, np.ndarray]:
+        """The episodes finished since the last call: ``{"r", "l", "t", "outcome"}`` arrays, in the order they ended.
+
+        ``r`` return, ``l`` length, ``t`` seconds since the learner was built (SB3's monitor
+        columns), ``outcome`` the code of :class:`coop_gym.envs.config.Outcome` (0 where the env
+        gives none).
+        """
+        chunks, self._finished = self._finished, []
+        columns = list(zip(*chunks, strict=False)) or [
+            [np.zeros(0)],
+            [np.zeros(0, np.int64)],
+            [np.zeros(0)],
+            [np.zeros(0, np.int64)],
+        ]
+        return {name: np.concatenate(column) for name, column in zip(("r", "l", "t", "outcome"), columns, strict=True)}
+
+    def rollout(self) -> Rollout:
+        """``n_steps`` steps of every env with the acting weights."""
+        cfg, policy, step = self.config, self._acting, self._env_step
+        shape = (cfg.n_steps, cfg.n_envs)
+        obs = np.zeros((*shape, *self._obs.shape[1:]), np.float32)
+        actions = np.zeros((*shape, len(self.nvec)), np.int64)
+        log_probs, values, rewards, starts = (np.zeros(shape, np.float32) for _ in range(4))
+        for t in range(cfg.n_steps):
+            obs[t], starts[t] = self._obs, self._starts
+            actions[t], log_probs[t], values[t] = policy.act(self._obs, self.rng)
+            raw, reward, terminated, truncated, final = step(actions[t, :, 0] if self._discrete else actions[t])
+            self._obs = self._observe(raw)
+            self._returns += reward
+            self._lengths += 1
+            rewards[t] = reward
+            if final is not None:
+                cut = truncated & ~terminated
+                if cut.any():  # a time-limit end: bootstrap from the final observation
+                    rewards[t, cut] += cfg.gamma * policy.value(
+                        self.normalizer(final[1][cut]) if self.normalizer else final[1][cut]
+                    )
+                self._record(final)
+            self._starts = final[0].astype(np.float32) if final is not None else np.zeros(cfg.n_envs, np.float32)
+        self.num_timesteps += cfg.n_steps * cfg.n_envs
+        last_values = policy.value(self._obs).astype(np.float32)
+        return Rollout(obs, actions, log_probs, values, rewards, starts, last_values, self._starts.copy())
+
+    def update(self, rollout: Rollout, progress_remaining: float) -> None:
+        """Start one PPO update on ``rollout``; with ``policy_lag=0`` wait for it and act with its weights."""
+        cfg = self.config
+        adv, returns = advantages(rollout, cfg.gamma, cfg.gae_lambda)
+        flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
+        batch = [flat(rollout.obs), flat(rollout.actions), flat(rollout.log_probs), flat(adv), flat(returns)]
+        lr = cfg.learning_rate * (progress_remaining if cfg.anneal_lr else 1.0)
+        samples = len(batch[0])
+        orders = np.stack([self.minibatch_rng.permutation(samples) for _ in range(cfg.n_epochs)]).astype(np.int32)
+        self._land()
+        self._pending = self._update(self.params, self.opt_state, orders, batch, lr, cfg.clip_range)
+        if cfg.policy_lag == 0:
+            self._land()
+
+    def set_params(self, params: Any) -> None:
+        """Take ``params`` (the network's tree) as the weights, and act with them."""
+        jax, _, _ = jax_modules()
+        self._land()
+        self.params = jax.tree_util.tree_map(jax.numpy.asarray, params)
+        self._act_with(self.params)
+
+    @property
+    def acting_params(self) -> Any:
+        """The weights the next rollout plays (with ``policy_lag=1``, those before the update in flight)."""
+        return self._acting_params
+
+    def _act_with(self, params: Any) -> None:
+        """The rollout plays ``params`` from now on."""
+        self._acting_params = params
+        self._acting = NumpyPolicy(params, self.nvec, self.config.activation)
+
+    def wait_for_update(self) -> None:
+        """Wait until the update in flight (``policy_lag``) has finished, without landing it: nothing changes.
+
+        For a clock that should count the update's time where it ran.
+        """
+        if self._pending is not None:
+            jax, _, _ = jax_modules()
+            jax.block_until_ready(self._pending)
+
+    def _land(self) -> None:
+        """Wait for the update in flight; its weights become the learner's and the rollout's."""
+        if self._pending is None:
+            return
+        self.params, self.opt_state, stats = self._pending
+        self._pending = None
+        self.stats = {name: float(value) for name, value in stats.items()}
+        self._act_with(self.params)
+
+    def learn(self, total_timesteps: int, on_rollout: Callable[[PPO], bool] | None = None) -> PPO:
+        """Train in whole rollouts until :attr:`num_timesteps` reaches ``total_timesteps``, the run's length.
+
+        The learning rate falls over the run's length, so a learner restored at step ``k``
+        (:meth:`state` / :meth:`restore`) continues exactly as the unbroken run. The last update
+        lands before this returns.
+        """
+        while self.num_timesteps < total_timesteps:
+            rollout = self.rollout()
+            self.update(rollout, 1.0 - self.num_timesteps / total_timesteps)
+            if on_rollout is not None and not on_rollout(self):
+                break
+        self._land()
+        return self
+
+    # --- 6. checkpoints ----------------------------------------------------------------------
+
+    def state(self) -> dict[str, Any]:
+        """Everything the run needs to continue exactly, as NumPy and plain Python (picklable).
+
+        An update still in flight (``policy_lag``) is waited for and kept as such: the restored
+        learner lands it where the unbroken run would have.
+        """
+        jax, _, _ = jax_modules()
+        as_numpy = partial(jax.tree_util.tree_map, np.asarray)
+        pending = None
+        if self._pending is not None:
+            params, opt_state, stats = self._pending
+            pending = (as_numpy(params), jax.tree_util.tree_leaves(as_numpy(opt_state)), as_numpy(stats))
+        norm = self.normalizer
+        return {
+            "num_timesteps": self.num_timesteps,
+            "params": as_numpy(self.params),
+            "opt_state": jax.tree_util.tree_leaves(as_numpy(self.opt_state)),
+            "pending": pending,
+            "acting_params": as_numpy(self._acting_params),
+            "stats": dict(self.stats),
+            "rng": [self.rng.bit_generator.state, self.minibatch_rng.bit_generator.state],
+            "normalizer": None if norm is None else {"count": norm.count, "sum": norm.sum, "sum_sq": norm.sum_sq},
+            "env": pickle.dumps(self.env),
+            "episode": {"obs": self._obs, "starts": self._starts, "returns": self._returns, "lengths": self._lengths},
+            "elapsed_s": time.time() - self._started,
+        }
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state` (taken from a learner of the same id, settings and seed)."""
+        jax, jnp, _ = jax_modules()
+        treedef = jax.tree_util.tree_structure(self.opt_state)
+
+        def opt_state(leaves: list[np.ndarray]) -> Any:
+            return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(leaf) for leaf in leaves])
+
+        self.num_timesteps = int(state["num_timesteps"])
+        self.params = jax.tree_util.tree_map(jnp.asarray, state["params"])
+        self.opt_state = opt_state(state["opt_state"])
+        self._pending = None
+        if state["pending"] is not None:
+            params, leaves, stats = state["pending"]
+            self._pending = (jax.tree_util.tree_map(jnp.asarray, params), opt_state(leaves), stats)
+        self._act_with(jax.tree_util.tree_map(jnp.asarray, state["acting_params"]))
+        self.stats = dict(state["stats"])
+        self.rng.bit_generator.state, self.minibatch_rng.bit_generator.state = state["rng"]
+        if self.normalizer is not None and state["normalizer"] is not None:
+            saved = state["normalizer"]
+            self.normalizer.count = saved["count"]
+            self.normalizer.sum, self.normalizer.sum_sq = saved["sum"].copy(), saved["sum_sq"].copy()
+            self.normalizer.update(np.zeros((0, *self.normalizer.sum.shape)))  # mean, var and scale from the sums
+        self.env.close()
+        self.env = pickle.loads(state["env"])
+        self._env_step = self._step_rows if hasattr(self.env, "step_rows") else self._step_infos
+        episode = state["episode"]
+        self._obs, self._starts = episode["obs"].copy(), episode["starts"].copy()
+        self._returns, self._lengths = episode["returns"].copy(), episode["lengths"].copy()
+        self._started = time.time() - float(state["elapsed_s"])
+        self._finished = []
