@@ -44,8 +44,8 @@ ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo", "dqn")
 """Algorithms ``train.py`` offers: SB3 PPO, sb3-contrib RecurrentPPO, SB3 DQN."""
 
 FRAMEWORKS: tuple[str, ...] = ("sb3", "jax")
-"""Learners that train in this process: SB3 itself, or JAX (:class:`agents.rl.jax_ppo.JaxPPO`,
-:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`: PPO and RecurrentPPO)."""
+"""Learners that train in this process: SB3 itself, or JAX (PPO: :class:`agents.ppo.PPO`; RecurrentPPO:
+:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`)."""
 
 JAX_ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo")
 """Algorithms ``framework="jax"`` trains."""
@@ -80,9 +80,9 @@ class TrainingConfig:
             wider person-to-person variation); the held-out ``"test"`` set is never trained on.
         algo_kwargs: Keyword arguments of the SB3 algorithm's constructor.
         policy_kwargs: The policy's ``policy_kwargs`` (network sizes).
-        framework: ``"sb3"`` (SB3's own class) or ``"jax"`` (:class:`agents.rl.jax_ppo.JaxPPO` /
-            :class:`agents.rl.jax_recurrent.JaxRecurrentPPO`, the same algorithm with its rollout
-            policy and update compiled by JAX; ``ppo`` and ``recurrent_ppo``).
+        framework: ``"sb3"`` (SB3's own class) or ``"jax"`` (``ppo``: :class:`agents.ppo.PPO`;
+            ``recurrent_ppo``: :class:`agents.rl.jax_recurrent.JaxRecurrentPPO`; the update
+            compiled by JAX).
     """
 
     algo: str
@@ -246,19 +246,20 @@ JAX_SIZING: dict[str, Any] = {
     "n_envs": 16,
     "n_steps": 256,
 }
-"""How :class:`~agents.rl.jax_ppo.JaxPPO` sizes PPO (``framework="jax"``), over the settings above.
+"""How the JAX learners size PPO (``framework="jax"``: :class:`agents.ppo.PPO`, and ``JaxPPO`` in ``bench/``), over
+the settings above.
 
 With the update compiled, what is left per env step is Python's work per ``VecEnv`` step,
 which more envs per step spread thinner; but shorter rollouts per env learn less per step.
 16 envs x 256 steps keeps the 4096 samples per update, the minibatches and the epochs of
 the SB3 settings, and scored highest of 8 x 512, 16 x 256 and 64 x 64 on the training
 personas' validation episodes (python bench/learners.py --rows jax-kalman@8,jax-kalman,jax-kalman@64;
-docs/agents.md, "The JAX learner")."""
+docs/agents.md, "JaxPPO and the LSTM learner")."""
 
 
 JAX_POLICY_LAG: dict[str, int] = {"CoopGym/SitToStandHard-v2": 1}
-"""``JaxPPO``'s ``policy_lag`` on an env id (0 on the others): 1 runs each update on a second core
-while the next rollout plays (:meth:`agents.rl.jax_ppo.JaxTraining.train`). Chosen on the
+"""PPO's ``policy_lag`` on the JAX learner, by env id (0 on the others): 1 runs each update on a second core
+while the next rollout plays (:meth:`agents.ppo.PPO.update`). Chosen on the
 training personas' validation episodes, 16 seeds on each of two CPUs (docs/agents.md, "Policy lag")."""
 
 

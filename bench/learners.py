@@ -427,7 +427,7 @@ def _learn(row: Row, config: Any, env: Any, seed: int, timesteps: int, selection
         model.learn(timesteps, callback=selection)
         return model, selection.finish(model)
     from agents.ppo import PPO, PPOConfig
-    from agents.rl.ppo_selection import learn_selected
+    from agents.rl.ppo_run import learn_selected
 
     env.close()  # agents.ppo's learner steps coop_gym's vector env itself
     learner = PPO(ENV_ID, PPOConfig.from_training(config), seed, {"personas": config.personas, **row.env_kwargs})

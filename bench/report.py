@@ -20,7 +20,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from report_format import Results
-from report_learners import best_of_seeds, learners, learners_across_cpus, selection_people, training_budget
+from report_learners import (
+    best_of_seeds,
+    learners,
+    learners_across_cpus,
+    ppo_learner,
+    selection_people,
+    training_budget,
+)
 from report_quality import (
     library_defaults,
     outside_learners,
@@ -62,6 +69,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     train_py,
     learners,
     learners_across_cpus,
+    ppo_learner,
     training_budget,
     selection_people,
     best_of_seeds,

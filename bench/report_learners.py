@@ -346,3 +346,48 @@ only to report; nothing is chosen on them.
 
 {_table(header, rows)}
 """
+
+
+_PPO_COMMAND = "python bench/learners.py --rows ppo-lag --seeds 0,1,...,15 --save bench/results/learners_ppo.json"
+
+
+def ppo_learner(results: Results) -> str:
+    """``agents.ppo``'s rows beside ``JaxPPO``'s ``jax-kalman-lag`` of the learners records (the same protocol)."""
+    head = "### The PPO learner `agents.ppo` against `JaxPPO`\n"
+    record = results.get("learners_ppo")
+    if record is None:
+        return head + "\n" + _missing(_PPO_COMMAND) + "\n"
+    report = record["results"]
+    rows = [_learner_row(f"`{name}`: {row['what']}", row) for name, row in report["rows"].items()]
+    for stem in ("learners", "learners_avx512"):
+        found = results.get(stem)
+        if found is not None and "jax-kalman-lag" in found["results"]["rows"]:
+            reference = found["results"]["rows"]["jax-kalman-lag"]
+            rows.append(_learner_row(f"`jax-kalman-lag`: `JaxPPO` (`bench/results/{stem}.json`)", reference))
+    header = ["learner", "seeds", "success, IQM [95 % CI]", "mind-reading score, IQM [95 % CI]"]
+    header += ["lowest seed", "unsafe (mean)", "training (median)"]
+    return f"""{head}
+{_provenance(record)}
+
+The rows train as those of [Learners and observations](#learners-and-observations-on-the-hard-level)
+do ({report["timesteps"]:,} steps, the wider training personas, the best policy of the last half on the training
+personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes; `ppo-lag` is
+`train.py`'s learner (`agents.ppo`, policy lag 1), `jax-kalman-lag` the learner before it (`JaxPPO`, policy lag 1,
+the same settings) from the records named (their machines: the records' provenance). The two learners' seeds draw
+different initial weights and actions.
+
+{_table(header, rows)}
+"""
+
+
+def _learner_row(label: str, row: dict[str, Any]) -> list[str]:
+    success, score = row["success"], row["score"]
+    return [
+        label,
+        str(row["runs"]),
+        f"{_pct(success['iqm'])} {_ci(success['ci95'])}",
+        f"{score['iqm']:.2f} [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]",
+        _pct(row["min_success"]),
+        _pct(row["unsafe_rate_mean"]),
+        f"{row['train_wall_s_median']:.0f} s",
+    ]

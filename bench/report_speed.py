@@ -204,7 +204,8 @@ episodes; the target counts successes only). Contenders: `default` is `train.py 
 configuration, `jax` the same PPO as `JaxPPO` (`train.py --policy-lag 0`) on its sizing,
 `default@N` SB3 on `N` envs with the same samples per update (`default@16` is SB3 on `jax`'s
 configuration), `jax-lag` `jax` with `policy_lag=1` (each update runs on a second core while the
-next rollout plays; `train.py`'s learner on `-v2`), `jax@N-eE` JaxPPO on `N` envs with `E` epochs
+next rollout plays), `ppo` / `ppo-lag` the PPO of `agents.ppo` on `jax`'s / `jax-lag`'s settings
+(`ppo-lag`: `train.py`'s learner on `-v2`), `jax@N-eE` JaxPPO on `N` envs with `E` epochs
 per update, `first_script` SB3's defaults on 8 `gymnasium.make` envs. A change of load
 between runs moves the ratios (the results file holds the load average before and after each).
 """

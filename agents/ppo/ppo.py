@@ -109,6 +109,8 @@ class PPOConfig:
     def from_training(cls, config: Any) -> PPOConfig:
         """The settings of a PPO :class:`agents.hyperparams.TrainingConfig` (``"lin_X"``: X, annealed).
 
+        A rollout smaller than a minibatch is one minibatch, as in SB3.
+
         Raises:
             ValueError: a setting this learner does not have.
         """
@@ -121,8 +123,12 @@ class PPOConfig:
         unknown = sorted(set(kwargs) - fields) + sorted(policy_kwargs)
         if config.algo != "ppo" or unknown:
             raise ValueError(f"PPOConfig.from_training: {config.algo!r} settings {unknown} are not this PPO's")
+        n_steps = int(kwargs.pop("n_steps", cls.n_steps))
+        batch_size = min(int(kwargs.pop("batch_size", cls.batch_size)), config.n_envs * n_steps)  # one at least
         return cls(
             n_envs=config.n_envs,
+            n_steps=n_steps,
+            batch_size=batch_size,
             learning_rate=float(rate[4:] if anneal else rate),
             anneal_lr=anneal,
             hidden=hidden,
@@ -144,6 +150,13 @@ class ObsNormalizer:
         self.clip, self.epsilon = clip, epsilon
         self.mean, self.var = np.zeros(shape), np.ones(shape)
         self._scale = 1.0 / np.sqrt(self.var + epsilon)
+
+    def restore(self, count: float, mean: np.ndarray, var: np.ndarray) -> None:
+        """Take the statistics of ``count`` observations of mean ``mean`` and variance ``var``."""
+        self.count = float(count)
+        self.sum = np.asarray(mean, np.float64) * self.count
+        self.sum_sq = (np.asarray(var, np.float64) + np.square(mean)) * self.count
+        self.update(np.zeros((0, *self.sum.shape)))
 
     def update(self, batch: np.ndarray) -> None:
         """Fold a batch of observations (one per row) into the statistics."""
@@ -552,7 +565,7 @@ class PPO:
             saved = state["normalizer"]
             self.normalizer.count = saved["count"]
             self.normalizer.sum, self.normalizer.sum_sq = saved["sum"].copy(), saved["sum_sq"].copy()
-            self.normalizer.update(np.zeros((0, *self.normalizer.sum.shape)))  # mean, var and scale from the sums
+            self.normalizer.update(np.zeros((0, *self.normalizer.sum.shape)))  # the mean and variance of the sums
         self.env.close()
         self.env = pickle.loads(state["env"])
         self._env_step = self._step_rows if hasattr(self.env, "step_rows") else self._step_infos

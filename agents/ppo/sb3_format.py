@@ -46,7 +46,8 @@ def to_sb3(learner: PPO, params: Any = None) -> SB3PPO:
 
     The model's env is ``n_envs`` envs of the learner's id and kwargs, inside a ``VecNormalize``
     holding the learner's statistics (not updating them) when it normalises observations;
-    ``num_timesteps`` is the learner's. The model logs nowhere.
+    ``num_timesteps`` is the learner's. The model logs nowhere; its ``framework`` is ``"jax"``, the
+    ``train.py --framework`` that trains this learner (what a saved ``agent.json`` records).
     """
     from stable_baselines3.common.logger import Logger
 
@@ -78,6 +79,7 @@ def to_sb3(learner: PPO, params: Any = None) -> SB3PPO:
     model.policy.load_state_dict(sb3_state_dict(learner.params if params is None else params), strict=True)
     model.num_timesteps = learner.num_timesteps
     model.set_logger(Logger(None, []))
+    model.framework = "jax"  # what the saved agent.json records: train.py --framework jax trained it
     return model
 
 

@@ -153,8 +153,12 @@ class PeriodicEvalCallback(BaseCallback):
         """Continue from :meth:`state`."""
         self.history, self._next = copy.deepcopy(state["history"]), state["next"]
 
+    def due(self, num_timesteps: int) -> bool:
+        """Whether an evaluation is due at ``num_timesteps``."""
+        return num_timesteps >= self._next
+
     def _on_step(self) -> bool:
-        if self.num_timesteps >= self._next:
+        if self.due(self.num_timesteps):
             self._next = (self.num_timesteps // self.every + 1) * self.every
             self.evaluate_now()
         return True

@@ -155,6 +155,8 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     """
     if seeds_of(args) > 1:
         return _train_seeds(args, plan, stop)
+    if plan.config.algo == "ppo" and plan.config.framework == "jax":
+        return _train_learner(args, plan, stop)
     run_dir, config = plan.run_dir, plan.config
     checkpoint = latest_checkpoint(run_dir)
     # Training env: training personas only; observations normalised if the config says so.
@@ -182,18 +184,90 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
         raise  # not reached: only a signal asks for it
     finally:
         stop.in_training = False
-    training = _training_summary(plan, model, start_steps, elapsed())
+    env.close()
+    return _finish(plan, model, start_steps, elapsed(), curve, selection, stop)
+
+
+def _finish(
+    plan: Plan,
+    model: Any,
+    start_steps: int,
+    train_s: float,
+    curve: PeriodicEvalCallback | None,
+    selection: SelectionCallback | None,
+    stop: StopSignals,
+) -> dict[str, Any]:
+    """After ``learn``: the kept policy saved, ``training.json`` written, the checkpoints removed; the summary."""
+    training = _training_summary(plan, model, start_steps, train_s)
     if selection is not None:  # the best-validated policy is the one saved
         training["selected"] = selection.finish(model)
         _print_selection(training["selected"])
-    save_agent(model, run_dir, algo=plan.algo, env_id=plan.env_id)
-    env.close()
+    save_agent(model, plan.run_dir, algo=plan.algo, env_id=plan.env_id)
     # Training is over: the summary marks it, and the checkpoints have served their purpose.
     finished = {"training": training, "learning_curve": curve.history if curve else [], "start_steps": start_steps}
-    write_json(run_dir / TRAINING_FILE, finished)
-    remove_checkpoints(run_dir)
+    write_json(plan.run_dir / TRAINING_FILE, finished)
+    remove_checkpoints(plan.run_dir)
     stop.check()  # the signal came after the last rollout boundary
     return finished
+
+
+def _train_learner(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
+    """:func:`train` for PPO on the JAX learner: :class:`agents.ppo.PPO`, the run's tools at its rollout ends.
+
+    Raises:
+        as :func:`train`.
+    """
+    from agents.ppo import PPO, PPOConfig
+    from agents.ppo.sb3_format import to_sb3
+    from agents.rl.ppo_run import RunHooks, continue_from_saved, restore_learner
+
+    run_dir, config = plan.run_dir, plan.config
+    settings = PPOConfig.from_training(config.replace(n_envs=plan.n_envs))
+    learner = PPO(plan.env_id, settings, args.seed, {"personas": config.personas})
+    checkpoint, state, start_steps = latest_checkpoint(run_dir), {}, 0
+    try:
+        if checkpoint is not None:
+            expected = {"algo": plan.algo, "env_id": plan.env_id, "framework": "jax", "n_envs": plan.n_envs}
+            state = restore_learner(checkpoint, learner, run_dir, expected)
+            start_steps = state["start_steps"]
+            print(f"continuing from {checkpoint} at {learner.num_timesteps} steps")
+        elif plan.source_model is not None:
+            continue_from_saved(learner, plan.source_model)
+            start_steps = learner.num_timesteps
+            print(f"continuing {plan.algo} from {plan.source_model} at {start_steps} steps")
+    except (OSError, ValueError) as exc:
+        if checkpoint is None:
+            raise RunProblem(f"--resume: {exc}") from exc
+        remedy = f"remove {checkpoint} to resume from the checkpoint before it (or from the start)"
+        raise RunCannotContinue(f"--resume {plan.run_dir}: {exc}; {remedy}") from exc
+    logger = cleanrl_logger(run_dir / "tb")
+    callbacks, curve, selection, elapsed = _callbacks(args, plan, stop, state, start_steps, learner.num_timesteps)
+    checkpoints = callbacks[-1]  # its schedule and state, taken at the learner's rollout ends
+    hooks = RunHooks(
+        run_dir,
+        algo=plan.algo,
+        env_id=plan.env_id,
+        logger=logger,
+        curve=curve,
+        selection=selection,
+        every=plan.checkpoint_every,
+        stop_requested=stop.requested,
+        extra=checkpoints.extra,
+        start_steps=learner.num_timesteps,
+        monitor_append=checkpoint is not None,
+    )
+    stop.in_training = True
+    try:
+        learner.learn(start_steps + plan.timesteps, hooks)
+    except TrainingInterrupted:  # stopped on request at a rollout boundary, after a checkpoint
+        stop.check()
+        raise  # not reached: only a signal asks for it
+    finally:
+        stop.in_training = False
+    model = to_sb3(learner)
+    model.set_logger(logger)
+    learner.env.close()
+    return _finish(plan, model, start_steps, elapsed(), curve, selection, stop)
 
 
 SEEDS_DIR = "seeds"

@@ -317,23 +317,23 @@ def test_a_run_whose_model_is_gone_after_training_says_so_and_keeps_its_marker(s
 def test_a_foreign_model_in_a_checkpoint_is_named_before_training(tmp_path, capsys):
     """An SB3 run's model.zip (1 env) copied into a JAX run's checkpoint (2 envs) at another step count."""
     from agents.hyperparams import hyperparams_for
+    from agents.ppo import PPO, PPOConfig
     from agents.rl import make_model, make_train_env, save_agent
-    from agents.rl.checkpoints import save_checkpoint
+    from agents.rl.ppo_run import save_learner
 
     run = tmp_path / "runs" / "run"
     run.mkdir(parents=True)
     (run / "args.json").write_text(_settings(n_envs=2, timesteps=4096, framework="jax"))
     (run / "INTERRUPTED").write_text(f"SIGINT: stopped\nresume with: python train.py --resume {run}\n")
     config = hyperparams_for("ppo", None, "jax")
-    env = make_train_env(config.env_id, 2, 0, normalize=True, backend="dummy")
-    own = make_model(config, env, 0)
+    own = PPO(config.env_id, PPOConfig.from_training(config.replace(n_envs=2)), 0, {"personas": config.personas})
     own.num_timesteps = 2048
-    checkpoint = save_checkpoint(own, run, algo="ppo", env_id=config.env_id)
+    checkpoint = save_learner(own, run, algo="ppo", env_id=config.env_id, extra={"start_steps": 0})
+    own.env.close()
     foreign = tmp_path / "foreign"
     sb3 = make_model(hyperparams_for("ppo", None, "sb3"), make_train_env(config.env_id, 1, 0, backend="dummy"), 0)
     save_agent(sb3, foreign, algo="ppo", env_id=config.env_id)
     (checkpoint / "model.zip").write_bytes((foreign / "model.zip").read_bytes())
-    env.close()
     line = _cannot_continue(["--resume", str(run), "--no-progress"], capsys)
     assert f"--resume {run}: {checkpoint / 'model.zip'} holds a model of num_timesteps 0" in line, line
     assert "but its checkpoint's state.pkl has 2048" in line and f"remove {checkpoint}" in line
