@@ -102,7 +102,15 @@ def plan_run(args: Any, folder: Path | None = None) -> Plan:
         problem = saved_model_problem("--resume", args.resume, env_id)
     if problem:
         raise RunProblem(problem)
-    plan = Plan(Path(), algo, env_id, config, timesteps, args.n_envs or config.n_envs, checkpoint_every, None)
+    n_envs = args.n_envs or config.n_envs
+    if config.algo == "ppo" and config.framework == "jax" and not args.eval_only:
+        from agents.ppo import PPOConfig
+
+        try:
+            PPOConfig.from_training(config.replace(n_envs=n_envs))
+        except ValueError as exc:
+            raise RunProblem(f"--n-envs {n_envs}: {exc}") from None
+    plan = Plan(Path(), algo, env_id, config, timesteps, n_envs, checkpoint_every, None)
     return _open_run_folder(args, plan, in_place, folder)
 
 

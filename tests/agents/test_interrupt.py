@@ -368,3 +368,14 @@ def test_a_failed_write_names_the_folder_and_the_remedy_for_its_cause(errno_name
     err = capsys.readouterr().err
     assert f"could not write RUN/eval.json: {os.strerror(code)}" in err and remedy in err, err
     assert err.count("free space") == (errno_name == "ENOSPC")
+
+
+def test_envs_the_learners_minibatches_cannot_divide_are_named_before_any_folder(tmp_path, capsys):
+    """3 envs x 256 steps cannot be cut into minibatches of 512: one line, and no run folder."""
+    import train
+
+    assert train.main(["--n-envs", "3", "--seeds", "1", "--out", str(tmp_path / "runs"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "python train.py: error: --n-envs 3:" in err, err
+    assert "multiple of batch_size (512)" in err
+    assert not (tmp_path / "runs").exists()
