@@ -32,12 +32,12 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import pickle
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 from typing import Any, NamedTuple
 
 import gymnasium as gym
@@ -258,13 +258,15 @@ def advantages(rollout: Rollout, gamma: float, gae_lambda: float) -> tuple[np.nd
 # --- 4. the update ------------------------------------------------------------------------
 
 
+@functools.cache
 def make_update(network: Any, config: PPOConfig, nvec: tuple[int, ...], samples: int) -> tuple[Any, Any]:
     """``(optimiser, update)``: ``update(params, opt_state, orders, batch, lr, clip) -> (params, opt_state, stats)``.
 
     ``batch``: ``(obs, actions, old_log_probs, advantages, returns)``, one row per sample;
     ``orders``: one permutation of the samples per epoch, (n_epochs, samples), cut into the
     epoch's minibatches in order. (NumPy draws them: ``jax.random.permutation`` on the CPU costs
-    as much as a fifth of the update.)
+    as much as a fifth of the update.) Built once per process for each set of arguments: the
+    learners of one configuration (seeds, a resumed run) share one compiled update.
     """
     jax, jnp, optax = jax_modules()
     from agents.ppo.networks import log_prob_entropy
@@ -523,7 +525,7 @@ class PPO:
         learner lands it where the unbroken run would have.
         """
         jax, _, _ = jax_modules()
-        as_numpy = partial(jax.tree_util.tree_map, np.asarray)
+        as_numpy = functools.partial(jax.tree_util.tree_map, np.asarray)
         pending = None
         if self._pending is not None:
             params, opt_state, stats = self._pending
