@@ -242,18 +242,25 @@ def _train_with_clock(
 
     load_before = os.getloadavg()
     model.learn(total_timesteps=budget_steps or 10**12, callback=[clock, Budget()])
-    if not points or points[-1]["timesteps"] != int(model.num_timesteps):
+    return _record(contender, seed, model.n_envs, int(model.num_timesteps), clock, points, load_before)
+
+
+def _record(
+    contender: str, seed: int, n_envs: int, steps: int, clock: Any, points: list[dict[str, Any]], load_before: Any
+) -> dict[str, Any]:
+    """One run's record, a final score taken where training stopped if the last one was not there."""
+    if not points or points[-1]["timesteps"] != steps:
         clock.final = True
-        clock._on_rollout_end()  # a final point where training stopped
+        clock.on_rollout_end()
     return {
         "contender": contender,
         "seed": seed,
-        "n_envs": model.n_envs,
+        "n_envs": n_envs,
         "curve": points,
         "time_to_targets_s": clock.reached,
-        "timesteps": int(model.num_timesteps),
+        "timesteps": steps,
         "train_s": clock.train_s,
-        "steps_per_s": int(model.num_timesteps) / clock.train_s if clock.train_s > 0 else None,
+        "steps_per_s": steps / clock.train_s if clock.train_s > 0 else None,
         "load_before": load_before,
         "load_after": os.getloadavg(),
     }
@@ -297,21 +304,7 @@ def _train_ppo_with_clock(
     load_before = os.getloadavg()
     clock.since = time.perf_counter()
     learner.learn(budget_steps or 10**12, at_rollout_end)
-    if not points or points[-1]["timesteps"] != learner.num_timesteps:
-        clock.final = True
-        clock.on_rollout_end()  # a final point where training stopped
-    return {
-        "contender": contender,
-        "seed": seed,
-        "n_envs": learner.config.n_envs,
-        "curve": points,
-        "time_to_targets_s": clock.reached,
-        "timesteps": learner.num_timesteps,
-        "train_s": clock.train_s,
-        "steps_per_s": learner.num_timesteps / clock.train_s if clock.train_s > 0 else None,
-        "load_before": load_before,
-        "load_after": os.getloadavg(),
-    }
+    return _record(contender, seed, learner.config.n_envs, learner.num_timesteps, clock, points, load_before)
 
 
 def _plot(report: dict[str, Any], path: Path) -> None:
