@@ -71,12 +71,14 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 import numpy as np
 import torch
+from learners import TRAINPY_FLAGS
 from numpy.typing import NDArray
 from result_files import RESULTS, ROOT, add_save_argument, held_out_report, save
 from stable_baselines3 import DQN, PPO
@@ -236,28 +238,51 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
 
 # --- the never-lift study: why a library's defaults settle on never lifting ---------------------
 
-NEVER_LIFT_CELLS: dict[str, tuple[str, str | None, str]] = {
-    "cleanrl-ppo": ("CleanRL's ppo.py on its defaults", "Logged/SitToStandHardDiscreteUnit-v2", CLEANRL_ENV_ID),
-    "cleanrl-ppo-nounit": (
+
+@dataclass(frozen=True)
+class Cell:
+    """A cell of the never-lift study: what is trained, on what, with which flags, scored on which id."""
+
+    what: str
+    train_env: str | None
+    """CleanRL's ``--env-id``: a measurement aid of ``bench/cleanrl_defaults.py`` that logs each episode's
+    outcome (``cleanrl_defaults:<id>``); None: SB3's defaults, the same log as ``make_vec_env``'s ``wrapper_class``."""
+    scored_on: str
+    """The id the final policy is scored on: its starts seated, its reward the id's own."""
+    flags: tuple[str, ...] = ()
+    """CleanRL's flags beyond its defaults."""
+
+
+_LOGGED = "Logged/SitToStandHardDiscreteUnit-v2"
+NEVER_LIFT_CELLS: dict[str, Cell] = {
+    "cleanrl-ppo": Cell("CleanRL's ppo.py on its defaults", _LOGGED, CLEANRL_ENV_ID),
+    "cleanrl-ppo-nounit": Cell(
         "the same on the id without unit scaling (SitToStandHardDiscrete-v2)",
         "Logged/SitToStandHardDiscrete-v2",
         "CoopGym/SitToStandHardDiscrete-v2",
     ),
-    "cleanrl-ppo-midguidance": (
+    "cleanrl-ppo-midguidance": Cell(
         "the same, half the training episodes started mid-guidance (cleanrl_defaults.MidGuidance)",
         "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2",
         CLEANRL_ENV_ID,
     ),
-    "cleanrl-ppo-priced": (
+    "cleanrl-ppo-priced": Cell(
         "the same, trained with a timeout priced as a failed assistance (cleanrl_defaults.PricedTimeout, -1)",
         "LoggedPriced/SitToStandHardDiscreteUnit-v2",
         CLEANRL_ENV_ID,
     ),
-    "sb3-defaults": ('PPO("MlpPolicy", make_vec_env(id, n_envs=8)): SB3 defaults', None, HARD_ID),
+    "cleanrl-ppo-ent02": Cell(
+        "the same with --ent-coef 0.02 (train.py's entropy bonus)", _LOGGED, CLEANRL_ENV_ID, ("--ent-coef", "0.02")
+    ),
+    "cleanrl-ppo-trainpy": Cell(
+        "the same with train.py's PPO settings as flags (bench/learners.py's TRAINPY_FLAGS)",
+        _LOGGED,
+        CLEANRL_ENV_ID,
+        TRAINPY_FLAGS,
+    ),
+    "sb3-defaults": Cell('PPO("MlpPolicy", make_vec_env(id, n_envs=8)): SB3 defaults', None, HARD_ID),
 }
-"""The study's cells: what is trained, what CleanRL's script gets as ``--env-id`` (a measurement aid of
-``bench/cleanrl_defaults.py`` that logs each episode's outcome; None: SB3, the same log as its
-``wrapper_class``) and the id the policy is scored on (its starts seated, its reward the id's own)."""
+"""The study's cells (:class:`Cell`)."""
 STUDY_SETS = ("validation", "train")
 """Who the study scores on: the validation people and the training personas, never the test personas."""
 LIFT_HAZARDS = (0.5, 0.1, 0.03, 0.01, 0.003, 0.0)
@@ -335,14 +360,16 @@ def _train_cell(cell: str, seed: int, timesteps: int, script: Path | None, folde
     import cleanrl_defaults
 
     cleanrl_defaults.clear_outcome_log()
-    train_env = NEVER_LIFT_CELLS[cell][1]
+    train_env, flags = NEVER_LIFT_CELLS[cell].train_env, NEVER_LIFT_CELLS[cell].flags
     if train_env is None:
         _train_defaults(seed, folder / f"{cell}__{seed}.zip", timesteps, cleanrl_defaults.OutcomeLog)
         return SB3Agent(PPO.load(folder / f"{cell}__{seed}.zip", device="cpu"), "ppo", HARD_ID, name=cell)
     if script is None:
         raise SystemExit(f"--cleanrl-script: the {cell} cell needs CleanRL's ppo.py")
     with contextlib.chdir(folder):  # the script writes its TensorBoard folder runs/ where it runs
-        agent, _ = cleanrl_defaults.run_script(script.resolve(), f"cleanrl_defaults:{train_env}", timesteps, seed)
+        agent, _ = cleanrl_defaults.run_script(
+            script.resolve(), f"cleanrl_defaults:{train_env}", timesteps, seed, flags
+        )
     torch.save(agent.module.state_dict(), folder / f"{cell}__{seed}.pt")
     return agent
 
@@ -366,7 +393,7 @@ def _study_run(cell: str, seed: int, args: argparse.Namespace, folder: Path) -> 
     run: dict[str, Any] = {"cell": cell, "seed": seed, "timesteps": args.timesteps, "train_wall_s": wall}
     run["training"] = training_outcomes(log, args.timesteps, args.bin_steps)
     for people in STUDY_SETS:
-        score = evaluate(agent, NEVER_LIFT_CELLS[cell][2], people, args.episodes, VALIDATION_SEED).summary()
+        score = evaluate(agent, NEVER_LIFT_CELLS[cell].scored_on, people, args.episodes, VALIDATION_SEED).summary()
         run[people] = {key: score[key] for key in RATE_KEYS}
     path.write_text(json.dumps(run, indent=2) + "\n")
     print(f"{cell}__{seed}: {wall:.0f} s; validation {run['validation']}; {run['training']['collapse_step']=}")
@@ -377,7 +404,8 @@ def _study_cell(cell: str, runs: list[dict[str, Any]]) -> dict[str, Any]:
     """A cell's report: per seed, and over seeds the IQM of success (bootstrap 95 %) on each set."""
     from agents.evaluate.headroom import iqm_across_runs
 
-    row: dict[str, Any] = {"what": NEVER_LIFT_CELLS[cell][0], "scored_on": NEVER_LIFT_CELLS[cell][2]}
+    what = NEVER_LIFT_CELLS[cell]
+    row: dict[str, Any] = {"what": what.what, "scored_on": what.scored_on, "flags": list(what.flags)}
     for people in STUDY_SETS:
         success = iqm_across_runs({HARD_ID: [r[people]["success_rate"] for r in runs]})
         row[people] = {
@@ -412,10 +440,12 @@ def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
         if runs:
             rows[cell] = _study_cell(cell, runs)
     scripted = {
-        people: {a: {k: evaluate(a, HARD_ID, people, args.episodes, VALIDATION_SEED).summary()[k] for k in RATE_KEYS}
-                 for a in SCRIPTED}
+        people: {
+            a: {k: evaluate(a, HARD_ID, people, args.episodes, VALIDATION_SEED).summary()[k] for k in RATE_KEYS}
+            for a in SCRIPTED
+        }
         for people in STUDY_SETS
-    }  # fmt: skip
+    }
     report = {
         "env_id": HARD_ID,
         "timesteps": args.timesteps,
@@ -427,8 +457,9 @@ def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
         "lift_hazard": lift_hazard_sweep(args.episodes),
     }
     for cell, row in rows.items():
-        cells = ", ".join(f"{s['validation']['success_rate']:.2f}/{s['validation']['never_lift_rate']:.2f}"
-                          for s in row["per_seed"])  # fmt: skip
+        cells = ", ".join(
+            f"{s['validation']['success_rate']:.2f}/{s['validation']['never_lift_rate']:.2f}" for s in row["per_seed"]
+        )
         print(f"{cell}: validation success/never-lift per seed {cells}")
     print("scripted (validation):", {a: s["success_rate"] for a, s in scripted["validation"].items()})
     print(
@@ -437,8 +468,12 @@ def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
     )
     if args.save:
         default = str(RESULTS / "library_defaults_<algo>_<env>_<timesteps>.json")
-        save(RESULTS / "never_lift_SitToStandHard-v2.json" if args.save == default else args.save, "library_defaults",
-             argv, report)  # fmt: skip
+        save(
+            RESULTS / "never_lift_SitToStandHard-v2.json" if args.save == default else args.save,
+            "library_defaults",
+            argv,
+            report,
+        )
 
 
 def main(argv: list[str] | None = None) -> None:
