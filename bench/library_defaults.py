@@ -280,6 +280,12 @@ NEVER_LIFT_CELLS: dict[str, Cell] = {
         CLEANRL_ENV_ID,
         TRAINPY_FLAGS,
     ),
+    "cleanrl-ppo-rollout": Cell(
+        "the same with train.py's rollout and update size as flags (16 x 256 steps, 8 minibatches, 10 epochs)",
+        _LOGGED,
+        CLEANRL_ENV_ID,
+        TRAINPY_FLAGS[:8],
+    ),
     "sb3-defaults": Cell('PPO("MlpPolicy", make_vec_env(id, n_envs=8)): SB3 defaults', None, HARD_ID),
 }
 """The study's cells (:class:`Cell`)."""
@@ -427,9 +433,29 @@ def _study_cell(cell: str, runs: list[dict[str, Any]]) -> dict[str, Any]:
     return row
 
 
+def _references(folder: Path, episodes: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The scripted rows on :data:`STUDY_SETS` and :func:`lift_hazard_sweep`, kept in ``folder`` for a rerun."""
+    from agents.evaluate import evaluate
+    from agents.rl.callbacks import VALIDATION_SEED
+
+    path = folder / f"references__{episodes}.json"
+    if path.exists():
+        kept = json.loads(path.read_text())
+        return kept["scripted"], kept["lift_hazard"]
+    scripted = {
+        people: {
+            a: {k: evaluate(a, HARD_ID, people, episodes, VALIDATION_SEED).summary()[k] for k in RATE_KEYS}
+            for a in SCRIPTED
+        }
+        for people in STUDY_SETS
+    }
+    hazard = lift_hazard_sweep(episodes)
+    path.write_text(json.dumps({"scripted": scripted, "lift_hazard": hazard}, indent=2) + "\n")
+    return scripted, hazard
+
+
 def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
     """``--study never-lift``: each of ``--cells`` over ``--seeds``, the scripted rows and the lift-hazard sweep."""
-    from agents.evaluate import evaluate
     from agents.rl.callbacks import VALIDATION_SEED
 
     folder = Path(args.runs)
@@ -439,13 +465,7 @@ def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
         runs = [run for seed in args.seeds if (run := _study_run(cell, seed, args, folder)) is not None]
         if runs:
             rows[cell] = _study_cell(cell, runs)
-    scripted = {
-        people: {
-            a: {k: evaluate(a, HARD_ID, people, args.episodes, VALIDATION_SEED).summary()[k] for k in RATE_KEYS}
-            for a in SCRIPTED
-        }
-        for people in STUDY_SETS
-    }
+    scripted, hazard = _references(folder, args.episodes)
     report = {
         "env_id": HARD_ID,
         "timesteps": args.timesteps,
@@ -454,7 +474,7 @@ def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
         "bin_steps": args.bin_steps,
         "rows": rows,
         "scripted": scripted,
-        "lift_hazard": lift_hazard_sweep(args.episodes),
+        "lift_hazard": hazard,
     }
     for cell, row in rows.items():
         cells = ", ".join(
