@@ -23,6 +23,7 @@ from report_format import Results
 from report_learners import best_of_seeds, learners, learners_across_cpus, selection_people, training_budget
 from report_quality import (
     library_defaults,
+    never_lift,
     outside_learners,
     papers_experiment,
     rllib,
@@ -67,6 +68,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     best_of_seeds,
     library_defaults,
     outside_learners,
+    never_lift,
     rllib,
     papers_experiment,
     against_gymnasium,
