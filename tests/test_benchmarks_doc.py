@@ -499,7 +499,9 @@ def test_the_never_lift_studys_envs_log_outcomes_and_start_mid_guidance_or_as_th
     episodes after the oracle's guidance (never a finished one) and the others exactly as the id."""
     import gymnasium as gym
 
-    cleanrl = _bench("cleanrl_defaults")
+    _bench("cleanrl_defaults")
+    # The module whose registration made the ids (a test may have imported bench/ under another name first).
+    cleanrl = sys.modules[gym.spec("Logged/SitToStandHardDiscreteUnit-v2").entry_point.__module__]
     plain = gym.make("CoopGym/SitToStandHardDiscreteUnit-v2")
     logged = gym.make("Logged/SitToStandHardDiscreteUnit-v2")
     cleanrl.clear_outcome_log()
