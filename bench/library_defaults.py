@@ -54,7 +54,8 @@ defaults and with the documented flags: ``bench/learners.py`` (rows ``cleanrl-pp
 
 Each cell of :data:`NEVER_LIFT_CELLS` (CleanRL's script on its defaults; on the id without unit
 scaling; with half its training episodes begun mid-guidance; with a timeout priced as a failed
-assistance; SB3's defaults) trains once per seed with every training episode's outcome logged at its
+assistance; with ``train.py``'s entropy bonus, its rollout and update size, or all its PPO settings as
+flags; SB3's defaults) trains once per seed with every training episode's outcome logged at its
 global step (``bench/cleanrl_defaults.py``'s ``OutcomeLog``: when the first successful lift came, when
 lifting stopped, how many successes came before). Its final policy (greedy) and the scripted rows play the
 same ``--episodes`` episodes of the validation people and of the training personas, never the test
