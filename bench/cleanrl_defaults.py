@@ -146,6 +146,96 @@ if WIDE_ENV_ID not in gym.registry:
     gym.register(WIDE_ENV_ID, entry_point=make_wide)
 
 
+# --- the never-lift study's measurement aids (bench/library_defaults.py --study never-lift) ---------
+
+OUTCOME_LOG: list[tuple[int, str]] = []
+"""``(steps, outcome)`` of each episode that ended in this process under :class:`OutcomeLog`: ``steps`` the
+env steps all of them had taken by then, which is a learner's global step (one process, its envs stepped in
+turn, as CleanRL's ``SyncVectorEnv`` and SB3's ``DummyVecEnv`` do)."""
+_STEPS_TAKEN = [0]
+
+
+def clear_outcome_log() -> None:
+    """Empty :data:`OUTCOME_LOG` and its step count (before a training run)."""
+    OUTCOME_LOG.clear()
+    _STEPS_TAKEN[0] = 0
+
+
+class OutcomeLog(gym.Wrapper[Any, Any, Any, Any]):
+    """Appends each episode's ``info["outcome"]`` with the global step to :data:`OUTCOME_LOG`; changes nothing."""
+
+    def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        _STEPS_TAKEN[0] += 1
+        if terminated or truncated:
+            OUTCOME_LOG.append((_STEPS_TAKEN[0], str(info["outcome"])))
+        return observation, reward, terminated, truncated, info
+
+
+MID_GUIDANCE_SHARE = 0.5
+"""The share of episodes :class:`MidGuidance` starts mid-guidance; the others start seated, as on the id."""
+MID_GUIDANCE_MAX_S = 15.0
+"""The longest guided prefix [s]: half the 30 s episode, so a learner always has time left to act."""
+
+
+class MidGuidance(gym.Wrapper[Any, Any, Any, Any]):
+    """Starts :data:`MID_GUIDANCE_SHARE` of the episodes mid-guidance instead of seated.
+
+    At such a reset the scripted oracle (:class:`agents.caregivers.scripted.OracleAgent`, which reads the
+    true ``xi`` from ``info``) guides the person for a uniform 0.1 s .. :data:`MID_GUIDANCE_MAX_S`, handing
+    over at the step where it would lift: the learner meets states from which a lift succeeds, and the
+    clock keeps what the guidance took. A start state of a training run, not an env version: the episode's
+    dynamics, reward and end are the id's own. Its draws come from its own generator, seeded by ``reset``.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any]) -> None:
+        super().__init__(env)
+        from agents.caregivers.scripted import make_scripted
+        from coop_gym.envs.contract import observation_features
+
+        self.guide = make_scripted("oracle", observation_features("oracle", "kalman"), "discrete")
+        self.prefix_rng = np.random.default_rng()
+        self.max_steps = round(MID_GUIDANCE_MAX_S / env.unwrapped.timing.action_period_s)  # type: ignore[attr-defined]
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        observation, info = self.env.reset(seed=seed, options=options)
+        if seed is not None:
+            self.prefix_rng = np.random.default_rng(seed)
+        if self.prefix_rng.random() >= MID_GUIDANCE_SHARE:
+            return observation, info
+        self.guide.reset()
+        for _ in range(int(self.prefix_rng.integers(1, self.max_steps + 1))):
+            features = np.append(info.get("unscaled_obs", observation), info["true_xi"])
+            action, _ = self.guide.predict(features)
+            if np.unravel_index(int(action), (3, 3, 2))[2] == 1:  # the oracle would lift: hand over here
+                break
+            observation, _, _, _, info = self.env.step(int(action))
+        return observation, info
+
+
+def make_study_env(**kwargs: Any) -> gym.Env[Any, Any]:
+    """The id ``base`` made as registered (the other keywords its own), its timeout priced (:class:`PricedTimeout`)
+    if ``priced`` and started by :class:`MidGuidance` if ``mid_guidance``, outermost in :class:`OutcomeLog`."""
+    priced, mid_guidance = kwargs.pop("priced", False), kwargs.pop("mid_guidance", False)
+    env = gym.make(kwargs.pop("base"), **kwargs)
+    env = PricedTimeout(env) if priced else env
+    return OutcomeLog(MidGuidance(env) if mid_guidance else env)
+
+
+STUDY_ENV_IDS: dict[str, dict[str, Any]] = {
+    "Logged/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID},
+    "Logged/SitToStandHardDiscrete-v2": {"base": "CoopGym/SitToStandHardDiscrete-v2"},
+    "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "mid_guidance": True},
+    "LoggedPriced/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "priced": True},
+}
+"""Measurement aids, not env versions: what CleanRL's script trains on in the never-lift study
+(``--env-id cleanrl_defaults:<id>``; ``gym.make`` passes no keyword, so each id's settings are in its
+registration). Each logs its outcomes; the policies are scored on the ``base`` ids."""
+for _id, _settings in STUDY_ENV_IDS.items():
+    if _id not in gym.registry:
+        gym.register(_id, entry_point=make_study_env, kwargs=_settings)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--script", required=True, help="path of CleanRL's ppo.py (or another script defining `agent`)")

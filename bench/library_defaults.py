@@ -46,21 +46,41 @@ interquartile mean of success with a stratified bootstrap 95 % interval
 ``bench/results/library_seeds_SitToStandHard-v2.json``. CleanRL's ``ppo.py`` over seeds, on its
 defaults and with the documented flags: ``bench/learners.py`` (rows ``cleanrl-ppo``,
 ``cleanrl-ppo-trainpy``).
+
+``--study never-lift`` asks why CleanRL's defaults settle on never lifting there, by measurement::
+
+    python bench/library_defaults.py --study never-lift --seeds 0,1,2,3,4 --cleanrl-script ppo.py
+                                     [--cells cleanrl-ppo,...] [--timesteps 300000] [--episodes 500] [--save]
+
+Each cell of :data:`NEVER_LIFT_CELLS` (CleanRL's script on its defaults; on the id without unit
+scaling; with half its training episodes begun mid-guidance; with a timeout priced as a failed
+assistance; with ``train.py``'s entropy bonus, its rollout and update size, or all its PPO settings as
+flags; SB3's defaults) trains once per seed with every training episode's outcome logged at its
+global step (``bench/cleanrl_defaults.py``'s ``OutcomeLog``: when the first successful lift came, when
+lifting stopped, how many successes came before). Its final policy (greedy) and the scripted rows play the
+same ``--episodes`` episodes of the validation people and of the training personas, never the test
+personas; :func:`lift_hazard_sweep` adds what a policy that cues at random and lifts with a fixed
+probability meets. ``--save`` writes ``bench/results/never_lift_SitToStandHard-v2.json``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+import numpy as np
 import torch
+from learners import TRAINPY_FLAGS
+from numpy.typing import NDArray
 from result_files import RESULTS, ROOT, add_save_argument, held_out_report, save
 from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.callbacks import BaseCallback
@@ -71,6 +91,8 @@ from coop_gym.cli import positive_int, seed_list
 
 ENV_IDS = {"ppo": "CoopGym/SitToStand-v0", "dqn": "CoopGym/SitToStandDiscrete-v0"}
 HARD_ID = "CoopGym/SitToStandHard-v2"
+CLEANRL_ENV_ID = "CoopGym/SitToStandHardDiscreteUnit-v2"
+"""The id CleanRL's ``ppo.py`` gets (``bench/learners.py``'s): hard-v2, Discrete(18) actions, unit-scaled."""
 SCRIPTED = ("blind", "prober", "belief", "oracle")
 DEFAULTS_TIMESTEPS = 300_000
 """The budget of the ``sb3-defaults`` learner: what an SB3 user's first ``learn`` call takes here."""
@@ -102,10 +124,10 @@ class _Snapshots(BaseCallback):
         return True
 
 
-def _train_defaults(seed: int, path: Path, timesteps: int | None) -> None:
+def _train_defaults(seed: int, path: Path, timesteps: int | None, wrapper_class: Any = None) -> None:
     from stable_baselines3.common.env_util import make_vec_env
 
-    env = make_vec_env(HARD_ID, n_envs=8, seed=seed)
+    env = make_vec_env(HARD_ID, n_envs=8, seed=seed, wrapper_class=wrapper_class)
     PPO("MlpPolicy", env, seed=seed, device="cpu").learn(timesteps or DEFAULTS_TIMESTEPS).save(path)
 
 
@@ -215,6 +237,266 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
         save(target, "library_defaults", argv, report)
 
 
+# --- the never-lift study: why a library's defaults settle on never lifting ---------------------
+
+
+@dataclass(frozen=True)
+class Cell:
+    """A cell of the never-lift study: what is trained, on what, with which flags, scored on which id."""
+
+    what: str
+    train_env: str | None
+    """CleanRL's ``--env-id``: a measurement aid of ``bench/cleanrl_defaults.py`` that logs each episode's
+    outcome (``cleanrl_defaults:<id>``); None: SB3's defaults, the same log as ``make_vec_env``'s ``wrapper_class``."""
+    scored_on: str
+    """The id the final policy is scored on: its starts seated, its reward the id's own."""
+    flags: tuple[str, ...] = ()
+    """CleanRL's flags beyond its defaults."""
+
+
+_LOGGED = "Logged/SitToStandHardDiscreteUnit-v2"
+NEVER_LIFT_CELLS: dict[str, Cell] = {
+    "cleanrl-ppo": Cell("CleanRL's ppo.py on its defaults", _LOGGED, CLEANRL_ENV_ID),
+    "cleanrl-ppo-nounit": Cell(
+        "the same on the id without unit scaling (SitToStandHardDiscrete-v2)",
+        "Logged/SitToStandHardDiscrete-v2",
+        "CoopGym/SitToStandHardDiscrete-v2",
+    ),
+    "cleanrl-ppo-midguidance": Cell(
+        "the same, half the training episodes started mid-guidance (cleanrl_defaults.MidGuidance)",
+        "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2",
+        CLEANRL_ENV_ID,
+    ),
+    "cleanrl-ppo-priced": Cell(
+        "the same, trained with a timeout priced as a failed assistance (cleanrl_defaults.PricedTimeout, -1)",
+        "LoggedPriced/SitToStandHardDiscreteUnit-v2",
+        CLEANRL_ENV_ID,
+    ),
+    "cleanrl-ppo-ent02": Cell(
+        "the same with --ent-coef 0.02 (train.py's entropy bonus)", _LOGGED, CLEANRL_ENV_ID, ("--ent-coef", "0.02")
+    ),
+    "cleanrl-ppo-trainpy": Cell(
+        "the same with train.py's PPO settings as flags (bench/learners.py's TRAINPY_FLAGS)",
+        _LOGGED,
+        CLEANRL_ENV_ID,
+        TRAINPY_FLAGS,
+    ),
+    "cleanrl-ppo-rollout": Cell(
+        "the same with train.py's rollout and update size as flags (16 x 256 steps, 8 minibatches, 10 epochs)",
+        _LOGGED,
+        CLEANRL_ENV_ID,
+        TRAINPY_FLAGS[:8],
+    ),
+    "sb3-defaults": Cell('PPO("MlpPolicy", make_vec_env(id, n_envs=8)): SB3 defaults', None, HARD_ID),
+}
+"""The study's cells (:class:`Cell`)."""
+STUDY_SETS = ("validation", "train")
+"""Who the study scores on: the validation people and the training personas, never the test personas."""
+LIFT_HAZARDS = (0.5, 0.1, 0.03, 0.01, 0.003, 0.0)
+"""Per-step lift probabilities of :class:`LiftHazard`; 0.5 is a fresh Discrete(18) policy's (half its actions lift)."""
+COLLAPSE_SHARE = 0.9
+"""A training run has stopped lifting from the first log bin whose episodes are at least this share timeouts."""
+
+
+class LiftHazard:
+    """Uniform over the 9 cue pairs of the Discrete(18) action, lifting with probability ``hazard`` each step.
+
+    A fresh policy network acts uniformly (``hazard`` 0.5); training lowers the lift's probability. What
+    this policy meets at each hazard is what a learner meets on its way to never lifting.
+    """
+
+    def __init__(self, hazard: float, seed: int = 0) -> None:
+        self.hazard = hazard
+        self.name = f"lift-hazard-{hazard}"
+        self.rng = np.random.default_rng(seed)
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> Any:
+        """SB3's protocol; the flat index of ``(push, verbal, lift)`` over ``(3, 3, 2)`` is ``2 * cues + lift``."""
+        rows = np.atleast_2d(np.asarray(observation)).shape[0]
+        lifts = self.rng.random(rows) < self.hazard
+        actions: NDArray[np.int64] = np.asarray(2 * self.rng.integers(9, size=rows) + lifts, dtype=np.int64)
+        return (actions if np.ndim(observation) == 2 else actions[0]), state
+
+
+def lift_hazard_sweep(episodes: int) -> list[dict[str, Any]]:
+    """Outcome rates and mean return of :class:`LiftHazard` at each :data:`LIFT_HAZARDS`, on the training personas."""
+    from agents.evaluate import evaluate
+    from agents.rl.callbacks import VALIDATION_SEED
+
+    rows = []
+    for hazard in LIFT_HAZARDS:
+        score = evaluate(LiftHazard(hazard), CLEANRL_ENV_ID, "train", episodes, VALIDATION_SEED).summary()
+        rows.append({"lift_hazard": hazard, **{k: score[k] for k in (*RATE_KEYS, "mean_return")}})
+    return rows
+
+
+RATE_KEYS = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
+
+
+def training_outcomes(log: list[tuple[int, str]], timesteps: int, bin_steps: int) -> dict[str, Any]:
+    """The outcomes of a run's training episodes per ``bin_steps`` of its global step, and when lifting stopped.
+
+    ``collapse_step``: the end of the first bin with at least :data:`COLLAPSE_SHARE` timeouts (None: never);
+    ``successes_before_collapse``: the successful lifts the learner had met by then (all of them if never).
+    """
+    outcomes = ("success", "unsafe", "premature", "timeout")
+    last = max([timesteps, *(step for step, _ in log)])  # SB3 finishes the rollout that passes ``timesteps``
+    bins = [{"to_step": end, **dict.fromkeys(outcomes, 0)} for end in range(bin_steps, last + bin_steps, bin_steps)]
+    for step, outcome in log:
+        bins[(step - 1) // bin_steps][outcome] += 1
+    collapse = next(
+        (b["to_step"] for b in bins if (n := sum(b[o] for o in outcomes)) and b["timeout"] >= COLLAPSE_SHARE * n), None
+    )
+    successes = [step for step, outcome in log if outcome == "success"]
+    return {
+        "episodes": len(log),
+        "first_success_step": successes[0] if successes else None,
+        "collapse_step": collapse,
+        "successes_before_collapse": sum(1 for s in successes if collapse is None or s <= collapse),
+        "unsafe_before_collapse": sum(1 for s, o in log if o == "unsafe" and (collapse is None or s <= collapse)),
+        "bins": bins,
+    }
+
+
+def _train_cell(cell: str, seed: int, timesteps: int, script: Path | None, folder: Path) -> Any:
+    """Train ``cell`` once with ``seed``, its outcomes logged; the trained agent (saved in ``folder``)."""
+    import contextlib
+
+    import cleanrl_defaults
+
+    cleanrl_defaults.clear_outcome_log()
+    train_env, flags = NEVER_LIFT_CELLS[cell].train_env, NEVER_LIFT_CELLS[cell].flags
+    if train_env is None:
+        _train_defaults(seed, folder / f"{cell}__{seed}.zip", timesteps, cleanrl_defaults.OutcomeLog)
+        return SB3Agent(PPO.load(folder / f"{cell}__{seed}.zip", device="cpu"), "ppo", HARD_ID, name=cell)
+    if script is None:
+        raise SystemExit(f"--cleanrl-script: the {cell} cell needs CleanRL's ppo.py")
+    with contextlib.chdir(folder):  # the script writes its TensorBoard folder runs/ where it runs
+        agent, _ = cleanrl_defaults.run_script(
+            script.resolve(), f"cleanrl_defaults:{train_env}", timesteps, seed, flags
+        )
+    torch.save(agent.module.state_dict(), folder / f"{cell}__{seed}.pt")
+    return agent
+
+
+def _study_run(cell: str, seed: int, args: argparse.Namespace, folder: Path) -> dict[str, Any] | None:
+    """One (cell, seed): trained, its training outcomes and its scores on :data:`STUDY_SETS` (kept in ``folder``)."""
+    import cleanrl_defaults
+
+    from agents.evaluate import evaluate
+    from agents.rl.callbacks import VALIDATION_SEED
+
+    path = folder / f"{cell}__{seed}.json"
+    if path.exists():
+        return dict(json.loads(path.read_text()))
+    if args.no_train:
+        return None
+    started = time.perf_counter()
+    agent = _train_cell(cell, seed, args.timesteps, args.cleanrl_script, folder)
+    wall = time.perf_counter() - started
+    log = list(cleanrl_defaults.OUTCOME_LOG)
+    run: dict[str, Any] = {"cell": cell, "seed": seed, "timesteps": args.timesteps, "train_wall_s": wall}
+    run["training"] = training_outcomes(log, args.timesteps, args.bin_steps)
+    for people in STUDY_SETS:
+        score = evaluate(agent, NEVER_LIFT_CELLS[cell].scored_on, people, args.episodes, VALIDATION_SEED).summary()
+        run[people] = {key: score[key] for key in RATE_KEYS}
+    path.write_text(json.dumps(run, indent=2) + "\n")
+    print(f"{cell}__{seed}: {wall:.0f} s; validation {run['validation']}; {run['training']['collapse_step']=}")
+    return run
+
+
+def _study_cell(cell: str, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """A cell's report: per seed, and over seeds the IQM of success (bootstrap 95 %) on each set."""
+    from agents.evaluate.headroom import iqm_across_runs
+
+    what = NEVER_LIFT_CELLS[cell]
+    row: dict[str, Any] = {"what": what.what, "scored_on": what.scored_on, "flags": list(what.flags)}
+    for people in STUDY_SETS:
+        success = iqm_across_runs({HARD_ID: [r[people]["success_rate"] for r in runs]})
+        row[people] = {
+            "success_iqm": success.iqm,
+            "success_ci95": None if math.isnan(success.ci95[0]) else list(success.ci95),  # one seed: none
+            "never_lift_seeds": sum(1 for r in runs if r[people]["timeout_rate"] >= COLLAPSE_SHARE),
+        }
+    keep = ("episodes", "first_success_step", "collapse_step", "successes_before_collapse", "unsafe_before_collapse")
+    row["per_seed"] = [
+        {
+            "seed": r["seed"],
+            "train_wall_s": r["train_wall_s"],
+            **{people: {**r[people], "never_lift_rate": r[people]["timeout_rate"]} for people in STUDY_SETS},
+            "training": {key: r["training"][key] for key in keep},
+            "training_bins": r["training"]["bins"],
+        }
+        for r in runs
+    ]
+    return row
+
+
+def _references(folder: Path, episodes: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The scripted rows on :data:`STUDY_SETS` and :func:`lift_hazard_sweep`, kept in ``folder`` for a rerun."""
+    from agents.evaluate import evaluate
+    from agents.rl.callbacks import VALIDATION_SEED
+
+    path = folder / f"references__{episodes}.json"
+    if path.exists():
+        kept = json.loads(path.read_text())
+        return kept["scripted"], kept["lift_hazard"]
+    scripted = {
+        people: {
+            a: {k: evaluate(a, HARD_ID, people, episodes, VALIDATION_SEED).summary()[k] for k in RATE_KEYS}
+            for a in SCRIPTED
+        }
+        for people in STUDY_SETS
+    }
+    hazard = lift_hazard_sweep(episodes)
+    path.write_text(json.dumps({"scripted": scripted, "lift_hazard": hazard}, indent=2) + "\n")
+    return scripted, hazard
+
+
+def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
+    """``--study never-lift``: each of ``--cells`` over ``--seeds``, the scripted rows and the lift-hazard sweep."""
+    from agents.rl.callbacks import VALIDATION_SEED
+
+    folder = Path(args.runs)
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = {}
+    for cell in args.cells.split(","):
+        runs = [run for seed in args.seeds if (run := _study_run(cell, seed, args, folder)) is not None]
+        if runs:
+            rows[cell] = _study_cell(cell, runs)
+    scripted, hazard = _references(folder, args.episodes)
+    report = {
+        "env_id": HARD_ID,
+        "timesteps": args.timesteps,
+        "episodes": args.episodes,
+        "episode_seed": VALIDATION_SEED,
+        "bin_steps": args.bin_steps,
+        "rows": rows,
+        "scripted": scripted,
+        "lift_hazard": hazard,
+    }
+    for cell, row in rows.items():
+        cells = ", ".join(
+            f"{s['validation']['success_rate']:.2f}/{s['validation']['never_lift_rate']:.2f}" for s in row["per_seed"]
+        )
+        print(f"{cell}: validation success/never-lift per seed {cells}")
+    print("scripted (validation):", {a: s["success_rate"] for a, s in scripted["validation"].items()})
+    print(
+        "lift hazard:",
+        [(h["lift_hazard"], h["success_rate"], round(h["mean_return"], 2)) for h in report["lift_hazard"]],
+    )
+    if args.save:
+        default = str(RESULTS / "library_defaults_<algo>_<env>_<timesteps>.json")
+        save(
+            RESULTS / "never_lift_SitToStandHard-v2.json" if args.save == default else args.save,
+            "library_defaults",
+            argv,
+            report,
+        )
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--algo", choices=sorted(ENV_IDS))
@@ -228,9 +510,21 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--learners", default=",".join(LEARNERS), help=f"with --seeds: {', '.join(LEARNERS)}")
     parser.add_argument("--runs", default="runs/library_seeds", help="with --seeds: where the models are kept")
     parser.add_argument("--no-train", action="store_true", help="with --seeds: score the models in --runs only")
+    parser.add_argument("--study", choices=["never-lift"], help="with --seeds: the never-lift study (--cells)")
+    parser.add_argument(
+        "--cells", default=",".join(NEVER_LIFT_CELLS), help=f"with --study: {', '.join(NEVER_LIFT_CELLS)}"
+    )
+    parser.add_argument("--cleanrl-script", type=Path, help="with --study: CleanRL's ppo.py, for the cleanrl-* cells")
+    parser.add_argument("--bin-steps", type=positive_int, default=10_000, help="with --study: log bin [steps]")
     add_save_argument(parser, "library_defaults_<algo>_<env>_<timesteps>.json")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
+    if args.study is not None:
+        if args.seeds is None or (unknown := sorted(set(args.cells.split(",")) - set(NEVER_LIFT_CELLS))):
+            parser.error(f"--study needs --seeds and known --cells: {', '.join(NEVER_LIFT_CELLS)}")
+        args.timesteps = args.timesteps or DEFAULTS_TIMESTEPS
+        _study(args, argv)
+        return
     if args.seeds is not None:
         if unknown := sorted(set(args.learners.split(",")) - set(LEARNERS)):
             parser.error(f"--learners: unknown {unknown}; known: {', '.join(LEARNERS)}")

@@ -30,6 +30,7 @@ from report_learners import (
 )
 from report_quality import (
     library_defaults,
+    never_lift,
     outside_learners,
     papers_experiment,
     rllib,
@@ -75,6 +76,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     best_of_seeds,
     library_defaults,
     outside_learners,
+    never_lift,
     rllib,
     papers_experiment,
     against_gymnasium,

@@ -272,6 +272,106 @@ mean over seeds and its stratified bootstrap interval follow rliable.
 """
 
 
+NEVER_LIFT = "never_lift_SitToStandHard-v2"
+"""``bench/library_defaults.py --study never-lift --save``: why a library's defaults settle on never lifting."""
+_OUTCOMES = ("success", "unsafe", "premature", "timeout")
+
+
+def _first_steps_shares(per_seed: list[dict[str, Any]], chunk: int, chunks: int) -> list[str]:
+    """Pooled over seeds, the share of training episodes ending in each outcome per ``chunk`` steps (the first
+    ``chunks``): ``success / unsafe / premature / timeout`` in %."""
+    cells = []
+    for k in range(chunks):
+        totals = dict.fromkeys(_OUTCOMES, 0)
+        for run in per_seed:
+            for b in run["training_bins"]:
+                if k * chunk < b["to_step"] <= (k + 1) * chunk:
+                    totals = {o: totals[o] + b[o] for o in _OUTCOMES}
+        n = sum(totals.values())
+        cells.append(" / ".join(f"{100 * totals[o] / n:.0f}" for o in _OUTCOMES) if n else "—")
+    return cells
+
+
+def _never_lift_tables(report: dict[str, Any]) -> tuple[str, str, str]:
+    """The scores per cell and scripted row, the training episodes' outcomes, and the lift-hazard sweep."""
+    scores, mechanism = [], []
+    for name, row in report["rows"].items():
+        cells = [f"`{name}`: {row['what']}", str(len(row["per_seed"]))]
+        for people in ("validation", "train"):
+            cells.append(f"{_pct(row[people]['success_iqm'])} {_ci(row[people]['success_ci95'])}")
+            seeds = [s[people] for s in row["per_seed"]]
+            cells.append("; ".join(f"{100 * s['success_rate']:.0f} / {100 * s['never_lift_rate']:.0f}" for s in seeds))
+        scores.append(cells)
+        runs = [s["training"] for s in row["per_seed"]]
+        first = [_count(r["first_success_step"]) if r["first_success_step"] else "never" for r in runs]
+        collapse = [_count(r["collapse_step"]) if r["collapse_step"] else "—" for r in runs]
+        before = [str(r["successes_before_collapse"]) for r in runs]
+        shares = _first_steps_shares(row["per_seed"], 50_000, 4)
+        mechanism.append([f"`{name}`", "; ".join(first), "; ".join(collapse), "; ".join(before), *shares])
+    for agent in report["scripted"]["validation"]:
+        scripted = [report["scripted"][people][agent] for people in ("validation", "train")]
+        scores.append(
+            [f"{agent} (scripted)", "", _pct(scripted[0]["success_rate"]), "", _pct(scripted[1]["success_rate"]), ""]
+        )
+    header = [
+        "trained",
+        "seeds",
+        "validation people: success, IQM [95 % CI]",
+        "per seed: success / never lifts (%)",
+        "training personas: success, IQM [95 % CI]",
+        "per seed: success / never lifts (%)",
+    ]
+    shares = [f"steps {k * 50}k to {(k + 1) * 50}k: S / U / P / T (%)" for k in range(4)]
+    mech_header = ["cell", "first successful lift (step), per seed", "stops lifting (step)", "successes by then"]
+    hazard = [
+        [f"{h['lift_hazard']:g}", *(_pct(h[f"{o}_rate"]) for o in _OUTCOMES), f"{h['mean_return']:+.2f}"]
+        for h in report["lift_hazard"]
+    ]
+    hazard_header = ["lift probability per step", "success", "unsafe", "premature", "timeout", "mean return"]
+    return _table(header, scores), _table(mech_header + shares, mechanism), _table(hazard_header, hazard)
+
+
+def never_lift(results: Results) -> str:
+    """Why CleanRL's defaults never lift on the hard level, measured on the validation people and training personas."""
+    head = "### Never lifting on the hard level: the measured why\n"
+    record = results.get(NEVER_LIFT)
+    if record is None:
+        return head + "\n" + _missing("python bench/library_defaults.py --study never-lift --seeds 0,1,2,3,4") + "\n"
+    report = record["results"]
+    scores, mechanism, hazard = _never_lift_tables(report)
+    return f"""{head}
+{_provenance(record)}
+
+Each cell is trained {_count(report["timesteps"])} steps once per seed, every training episode's outcome
+logged with its step (`bench/cleanrl_defaults.py`'s `OutcomeLog`); its final policy is scored greedy on
+{report["episodes"]} episodes (seeds from {report["episode_seed"]}) of the validation people and of the
+training personas, never the test personas, the scripted caregivers on the same episodes. *Never lifts*:
+the share of episodes ending in a timeout. The cells: CleanRL's `ppo.py` unmodified, on its defaults, on
+`CoopGym/SitToStandHardDiscreteUnit-v2` (`cleanrl-ppo`), on the same id without unit scaling
+(`-nounit`), with half its training episodes begun mid-guidance by the scripted oracle, handed over
+before it would lift (`-midguidance`, `MidGuidance`), with a timeout priced as a failed assistance
+(`-priced`, `PricedTimeout`), with `train.py`'s entropy bonus (`-ent02`), its rollout and update size
+(`-rollout`) or all its PPO settings as flags (`-trainpy`); and SB3's
+`PPO("MlpPolicy", make_vec_env(id, n_envs=8))` on `{report["env_id"]}`. Every policy is scored on an id
+as registered (seated starts, the id's reward). The same script at 1M steps, on its defaults and with
+`train.py`'s flags, is in the outside learners' table above.
+
+{scores}
+
+The training episodes: when each seed first lifted successfully, when it stopped lifting (the first
+{_count(report["bin_steps"])}-step bin with at least 90 % timeouts), how many successful lifts it had
+met by then, and, over all seeds, the share of episodes ending in success / unsafe / premature / timeout
+(`-midguidance`'s include the episodes begun mid-guidance).
+
+{mechanism}
+
+What a policy that cues at random and lifts with a fixed probability per step meets (the training
+personas): a fresh `Discrete(18)` network lifts with probability 0.5, and training lowers it.
+
+{hazard}
+"""
+
+
 def rllib(results: Results) -> str:
     return """\
 ### RLlib

@@ -103,6 +103,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "library_seeds_SitToStandHard-v2",
         ),
         (
+            "library_defaults",
+            [
+                *["--study", "never-lift", "--seeds", "0", "--cells", "cleanrl-ppo,sb3-defaults", "--timesteps", "64"],
+                *["--cleanrl-script", str(tmp / "standin.py"), "--episodes", "4", "--runs", str(tmp / "never_lift")],
+            ],
+            "never_lift_SitToStandHard-v2.json",
+            "never_lift_SitToStandHard-v2",
+        ),
+        (
             "learners",
             [
                 "--rows",
@@ -467,3 +476,59 @@ def test_the_rl_zoo_learner_runs_the_documented_command_and_keeps_its_layout(
     assert commands[1][-2:] == ["-n", "4096"]
     assert model.read_bytes() == b"model"
     assert (model.with_suffix("") / VECNORMALIZE_FILE).read_bytes() == b"statistics"
+
+
+def test_the_never_lift_studys_log_bins_each_training_episode_and_finds_where_lifting_stops() -> None:
+    """``training_outcomes``: each episode in the bin of its global step; lifting stops at the first bin of timeouts."""
+    defaults = _bench("library_defaults")
+    log = [(5, "unsafe"), (9, "success"), (10, "unsafe"), (11, "timeout"), (19, "timeout"), (25, "success")]
+    found = defaults.training_outcomes(log, 20, 10)
+    assert [(b["to_step"], b["unsafe"], b["success"], b["timeout"]) for b in found["bins"]] == [
+        (10, 2, 1, 0),
+        (20, 0, 0, 2),
+        (30, 0, 1, 0),  # past the budget: SB3 finishes its last rollout
+    ]
+    assert found["first_success_step"] == 9
+    assert found["collapse_step"] == 20
+    assert (found["successes_before_collapse"], found["unsafe_before_collapse"]) == (1, 2)
+    assert defaults.training_outcomes([(3, "success")], 20, 10)["collapse_step"] is None
+
+
+def test_the_never_lift_studys_envs_log_outcomes_and_start_mid_guidance_or_as_the_id() -> None:
+    """``Logged/...`` plays the id's episodes and logs their outcomes; ``LoggedMidGuidance/...`` starts some
+    episodes after the oracle's guidance (never a finished one) and the others exactly as the id."""
+    import gymnasium as gym
+
+    _bench("cleanrl_defaults")
+    # The module whose registration made the ids (a test may have imported bench/ under another name first).
+    cleanrl = sys.modules[gym.spec("Logged/SitToStandHardDiscreteUnit-v2").entry_point.__module__]
+    plain = gym.make("CoopGym/SitToStandHardDiscreteUnit-v2")
+    logged = gym.make("Logged/SitToStandHardDiscreteUnit-v2")
+    cleanrl.clear_outcome_log()
+    for env in (plain, logged):
+        env.reset(seed=3)
+    for step in range(4):
+        a, b = plain.step(step * 2), logged.step(step * 2)  # cues, no lift
+        assert np.array_equal(a[0], b[0]) and a[1] == b[1]
+    assert logged.step(1)[4]["outcome"] == plain.step(1)[4]["outcome"]
+    assert [steps for steps, _ in cleanrl.OUTCOME_LOG] == [5]
+    mid = gym.make("LoggedMidGuidance/SitToStandHardDiscreteUnit-v2")
+    guided = 0
+    for seed in range(24):
+        observation, info = mid.reset(seed=seed)
+        if info["elapsed_s"] == 0.0:
+            assert np.array_equal(observation, plain.reset(seed=seed)[0])
+        else:
+            guided += 1
+            assert info["elapsed_s"] <= cleanrl.MID_GUIDANCE_MAX_S and info["outcome"] == "none"
+    assert 0 < guided < 24
+
+
+def test_a_lift_hazard_policy_lifts_with_its_probability_and_cues_at_random() -> None:
+    defaults = _bench("library_defaults")
+    observations = np.zeros((4000, 11))
+    never = defaults.LiftHazard(0.0).predict(observations)[0]
+    always = defaults.LiftHazard(1.0).predict(observations)[0]
+    assert set(never % 2) == {0} and set(always % 2) == {1}
+    assert set(never // 2) == set(range(9))
+    assert abs(np.mean(defaults.LiftHazard(0.5).predict(observations)[0] % 2) - 0.5) < 0.05
