@@ -356,7 +356,7 @@ def ppo_learner(results: Results) -> str:
     head = "### The PPO learner `agents.ppo` against `JaxPPO`\n"
     record = results.get("learners_ppo")
     if record is None:
-        return head + "\n" + _missing(_PPO_COMMAND) + "\n"
+        return f"{head}\nNo results file yet: `{_PPO_COMMAND}`, then `python bench/report.py`.\n"
     report = record["results"]
     rows = [_learner_row(f"`{name}`: {row['what']}", row) for name, row in report["rows"].items()]
     for stem in ("learners", "learners_avx512"):
@@ -385,8 +385,9 @@ def _learner_row(label: str, row: dict[str, Any]) -> list[str]:
     return [
         label,
         str(row["runs"]),
-        f"{_pct(success['iqm'])} {_ci(success['ci95'])}",
-        f"{score['iqm']:.2f} [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]",
+        f"{_pct(success['iqm'])} {_ci(success['ci95']) if success['ci95'][0] is not None else ''}".rstrip(),
+        "—" if score["iqm"] is None else f"{score['iqm']:.2f}"
+        + ("" if score["ci95"][0] is None else f" [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]"),
         _pct(row["min_success"]),
         _pct(row["unsafe_rate_mean"]),
         f"{row['train_wall_s_median']:.0f} s",

@@ -135,6 +135,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
         (
             "learners",
             [
+                *["--rows", "ppo-lag", "--seeds", "0", "--timesteps", "4096", "--episodes", "4"],
+                *["--validation-episodes", "4", "--runs", str(tmp / "learners")],
+            ],
+            "learners_ppo.json",
+            "learners_ppo",
+        ),
+        (
+            "learners",
+            [
                 *["--rows", "jax-kalman-lag", "--seeds", "0", "--timesteps", "4096", "--episodes", "4"],
                 *["--validation-episodes", "4", "--runs", str(tmp / "learners")],
             ],
