@@ -79,7 +79,7 @@ def to_sb3(learner: PPO, params: Any = None) -> SB3PPO:
     model.policy.load_state_dict(sb3_state_dict(learner.params if params is None else params), strict=True)
     model.num_timesteps = learner.num_timesteps
     model.set_logger(Logger(None, []))
-    model.framework = "jax"  # what the saved agent.json records: train.py --framework jax trained it
+    model.framework = "jax"  # type: ignore[attr-defined]  # what agent.json records: train.py --framework jax
     return model
 
 
