@@ -55,6 +55,7 @@ class RunHooks:
         extra: The caller's state, stored with each checkpoint.
         start_steps: The learner's step count when the run (or its resume) began.
         monitor_append: Add to an existing ``monitor.csv`` (a resumed run) instead of starting one.
+        progress: A progress bar (``tqdm``'s) to advance by the steps of each rollout, or None.
     """
 
     def __init__(
@@ -71,6 +72,7 @@ class RunHooks:
         extra: Callable[[], dict[str, Any]],
         start_steps: int,
         monitor_append: bool,
+        progress: Any = None,
     ) -> None:
         """Open ``monitor.csv``; nothing else happens before the first rollout ends."""
         self.run_dir, self.algo, self.env_id, self.logger = Path(run_dir), algo, env_id, logger
@@ -83,9 +85,13 @@ class RunHooks:
             header = json.dumps({"t_start": time.time(), "env_id": env_id})
             self.monitor.write_text(f"#{header}\nr,l,t,outcome\n", encoding="utf-8")
         self.last: Path | None = None
+        self.progress, self._shown = progress, start_steps
 
     def __call__(self, learner: PPO) -> bool:
         """The rollout end: log, score when due, checkpoint when due; raise TrainingInterrupted on a stop."""
+        if self.progress is not None:
+            self.progress.update(learner.num_timesteps - self._shown)
+            self._shown = learner.num_timesteps
         self._log(learner)
         steps, shadow = learner.num_timesteps, None
         for scorer in (self.curve, self.selection):

@@ -263,6 +263,7 @@ def _train_learner(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
         extra=checkpoints.extra,
         start_steps=learner.num_timesteps,
         monitor_append=checkpoint is not None,
+        progress=_progress_bar(start_steps + plan.timesteps - learner.num_timesteps) if args.progress else None,
     )
     stop.in_training = True
     try:
@@ -272,6 +273,8 @@ def _train_learner(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
         raise  # not reached: only a signal asks for it
     finally:
         stop.in_training = False
+        if hooks.progress is not None:
+            hooks.progress.close()
     model = to_sb3(learner)
     model.set_logger(logger)
     learner.env.close()
@@ -374,6 +377,13 @@ def _model_to_train(args: Any, plan: Plan, env: Any, checkpoint: Path | None) ->
     if plan.config.normalize:
         env = VecNormalize(env, norm_obs=True, norm_reward=False)
     return make_model(plan.config, env, args.seed), env, {}, 0
+
+
+def _progress_bar(total: int) -> Any:
+    """The progress bar SB3's ``learn(progress_bar=True)`` shows (tqdm's rich bar) over ``total`` steps."""
+    from tqdm.rich import tqdm
+
+    return tqdm(total=total)
 
 
 def _training_summary(plan: Plan, model: Any, start_steps: int, train_s: float) -> dict[str, Any]:
