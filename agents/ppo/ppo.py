@@ -364,6 +364,8 @@ class PPO:
         self.rng, self.minibatch_rng = np.random.Generator(streams[0]), np.random.Generator(streams[1])
         self.normalizer = ObsNormalizer(obs_shape) if cfg.normalize_obs else None
         self.num_timesteps, self.stats = 0, dict[str, float]()
+        self.learning_rate = cfg.learning_rate
+        """The learning rate of the last update."""
         self._finished: list[tuple[np.ndarray, ...]] = []
         self._act_with(self.params)
         self._pending: Any = None
@@ -459,6 +461,7 @@ class PPO:
         flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
         batch = [flat(rollout.obs), flat(rollout.actions), flat(rollout.log_probs), flat(adv), flat(returns)]
         lr = cfg.learning_rate * (progress_remaining if cfg.anneal_lr else 1.0)
+        self.learning_rate = lr
         samples = len(batch[0])
         orders = np.stack([self.minibatch_rng.permutation(samples) for _ in range(cfg.n_epochs)]).astype(np.int32)
         self._land()

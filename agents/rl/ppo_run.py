@@ -86,6 +86,7 @@ class RunHooks:
             self.monitor.write_text(f"#{header}\nr,l,t,outcome\n", encoding="utf-8")
         self.last: Path | None = None
         self.progress, self._shown = progress, start_steps
+        self._clock: tuple[float, int] | None = None  # when the last rollout ended, and at which step
 
     def __call__(self, learner: PPO) -> bool:
         """The rollout end: log, score when due, checkpoint when due; raise TrainingInterrupted on a stop."""
@@ -124,6 +125,13 @@ class RunHooks:
         )
         for name, value in learner.stats.items():
             self.logger.record(f"train/{name}", value)
+        self.logger.record("train/learning_rate", learner.learning_rate)
+        now = time.perf_counter()
+        if self._clock is not None:
+            self.logger.record(
+                "time/fps", int((learner.num_timesteps - self._clock[1]) / max(now - self._clock[0], 1e-9))
+            )
+        self._clock = (now, learner.num_timesteps)
         if self.recent:
             returns, lengths, outcomes = zip(*self.recent, strict=True)
             self.logger.record("rollout/ep_rew_mean", float(np.mean(returns[-100:])))
