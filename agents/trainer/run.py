@@ -1,4 +1,4 @@
-"""One ``train.py`` run with Stable-Baselines3: its plan and run folder, then training with checkpoints.
+"""One ``train.py`` run: its plan and run folder, then training with checkpoints (SB3's learners, or :mod:`agents.ppo`).
 
 * :func:`plan_run` -- what the run does, settled before any work: the algorithm's settings
   (:mod:`agents.hyperparams`) overridden by the flags, a saved model checked against the env,
@@ -6,7 +6,8 @@
 * :func:`train` -- the training env, the model (restored from the last checkpoint, continued
   from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
   checkpoints), ``learn``, then the saved agent and ``training.json``; with ``--seeds N``, N such runs
-  in ``RUN/seeds/``, the one best on the validation people kept.
+  in ``RUN/seeds/``, the one best on the validation people kept. PPO on the JAX learner trains
+  :class:`agents.ppo.PPO` with the same tools at its rollout ends (:mod:`agents.rl.ppo_run`).
 
 What happens after training (the evaluation against the baselines, the report) is
 :func:`agents.trainer.run_report.evaluate_and_report`; the arguments are ``train.Args``.
@@ -178,7 +179,7 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     )
     model, env, state, start_steps = _model_to_train(args, plan, env, checkpoint)
     model.set_logger(cleanrl_logger(run_dir / "tb"))
-    callbacks, curve, selection, elapsed = _callbacks(args, plan, stop, state, start_steps, int(model.num_timesteps))
+    callbacks, curve, selection, elapsed, _ = _callbacks(args, plan, stop, state, start_steps, int(model.num_timesteps))
     stop.in_training = True
     try:
         model.learn(
@@ -249,8 +250,7 @@ def _train_learner(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
         remedy = f"remove {checkpoint} to resume from the checkpoint before it (or from the start)"
         raise RunCannotContinue(f"--resume {plan.run_dir}: {exc}; {remedy}") from exc
     logger = cleanrl_logger(run_dir / "tb")
-    callbacks, curve, selection, elapsed = _callbacks(args, plan, stop, state, start_steps, learner.num_timesteps)
-    checkpoints = callbacks[-1]  # its schedule and state, taken at the learner's rollout ends
+    _, curve, selection, elapsed, checkpoint_state = _callbacks(args, plan, stop, state, start_steps, 0)
     hooks = RunHooks(
         run_dir,
         algo=plan.algo,
@@ -260,7 +260,7 @@ def _train_learner(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
         selection=selection,
         every=plan.checkpoint_every,
         stop_requested=stop.requested,
-        extra=checkpoints.extra,
+        extra=checkpoint_state,
         start_steps=learner.num_timesteps,
         monitor_append=checkpoint is not None,
         progress=_progress_bar(start_steps + plan.timesteps - learner.num_timesteps) if args.progress else None,
@@ -418,8 +418,10 @@ def _print_selection(selected: dict[str, Any]) -> None:
 
 def _callbacks(
     args: Any, plan: Plan, stop: StopSignals, state: dict[str, Any], start_steps: int, model_steps: int
-) -> tuple[list[Any], PeriodicEvalCallback | None, SelectionCallback | None, Callable[[], float]]:
-    """``(callbacks, learning-curve callback or None, selection callback or None, training-seconds clock)``."""
+) -> tuple[
+    list[Any], PeriodicEvalCallback | None, SelectionCallback | None, Callable[[], float], Callable[[], dict[str, Any]]
+]:
+    """``(callbacks, learning curve or None, selection or None, training-seconds clock, a checkpoint's run state)``."""
     # Periodic scores on the evaluation personas: the learning curve only, never a selection.
     callbacks: list[Any] = [OutcomeStatsCallback()]
     curve = None
@@ -470,7 +472,7 @@ def _callbacks(
             start_steps=model_steps,
         )
     )
-    return callbacks, curve, selection, elapsed
+    return callbacks, curve, selection, elapsed, checkpoint_state
 
 
 # The learning curve's part of a checkpoint, under the keys checkpoints have always used.
