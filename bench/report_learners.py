@@ -17,7 +17,6 @@ from report_format import (
     _ci,
     _count,
     _from_results,
-    _missing,
     _pct,
     _provenance,
     _table,
@@ -34,13 +33,9 @@ def _except_cleanrl(report: dict[str, Any]) -> str:
     )
 
 
-def learners(results: Results) -> str:
+@_from_results("learners", "### Learners and observations on the hard level", "python bench/learners.py")
+def learners(report: dict[str, Any], record: dict[str, Any]) -> str:
     """Learner x observation on the hard level (``bench/learners.py``)."""
-    head = "### Learners and observations on the hard level\n"
-    record = results.get("learners")
-    if record is None:
-        return head + "\n" + _missing("python bench/learners.py") + "\n"
-    report = record["results"]
     rows = []
     for name, row in report["rows"].items():
         success, score = row["success"], row["score"]
@@ -69,10 +64,7 @@ def learners(results: Results) -> str:
         "unsafe (mean)",
         "training (median)",
     ]
-    return f"""{head}
-{_provenance(record)}
-
-Each row{_except_cleanrl(report)} trains with `train.py`'s protocol on `{report["env_id"]}`
+    return f"""Each row{_except_cleanrl(report)} trains with `train.py`'s protocol on `{report["env_id"]}`
 ({report["timesteps"]:,} steps, the wider training personas, the best-validated policy of the last
 half kept; the observation, action and normalisation the row names) once per training seed,
 and plays the same {report["episodes"]} held-out episodes as the scripted caregivers below
