@@ -91,6 +91,12 @@ class PPOConfig:
 
     def __post_init__(self) -> None:
         """Refuse settings the loop cannot run."""
+        for name in ("n_envs", "n_steps", "batch_size", "n_epochs"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"PPOConfig.{name} must be a positive integer, got {value!r}")
+        if not self.hidden or not all(isinstance(w, int) and not isinstance(w, bool) and w > 0 for w in self.hidden):
+            raise ValueError(f"PPOConfig.hidden must be positive layer widths, got {self.hidden!r}")
         samples = self.n_envs * self.n_steps
         if samples % self.batch_size:
             raise ValueError(
@@ -282,7 +288,8 @@ def make_update(network: Any, config: PPOConfig, nvec: tuple[int, ...], samples:
         obs, actions, old_log_prob, adv, returns = batch
         logits, values = network.apply(params, obs)
         log_prob, entropy = log_prob_entropy(logits, actions, nvec)
-        adv = (adv - adv.mean()) / (adv.std(ddof=1) + 1e-8)
+        if config.batch_size > 1:  # as SB3: a minibatch of one is left as it is
+            adv = (adv - adv.mean()) / (adv.std(ddof=1) + 1e-8)
         log_ratio = log_prob - old_log_prob
         ratio = jnp.exp(log_ratio)
         policy_loss = -jnp.minimum(adv * ratio, adv * jnp.clip(ratio, 1 - clip, 1 + clip)).mean()

@@ -189,6 +189,10 @@ def test_it_learns_a_gymnasium_env_without_a_native_vector_env() -> None:
         ({"batch_size": 100}, "multiple of batch_size"),
         ({"policy_lag": 2}, "policy_lag"),
         ({"activation": "gelu"}, "activation"),
+        ({"n_envs": 0}, "n_envs must be a positive integer"),
+        ({"batch_size": 0}, "batch_size must be a positive integer"),
+        ({"hidden": ()}, "hidden must be positive layer widths"),
+        ({"hidden": (64, -1)}, "hidden must be positive layer widths"),
     ],
 )
 def test_settings_it_cannot_run_are_refused(changes: dict[str, object], message: str) -> None:
