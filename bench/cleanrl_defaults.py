@@ -44,7 +44,7 @@ class ScriptAgent:
     """A CleanRL ``Agent`` (``actor`` logits over a Discrete action) behind SB3's ``predict``."""
 
     def __init__(self, module: torch.nn.Module, name: str) -> None:
-        self.module = module
+        self.module: Any = module  # the script's Agent: its actor is an attribute nn.Module does not declare
         self.name = name
 
     def predict(

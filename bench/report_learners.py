@@ -143,7 +143,7 @@ def learners_across_cpus(results: Results) -> str:
         )
     reference = records["learners"]["results"]["rows"]
     ordered = ["learners", *sorted(stem for stem in records if stem != "learners")]
-    rows = []
+    rows: list[list[str]] = []
     for name in reference:
         holders = [stem for stem in ordered if name in records[stem]["results"]["rows"]]
         if len(holders) < 2:  # a row on the first machine only
@@ -340,7 +340,9 @@ only to report; nothing is chosen on them.
 """
 
 
-_PPO_COMMAND = "python bench/learners.py --rows ppo-lag --seeds 0,1,...,15 --save bench/results/learners_ppo.json"
+_PPO_COMMAND = (
+    "python bench/learners.py --rows jax-kalman-lag --seeds 0,1,...,15 --save bench/results/learners_ppo.json"
+)
 
 
 def ppo_learner(results: Results) -> str:
@@ -364,9 +366,9 @@ def ppo_learner(results: Results) -> str:
 The rows train as those of [Learners and observations](#learners-and-observations-on-the-hard-level)
 do ({report["timesteps"]:,} steps, the wider training personas, the best policy of the last half on the training
 personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes; `ppo-lag` is
-`train.py`'s learner (`agents.ppo`, policy lag 1), `jax-kalman-lag` the learner before it (`JaxPPO`, policy lag 1,
-the same settings) from the records named (their machines: the records' provenance). The two learners' seeds draw
-different initial weights and actions.
+`train.py`'s learner (`agents.ppo`, policy lag 1; `bench/learners.py` now trains it as `jax-kalman-lag`),
+`jax-kalman-lag`: `JaxPPO` the learner before it (policy lag 1, the same settings) from the records named (their
+machines: the records' provenance). The two learners' seeds draw different initial weights and actions.
 
 {_table(header, rows)}
 """
@@ -378,7 +380,9 @@ def _learner_row(label: str, row: dict[str, Any]) -> list[str]:
         label,
         str(row["runs"]),
         f"{_pct(success['iqm'])} {_ci(success['ci95']) if success['ci95'][0] is not None else ''}".rstrip(),
-        "—" if score["iqm"] is None else f"{score['iqm']:.2f}"
+        "—"
+        if score["iqm"] is None
+        else f"{score['iqm']:.2f}"
         + ("" if score["ci95"][0] is None else f" [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]"),
         _pct(row["min_success"]),
         _pct(row["unsafe_rate_mean"]),

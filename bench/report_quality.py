@@ -111,7 +111,7 @@ def train_py(results: Results) -> str:
     levels = {} if record is None else record["results"]["levels"]
     # The level of train.py's default env (hard-v2): its pretrained rows beside its baselines.
     hard = next((level for level in levels.values() if level["env_id"] == DEFAULT_ENV_IDS["ppo"]), None)
-    if hard is None:
+    if record is None or hard is None:
         return head + "\n" + _missing("python bench/levels.py --levels hard-v2") + "\n"
     names = [row["agent"] for row in hard["results"] if row["agent"].startswith("pretrained:")]
     names += ["prober", "belief", "blind", "handbook", "oracle"]
@@ -215,9 +215,8 @@ separately; its tyro comes with coop_gym) and scores its agent both greedy and s
 
 
 def _seeds_row(name: str, per_seed: list[dict[str, Any]], success: dict[str, Any]) -> list[str]:
-    cells = [
-        f"{100 * r['success_rate']:.1f} / {100 * r.get('never_lift_rate', r.get('timeout_rate')):.1f}" for r in per_seed
-    ]
+    never = [r["never_lift_rate"] if "never_lift_rate" in r else r["timeout_rate"] for r in per_seed]
+    cells = [f"{100 * r['success_rate']:.1f} / {100 * n:.1f}" for r, n in zip(per_seed, never, strict=True)]
     return [name, str(len(per_seed)), f"{_pct(success['iqm'])} {_ci(success['ci95'])}", "; ".join(cells)]
 
 

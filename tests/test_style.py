@@ -23,7 +23,7 @@ def test_ruff_is_clean() -> None:
 def test_mypy_is_clean() -> None:
     pytest.importorskip("mypy")
     out = subprocess.run(
-        [sys.executable, "-m", "mypy", "coop_gym", "estimator", "agents", "train.py"],
+        [sys.executable, "-m", "mypy", "coop_gym", "estimator", "agents", "train.py", "bench"],
         cwd=ROOT,
         capture_output=True,
         text=True,
