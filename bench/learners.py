@@ -13,20 +13,21 @@ and the observation it gets (:data:`ROWS`):
 - ``ppo-raw``: the same PPO on the measurements alone (no estimate, no memory);
 - ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
   on the measurements alone / on the default observation;
-- ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO as ``ppo-*`` trained by
-  :class:`agents.rl.jax_ppo.JaxPPO` on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
-  ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by
-  :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (the hard level's RecurrentPPO settings: PPO's,
-  with an LSTM before the heads); ``ROW@N``
+- ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO trained by ``train.py``'s learner,
+  :class:`agents.ppo.PPO`, on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
+  ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by ``agents.ppo``'s recurrent
+  PPO (the hard level's RecurrentPPO settings: PPO's, with an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
-  ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no ``VecNormalize``;
+  ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no observation normaliser;
   ``jax-kalman-lag``: ``jax-kalman`` with ``policy_lag=1`` (each update on a second core while the
   next rollout plays, one update behind): what ``python train.py`` trains; ``jax-kalman-lag-population``:
   the same trained across bodies (``personas="train_population"``, other people of the validation people's population);
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
-  :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no ``VecNormalize``);
-  ``jax-discreteunit-ends``: the same with a time-out ending the return, as in CleanRL's script;
+  :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no observation normaliser).
+  Records saved before ``JaxPPO`` was removed (``bench/results/learners*.json`` up to
+  ``learners_ppo.json``) hold ``jax-*`` rows trained by ``JaxPPO``, the same PPO with another
+  sampler and initial draw, and ``agents.ppo``'s as ``ppo-lag``; their ``what`` says which;
 - ``cleanrl-ppo``: CleanRL's public ``ppo.py``, unmodified, on its defaults (4 envs x 128
   steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
   :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
@@ -40,7 +41,7 @@ and the observation it gets (:data:`ROWS`):
   discount, entropy bonus, value clipping); ``cleanrl-ppo-wide``: on
   its defaults, trained on ``train.py``'s wider personas (``bench/cleanrl_defaults.py``'s ``WidePersonas``);
   ``cleanrl-ppo-trainpy-wide``: both;
-- ``ROW-stackK`` (e.g. ``jax-raw-stack16``): ``ROW`` with its last ``K`` observations stacked
+- ``ROW-stackK`` (e.g. ``ppo-raw-stack16``): an SB3 row with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
 Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's
@@ -107,8 +108,6 @@ class Row:
     """Flags CleanRL's script gets beyond its defaults (e.g. ``("--ent-coef", "0.02")``)."""
     normalize: bool = True
     """Whether observations pass through ``VecNormalize``, as ``train.py``'s do (not CleanRL's script's)."""
-    bootstrap: bool = True
-    """Whether a time-out adds ``gamma * V(final observation)`` as in SB3 (CleanRL's script ends the return)."""
     algo_kwargs: dict[str, Any] = field(default_factory=dict)
     """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``). A JaxPPO row without
     ``policy_lag`` here runs ``policy_lag=0``, whatever ``train.py``'s default."""
@@ -135,7 +134,7 @@ WIDE_TRAIN_ENV = "cleanrl_defaults:WidePersonas/SitToStandHardDiscreteUnit-v2"
 
 DISCRETE_UNIT: dict[str, Any] = {"action_type": "discrete", "observation_scale": "unit"}
 """The keywords that make :data:`ENV_ID` into :data:`CLEANRL_ENV_ID`."""
-_NO_NORM = "SitToStandHardDiscreteUnit-v2's 18 joint actions and unit-scaled observations, no VecNormalize"
+_NO_NORM = "SitToStandHardDiscreteUnit-v2's 18 joint actions and unit-scaled observations, no observation normaliser"
 
 ROWS: dict[str, Row] = {
     "ppo-kalman": Row("ppo", {}, "SB3's PPO (MLP), Kalman estimate + measurements (train.py --framework sb3)"),
@@ -143,25 +142,13 @@ ROWS: dict[str, Row] = {
     "ppo-raw": Row("ppo", {"observation_mode": "raw"}, "PPO (MLP), measurements only"),
     "recurrent-raw": Row("recurrent_ppo", {"observation_mode": "raw"}, "RecurrentPPO (LSTM), measurements only"),
     "recurrent-kalman": Row("recurrent_ppo", {}, "RecurrentPPO (LSTM), Kalman estimate + measurements"),
-    "jax-kalman": Row(
-        "ppo",
-        {},
-        "JaxPPO (the same PPO, compiled update), Kalman estimate + measurements (train.py --policy-lag 0)",
-        "jax",
-    ),
+    "jax-kalman": Row("ppo", {}, "agents.ppo, Kalman estimate + measurements (train.py --policy-lag 0)", "jax"),
     "jax-kalman-lag": Row(
         "ppo",
         {},
-        "JaxPPO, policy_lag=1 (each update runs while the next rollout plays), Kalman estimate + measurements"
+        "agents.ppo, policy_lag=1 (each update runs while the next rollout plays), Kalman estimate + measurements"
         " (train.py's default)",
         "jax",
-        algo_kwargs={"policy_lag": 1},
-    ),
-    "ppo-lag": Row(
-        "ppo",
-        {},
-        "agents.ppo (flax networks, optax, the update jitted), policy_lag=1, Kalman estimate + measurements",
-        "ppo",
         algo_kwargs={"policy_lag": 1},
     ),
     "jax-kalman-lag-population": Row(
@@ -172,27 +159,28 @@ ROWS: dict[str, Row] = {
         algo_kwargs={"policy_lag": 1},
         personas="train_population",
     ),
-    "jax-switching": Row("ppo", SWITCHING, "JaxPPO, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"),
-    "jax-raw": Row("ppo", {"observation_mode": "raw"}, "JaxPPO, measurements only", "jax"),
-    "jax-lstm-raw": Row(
-        "recurrent_ppo", {"observation_mode": "raw"}, "JaxRecurrentPPO (LSTM: memory), measurements only", "jax"
+    "jax-switching": Row(
+        "ppo", SWITCHING, "agents.ppo, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"
     ),
-    "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
+    "jax-raw": Row("ppo", {"observation_mode": "raw"}, "agents.ppo, measurements only", "jax"),
+    "jax-lstm-raw": Row(
+        "recurrent_ppo",
+        {"observation_mode": "raw"},
+        "agents.ppo's recurrent PPO (LSTM: memory), measurements only",
+        "jax",
+    ),
+    "jax-lstm-kalman": Row(
+        "recurrent_ppo", {}, "agents.ppo's recurrent PPO (LSTM), Kalman estimate + measurements", "jax"
+    ),
     "jax-unit": Row(
         "ppo",
         {"observation_scale": "unit"},
-        "JaxPPO, unit-scaled observations (SitToStandHardUnit-v2) instead of VecNormalize",
+        "agents.ppo, unit-scaled observations (SitToStandHardUnit-v2) instead of the observation normaliser",
         "jax",
         normalize=False,
     ),
-    "jax-discreteunit": Row("ppo", DISCRETE_UNIT, "JaxPPO on CleanRL's interface, " + _NO_NORM, "jax", normalize=False),
-    "jax-discreteunit-ends": Row(
-        "ppo",
-        DISCRETE_UNIT,
-        "jax-discreteunit, a time-out ending the return as in CleanRL's",
-        "jax",
-        normalize=False,
-        bootstrap=False,
+    "jax-discreteunit": Row(
+        "ppo", DISCRETE_UNIT, "agents.ppo on CleanRL's interface, " + _NO_NORM, "jax", normalize=False
     ),
     "cleanrl-ppo": Row(
         "ppo",
@@ -264,7 +252,7 @@ ROWS: dict[str, Row] = {
         train_env=WIDE_TRAIN_ENV,
     ),
 }
-"""The rows. ``ROW-stackK`` is ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
+"""The rows. ``ROW-stackK`` is SB3 row ``ROW`` on its last ``K`` observations (SB3's ``VecFrameStack``:
 memory of a fixed window, 0.1 s per frame); ``ROW@N`` is a ``jax-*`` row on ``N`` envs, ``ROW@N-eE``
 the same with ``E`` epochs per update."""
 
@@ -275,6 +263,8 @@ def _row(name: str) -> tuple[Row, str]:
     stacked = re.fullmatch(r"(.+)-stack([1-9][0-9]*)", base)
     key = stacked.group(1) if stacked else base
     if key not in ROWS or ((size or stacked) and ROWS[key].framework == "cleanrl"):
+        raise KeyError(name)
+    if stacked and ROWS[key].framework == "jax":  # agents.ppo stacks no frames
         raise KeyError(name)
     if size and (sizing(size) is None or ROWS[key].framework != "jax"):
         raise KeyError(name)
@@ -294,7 +284,7 @@ def _rows(text: str) -> list[str]:
         except KeyError:
             unknown.append(n)
     if unknown or not names:
-        known = f"{', '.join(ROWS)} (also ROW-stackK; jax-* rows: ROW@N, ROW@N-eE)"
+        known = f"{', '.join(ROWS)} (also ROW-stackK of an SB3 row; jax-* rows: ROW@N, ROW@N-eE)"
         raise argparse.ArgumentTypeError(f"unknown row(s) {unknown}; known: {known}")
     return names
 
@@ -336,48 +326,26 @@ def train_cleanrl(
     }
 
 
-def _timeouts_end(env: Any) -> Any:
-    """``env`` with every episode end reported as the task's end: no time-out is bootstrapped.
-
-    SB3 (and ``JaxPPO``) add ``gamma * V(final observation)`` to the reward of a step whose info says
-    ``TimeLimit.truncated``; CleanRL's ``ppo.py`` ends the return at a truncation as at a termination.
-    """
-    import numpy as np
-    from stable_baselines3.common.vec_env import VecEnvWrapper
-
-    class TimeoutsEnd(VecEnvWrapper):  # type: ignore[misc]
-        def reset(self) -> Any:
-            return self.venv.reset()
-
-        def step_wait(self) -> Any:
-            obs, rewards, dones, infos = self.venv.step_wait()
-            for i in np.flatnonzero(dones):
-                infos[i]["TimeLimit.truncated"] = False
-            return obs, rewards, dones, infos
-
-    return TimeoutsEnd(env)
-
-
 def train_one(
     name: str, seed: int, timesteps: int, episodes: int, folder: Path, validation: int, people: bool = False
 ) -> dict[str, Any]:
     """Train row ``name`` as ``train.py`` does, keep the best-validated policy, score it held-out (``people``: see
     :func:`people_report`; every scored policy also plays the validation people and the held-out episodes)."""
     import torch
-    from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
     from agents.evaluate import evaluate
     from agents.hyperparams import hyperparams_for
-    from agents.rl import SelectionCallback, load_agent, make_train_env, save_agent
+    from agents.rl import SelectionCallback, load_agent, save_agent
     from agents.rl.callbacks import VALIDATION_SEED
 
     torch.set_num_threads(1)  # as train.py --threads
     row, size = _row(name)
-    config = hyperparams_for(row.algo, ENV_ID, "jax" if row.framework == "ppo" else row.framework)
-    sequential = {"policy_lag": 0} if row.algo == "ppo" and row.framework in ("jax", "ppo") else {}
+    config = hyperparams_for(row.algo, ENV_ID, row.framework)
+    sequential = {"policy_lag": 0} if row.algo == "ppo" and row.framework == "jax" else {}
     config = config.replace(
         total_timesteps=timesteps,
         personas=row.personas,
+        normalize=config.normalize and row.normalize,
         algo_kwargs={**config.algo_kwargs, **sequential, **row.algo_kwargs},
     )
     if size:  # the same samples per update on N envs (and E epochs)
@@ -385,13 +353,6 @@ def train_one(
             config = resized(config, size)
         except ValueError as error:
             raise ValueError(f"{name}: {error}") from None
-    env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
-    if not row.bootstrap:
-        env = _timeouts_end(env)
-    if config.normalize and row.normalize:
-        env = VecNormalize(env, norm_obs=True, norm_reward=False)
-    if row.frame_stack > 1:  # normalised frames stacked (what the saved agent rebuilds when it plays)
-        env = VecFrameStack(env, row.frame_stack)
     half = timesteps // 2
     every = max(1, (timesteps - half) // 8)
     checkpoints = folder / f"{name}__{seed}__{timesteps}_checkpoints"
@@ -400,12 +361,11 @@ def train_one(
         checkpoints, row.algo, ENV_ID, validation, 8, half, every, row.env_kwargs, recorded=recorded if people else None
     )
     started = time.perf_counter()
-    model, selected = _learn(row, config, env, seed, timesteps, selection)
+    model, selected = _learn(row, config, seed, timesteps, selection)
     wall_s = time.perf_counter() - started
     saved = save_agent(model, folder / f"{name}__{seed}__{timesteps}", algo=row.algo, env_id=ENV_ID)
     agent = load_agent(saved)  # what a user loads, not the object in memory
     result = evaluate(agent, ENV_ID, "test", episodes, 0, env_kwargs=row.env_kwargs, name=f"{name}:{seed}")
-    env.close()
     return {
         **result.summary(),  # its "seed" is the first held-out episode's
         "row": name,
@@ -418,22 +378,30 @@ def train_one(
     }
 
 
-def _learn(row: Row, config: Any, env: Any, seed: int, timesteps: int, selection: Any) -> tuple[Any, dict[str, Any]]:
-    """``(model, selected)``: row ``row`` trained on ``env`` (a ``ppo`` row: on its own vector env), the policy kept."""
-    from agents.rl import make_model
+def _learn(row: Row, config: Any, seed: int, timesteps: int, selection: Any) -> tuple[Any, dict[str, Any]]:
+    """``(model, selected)``: row ``row`` trained (an SB3 row on SB3's vector env, a ``jax`` row by ``agents.ppo``
+    on coop_gym's), the policy kept."""
+    if row.framework == "jax":
+        from agents.ppo import PPO, PPOConfig
+        from agents.rl.ppo_run import learn_selected
 
-    if row.framework != "ppo":
-        model = make_model(config, env, seed)
-        model.learn(timesteps, callback=selection)
-        return model, selection.finish(model)
-    from agents.ppo import PPO, PPOConfig
-    from agents.rl.ppo_run import learn_selected
+        learner = PPO(ENV_ID, PPOConfig.from_training(config), seed, {"personas": config.personas, **row.env_kwargs})
+        trained, selected = learn_selected(learner, timesteps, selection)
+        learner.env.close()
+        return trained, selected  # type: ignore[return-value]
+    from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
-    env.close()  # agents.ppo's learner steps coop_gym's vector env itself
-    learner = PPO(ENV_ID, PPOConfig.from_training(config), seed, {"personas": config.personas, **row.env_kwargs})
-    model, selected = learn_selected(learner, timesteps, selection)
-    learner.env.close()
-    return model, selected  # type: ignore[return-value]
+    from agents.rl import make_model, make_train_env
+
+    env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
+    if config.normalize:
+        env = VecNormalize(env, norm_obs=True, norm_reward=False)
+    if row.frame_stack > 1:  # normalised frames stacked (what the saved agent rebuilds when it plays)
+        env = VecFrameStack(env, row.frame_stack)
+    model = make_model(config, env, seed)
+    model.learn(timesteps, callback=selection)
+    env.close()
+    return model, selection.finish(model)
 
 
 def people_report(runs: list[dict[str, Any]]) -> dict[str, Any] | None:

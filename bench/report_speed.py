@@ -201,12 +201,12 @@ each in its own process, with `--jobs 2`), scoring held-out success on the same 
 intervals of training time (evaluation time not counted), and reports the training time each
 needs to reach a scripted caregiver's level (the low end of its 95 % interval on those
 episodes; the target counts successes only). Contenders: `default` is `train.py --framework sb3`'s
-configuration, `jax` the same PPO as `JaxPPO` (`train.py --policy-lag 0`) on its sizing,
+configuration, `jax` `train.py`'s learner (`agents.ppo`) with `--policy-lag 0` on its sizing,
 `default@N` SB3 on `N` envs with the same samples per update (`default@16` is SB3 on `jax`'s
 configuration), `jax-lag` `jax` with `policy_lag=1` (each update runs on a second core while the
-next rollout plays), `ppo` / `ppo-lag` the PPO of `agents.ppo` on `jax`'s / `jax-lag`'s settings
-(`ppo-lag`: `train.py`'s learner on `-v2`), `jax@N-eE` JaxPPO on `N` envs with `E` epochs
-per update, `first_script` SB3's defaults on 8 `gymnasium.make` envs. A change of load
+next rollout plays: `train.py`'s learner on `-v2`), `jax@N-eE` `jax` on `N` envs with `E` epochs
+per update, `first_script` SB3's defaults on 8 `gymnasium.make` envs. In records saved while
+`JaxPPO` was the JAX learner, `jax` / `jax-lag` name `JaxPPO` and `ppo` / `ppo-lag` `agents.ppo`. A change of load
 between runs moves the ratios (the results file holds the load average before and after each).
 """
     if not records:

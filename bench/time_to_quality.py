@@ -13,13 +13,11 @@ other (or ``--jobs`` at a time, each in its own process):
   cut by the clock, so a linearly decaying learning rate stays at its start value, unless
   ``--budget-steps N`` also ends it after ``N`` steps, the learning rate decaying over them as
   ``train.py``'s does over its budget);
-- ``jax``: the same PPO as :class:`agents.rl.jax_ppo.JaxPPO` (``train.py --policy-lag 0``), on
-  its own sizing (``hyperparams_for(..., framework="jax")``), each update between two rollouts;
-- ``jax-lag``: ``jax`` with ``policy_lag=1`` (each update runs on its own thread while the
-  next rollout plays; :meth:`agents.rl.jax_ppo.JaxTraining.train`): ``train.py``'s learner on
-  the hard level ``-v2``;
-- ``ppo`` / ``ppo-lag``: :class:`agents.ppo.PPO` (flax networks, optax, its own vector env) on
-  ``jax``'s and ``jax-lag``'s settings;
+- ``jax``: ``train.py``'s learner, :class:`agents.ppo.PPO` (flax networks, optax, coop_gym's
+  vector env), on its own sizing (``hyperparams_for(..., framework="jax")``) with
+  ``policy_lag=0`` (``train.py --policy-lag 0``), each update between two rollouts;
+- ``jax-lag``: ``jax`` with ``policy_lag=1`` (each update runs on XLA's thread while the next
+  rollout plays): ``train.py``'s learner on the hard level ``-v2``;
 - ``default@N`` / ``jax@N`` / ``jax-lag@N``: any of these on ``N`` envs with ``n_steps`` scaled so each update still
   takes ``n_envs * n_steps`` samples (``default@N`` at the jax sizing's env count is SB3 on the
   same configuration as ``jax``); ``@N-eE`` also sets ``E`` epochs per update;
@@ -64,7 +62,7 @@ from result_files import add_save_argument, save
 
 from coop_gym.cli import output_path_problem, positive_int, seed_list
 
-CONTENDERS: tuple[str, ...] = ("default", "jax", "jax-lag", "ppo", "ppo-lag", "first_script")
+CONTENDERS: tuple[str, ...] = ("default", "jax", "jax-lag", "first_script")
 _CONFIGURED = ("default", "jax", "jax-lag")
 """The contenders built from ``train.py``'s settings (:func:`_config`), which take a sizing ``@N``."""
 
@@ -126,19 +124,23 @@ def _config(kind: str, env_id: str) -> Any:
     return config
 
 
+def _sized_config(contender: str, env_id: str) -> Any:
+    """The configuration of a contender built from ``train.py``'s settings (``KIND`` or ``KIND@SIZE``)."""
+    kind, _, size = contender.partition("@")
+    config = _config(kind, env_id)
+    return resized(config, size) if size else config
+
+
 def _build(contender: str, env_id: str, seed: int) -> Any:
-    """The SB3 model of ``contender`` on fresh training envs."""
+    """The SB3 model of an SB3 contender (``default``, ``default@N``, ``first_script``) on fresh training envs."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.rl import make_model, make_train_env
 
-    kind, _, size = contender.partition("@")
-    if kind in _CONFIGURED:
-        config = _config(kind, env_id)
-        if size:
-            config = resized(config, size)
+    if contender.partition("@")[0] == "default":
+        config = _sized_config(contender, env_id)
         env = make_train_env(env_id, config.n_envs, seed, personas=config.personas)
         if config.normalize:
             env = VecNormalize(env, norm_obs=True, norm_reward=False)
@@ -173,7 +175,7 @@ def _clock(
         def _on_rollout_end(self) -> None:
             now = time.perf_counter()
             if self.final or self.train_s + now - self.since >= min(self.next_eval, budget_s):
-                # A lagged JaxPPO's update may still run: training time, not the evaluation's.
+                # A lagged update may still run: training time, not the evaluation's.
                 getattr(self.model, "wait_for_update", lambda: None)()
                 now = time.perf_counter()
             self.train_s += now - self.since
@@ -219,7 +221,7 @@ def _train_with_clock(
 
     torch.set_num_threads(1)
     background.wait()  # on a fresh cache: train on compiled kernels, not their Python twins
-    if contender in ("ppo", "ppo-lag"):
+    if contender.startswith("jax"):
         return _train_ppo_with_clock(
             contender, env_id, seed, budget_s, every_s, episodes, eval_seed, targets, budget_steps
         )
@@ -283,7 +285,7 @@ def _train_ppo_with_clock(
     from agents.ppo.sb3_format import to_sb3
     from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
 
-    config = _config(contender.replace("ppo", "jax"), env_id)
+    config = _sized_config(contender, env_id)
     learner = PPO(env_id, PPOConfig.from_training(config), seed, {"personas": config.personas})
     points: list[dict[str, Any]] = []
 

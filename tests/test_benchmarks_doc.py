@@ -8,6 +8,7 @@ date and the machine, and the page renders from those files. No speed is asserte
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
 import json
 import sys
@@ -135,7 +136,7 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
         (
             "learners",
             [
-                *["--rows", "ppo-lag", "--seeds", "0", "--timesteps", "4096", "--episodes", "4"],
+                *["--rows", "jax-kalman-lag", "--seeds", "0", "--timesteps", "4096", "--episodes", "4"],
                 *["--validation-episodes", "4", "--runs", str(tmp / "learners")],
             ],
             "learners_ppo.json",
@@ -226,9 +227,11 @@ def test_each_bench_script_writes_its_results_file_and_the_page_renders_from_the
 def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``ROW@N-eE``: N envs, the update's samples kept (n_steps scaled), E epochs; ``ROW@N``: the row's epochs.
 
-    And a row's ``normalize=False`` leaves ``VecNormalize`` out, ``bootstrap=False`` ends the return at a time-out.
+    A ``jax-*`` row trains ``agents.ppo``; its ``normalize=False`` leaves the observation normaliser out, and an
+    SB3 row's frames are stacked where a ``jax-*`` row's are refused.
     """
     pytest.importorskip("stable_baselines3")
+    import agents.ppo
     import agents.rl
 
     learners = _bench("learners")
@@ -237,43 +240,41 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     class Built(Exception):
         pass
 
-    def capture(config: Any, env: Any, seed: int, **_: Any) -> Any:
-        built.update(n_envs=env.num_envs, env=env, **config.algo_kwargs)
+    def capture(env_id: str, config: Any, seed: int, env_kwargs: dict[str, Any]) -> Any:
+        built.update(config=config, env_kwargs=env_kwargs, seed=seed)
         raise Built
 
-    monkeypatch.setattr(agents.rl, "make_model", capture)
+    def capture_sb3(config: Any, env: Any, seed: int, **_: Any) -> Any:
+        built.update(env=env, **config.algo_kwargs)
+        raise Built
+
+    monkeypatch.setattr(agents.ppo, "PPO", capture)
+    monkeypatch.setattr(agents.rl, "make_model", capture_sb3)
     for name, expected in (("jax-kalman@64-e4", (64, 64, 4)), ("jax-kalman@64", (64, 64, 10))):
         with pytest.raises(Built):
             learners.train_one(name, 0, 64, 4, tmp_path, 4)
-        assert (built["n_envs"], built["n_steps"], built["n_epochs"]) == expected, name
-    # A row's own learner settings reach the model, over train.py's.
+        config = built["config"]
+        assert (config.n_envs, config.n_steps, config.n_epochs) == expected, name
+    # A row's own learner settings reach the learner, over train.py's.
     with pytest.raises(Built):
-        learners.train_one("jax-kalman-lag", 0, 64, 4, tmp_path, 4)
-    assert built["policy_lag"] == 1 and built["ent_coef"] == 0.02
-    built.clear()
+        learners.train_one("jax-kalman-lag", 3, 64, 4, tmp_path, 4)
+    assert built["config"].policy_lag == 1 and built["config"].ent_coef == 0.02 and built["seed"] == 3
     with pytest.raises(Built):
         learners.train_one("jax-kalman", 0, 64, 4, tmp_path, 4)
-    assert built["policy_lag"] == 0  # a JaxPPO row is sequential unless it says otherwise, whatever train.py's default
+    assert built["config"].policy_lag == 0  # a jax row is sequential unless it says otherwise, whatever train.py's
+    assert built["config"].normalize_obs and built["env_kwargs"] == {"personas": "train_wide"}
     # A row without normalisation trains on its own env, as CleanRL's script would see it.
-    from stable_baselines3.common.vec_env import VecNormalize
-
     with pytest.raises(Built):
         learners.train_one("jax-discreteunit", 0, 64, 4, tmp_path, 4)
-    assert not isinstance(built["env"], VecNormalize) and built["env"].action_space.n == 18
+    assert not built["config"].normalize_obs and built["env_kwargs"]["action_type"] == "discrete"
+    # SB3 rows: VecNormalize, and frames stacked on request.
+    from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
+
     with pytest.raises(Built):
-        learners.train_one("jax-kalman", 0, 64, 4, tmp_path, 4)
-    assert isinstance(built["env"], VecNormalize)
-    # ... and a row without bootstrap reports a time-out as the task's end.
-    with pytest.raises(Built):
-        learners.train_one("jax-discreteunit-ends", 0, 64, 4, tmp_path, 4)
-    env = built["env"]
-    n = env.num_envs
-    dones = np.arange(n) < 2
-    infos = [{"TimeLimit.truncated": True}, {"TimeLimit.truncated": False}] + [{} for _ in range(n - 2)]
-    env.venv.step_wait = lambda: (np.zeros((n, 11)), np.zeros(n), dones, infos)
-    _, _, out_dones, out_infos = env.step_wait()
-    assert out_dones.tolist() == dones.tolist()
-    assert [info.get("TimeLimit.truncated") for info in out_infos[:3]] == [False, False, None]
+        learners.train_one("ppo-raw-stack4", 0, 64, 4, tmp_path, 4)
+    assert isinstance(built["env"], VecFrameStack) and isinstance(built["env"].venv, VecNormalize)
+    with pytest.raises(argparse.ArgumentTypeError, match="jax-raw-stack4"):
+        learners._rows("jax-raw-stack4")
     # The same sizing names a time_to_quality contender.
     from agents.hyperparams import hyperparams_for
 
@@ -282,15 +283,16 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     assert (config.n_envs, config.algo_kwargs["n_steps"], config.algo_kwargs["n_epochs"]) == (64, 64, 4)
     config = ttq.resized(hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax"), "64")
     assert (config.n_envs, config.algo_kwargs["n_epochs"]) == (64, 10)
-    monkeypatch.undo()  # the real make_model
-    lagged = ttq._build("jax-lag@32", "CoopGym/SitToStandHard-v2", 0)
+    lagged = agents.ppo.PPOConfig.from_training(ttq._sized_config("jax-lag@32", "CoopGym/SitToStandHard-v2"))
     assert (lagged.policy_lag, lagged.n_envs, lagged.n_steps) == (1, 32, 128)
-    assert ttq._build("jax", "CoopGym/SitToStandHard-v2", 0).policy_lag == 0
+    assert ttq._sized_config("jax", "CoopGym/SitToStandHard-v2").algo_kwargs["policy_lag"] == 0
 
 
 def test_time_to_quality_budget_steps_end_a_run_and_decay_its_learning_rate(monkeypatch: pytest.MonkeyPatch) -> None:
     """``--budget-steps``: training stops after that many steps, its learning rate decayed over them."""
     pytest.importorskip("jax")
+    import agents.ppo
+
     ttq = _bench("time_to_quality")
     rates: list[float] = []
     build = ttq._build
@@ -308,10 +310,24 @@ def test_time_to_quality_budget_steps_end_a_run_and_decay_its_learning_rate(monk
         return model
 
     monkeypatch.setattr(ttq, "_build", recording_build)
+    config = ttq._sized_config("default", "CoopGym/SitToStand-v0")
+    rollout = config.n_envs * config.algo_kwargs["n_steps"]
+    run = ttq._train_with_clock("default", "CoopGym/SitToStand-v0", 0, 600.0, 600.0, 2, 0, {}, False, 2 * rollout)
+    assert run["timesteps"] == 2 * rollout and run["curve"][-1]["timesteps"] == 2 * rollout
+    assert rates == [pytest.approx(0.0, abs=1e-12)]  # linear decay to 0 at the budget's end
+    # agents.ppo: its rate too falls to 0 over the budget.
+    learners: list[Any] = []
+    original = agents.ppo.PPO
+
+    def recording_ppo(*args: Any, **kwargs: Any) -> Any:
+        learners.append(original(*args, **kwargs))
+        return learners[-1]
+
+    monkeypatch.setattr(agents.ppo, "PPO", recording_ppo)
     rollout = 4096  # the jax sizing's 16 envs x 256 steps
     run = ttq._train_with_clock("jax", "CoopGym/SitToStand-v0", 0, 600.0, 600.0, 2, 0, {}, False, 2 * rollout)
     assert run["timesteps"] == 2 * rollout and run["curve"][-1]["timesteps"] == 2 * rollout
-    assert rates == [pytest.approx(0.0, abs=1e-12)]  # linear decay to 0 at the budget's end
+    assert learners[0].learning_rate == pytest.approx(0.0, abs=1e-12)
 
 
 def test_cleanrl_rows_flags_are_train_pys_settings() -> None:
