@@ -213,13 +213,51 @@ class MidGuidance(gym.Wrapper[Any, Any, Any, Any]):
         return observation, info
 
 
+CURRICULUM_EASY_ENV_ID = "CoopGym/SitToStandDiscreteUnit-v0"
+"""The curriculum's first level: the paper's (its personas and timing), CleanRL's interface as on the hard id."""
+CURRICULUM_STEPS = 100_000
+"""The learner's steps (all its envs: :data:`OUTCOME_LOG`'s count) after which :class:`Curriculum` plays hard."""
+
+
+class Curriculum(gym.Wrapper[Any, Any, Any, Any]):
+    """Episodes of :data:`CURRICULUM_EASY_ENV_ID` until the process has taken :data:`CURRICULUM_STEPS` steps, then
+    the wrapped (hard) id's: a curriculum of levels by id inside one training run, at episode boundaries.
+
+    Both levels have the same observations and actions, so the learner sees one env. A start of a training run,
+    not an env version: each episode is one of the two ids' own. The easy env is seeded as the hard one is.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any]) -> None:
+        super().__init__(env)
+        self.easy = gym.make(CURRICULUM_EASY_ENV_ID)
+        if self.easy.observation_space != env.observation_space or self.easy.action_space != env.action_space:
+            raise ValueError(f"Curriculum: {CURRICULUM_EASY_ENV_ID} and {env.spec and env.spec.id} differ in spaces")
+        self.active: gym.Env[Any, Any] = self.easy
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        if seed is not None:
+            self.easy.reset(seed=seed)
+        self.active = self.easy if _STEPS_TAKEN[0] < CURRICULUM_STEPS else self.env
+        return self.active.reset(seed=seed, options=options)
+
+    def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
+        return self.active.step(action)  # type: ignore[return-value]
+
+    def close(self) -> None:
+        self.easy.close()
+        super().close()
+
+
 def make_study_env(**kwargs: Any) -> gym.Env[Any, Any]:
     """The id ``base`` made as registered (the other keywords its own), its timeout priced (:class:`PricedTimeout`)
-    if ``priced`` and started by :class:`MidGuidance` if ``mid_guidance``, outermost in :class:`OutcomeLog`."""
+    if ``priced``, started by :class:`MidGuidance` if ``mid_guidance``, after the easy level if ``curriculum``
+    (:class:`Curriculum`), outermost in :class:`OutcomeLog`."""
     priced, mid_guidance = kwargs.pop("priced", False), kwargs.pop("mid_guidance", False)
+    curriculum = kwargs.pop("curriculum", False)
     env = gym.make(kwargs.pop("base"), **kwargs)
     env = PricedTimeout(env) if priced else env
-    return OutcomeLog(MidGuidance(env) if mid_guidance else env)
+    env = MidGuidance(env) if mid_guidance else env
+    return OutcomeLog(Curriculum(env) if curriculum else env)
 
 
 STUDY_ENV_IDS: dict[str, dict[str, Any]] = {
@@ -227,6 +265,7 @@ STUDY_ENV_IDS: dict[str, dict[str, Any]] = {
     "Logged/SitToStandHardDiscrete-v2": {"base": "CoopGym/SitToStandHardDiscrete-v2"},
     "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "mid_guidance": True},
     "LoggedPriced/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "priced": True},
+    "LoggedCurriculum/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "curriculum": True},
 }
 """Measurement aids, not env versions: what CleanRL's script trains on in the never-lift study
 (``--env-id cleanrl_defaults:<id>``; ``gym.make`` passes no keyword, so each id's settings are in its

@@ -267,6 +267,12 @@ NEVER_LIFT_CELLS: dict[str, Cell] = {
         "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2",
         CLEANRL_ENV_ID,
     ),
+    "cleanrl-ppo-curriculum": Cell(
+        "the same, its first 100,000 steps on the paper's level (SitToStandDiscreteUnit-v0), then hard-v2's "
+        "(cleanrl_defaults.Curriculum)",
+        "LoggedCurriculum/SitToStandHardDiscreteUnit-v2",
+        CLEANRL_ENV_ID,
+    ),
     "cleanrl-ppo-priced": Cell(
         "the same, trained with a timeout priced as a failed assistance (cleanrl_defaults.PricedTimeout, -1)",
         "LoggedPriced/SitToStandHardDiscreteUnit-v2",

@@ -549,6 +549,34 @@ def test_the_never_lift_studys_envs_log_outcomes_and_start_mid_guidance_or_as_th
     assert 0 < guided < 24
 
 
+def test_the_curriculum_plays_the_easy_level_until_its_step_count_then_the_hard_one() -> None:
+    """``LoggedCurriculum/...``: episodes of the paper's level, seeded as the hard id's, until the process's learner has
+    taken ``CURRICULUM_STEPS`` steps; from the next reset on, exactly the hard id's episodes."""
+    import gymnasium as gym
+
+    _bench("cleanrl_defaults")
+    cleanrl = sys.modules[gym.spec("LoggedCurriculum/SitToStandHardDiscreteUnit-v2").entry_point.__module__]
+    hard, easy = gym.make("CoopGym/SitToStandHardDiscreteUnit-v2"), gym.make(cleanrl.CURRICULUM_EASY_ENV_ID)
+    curriculum = gym.make("LoggedCurriculum/SitToStandHardDiscreteUnit-v2")
+    cleanrl.clear_outcome_log()
+
+    def trace(env: Any, seed: int | None) -> list[Any]:
+        observation, _ = env.reset(seed=seed)
+        return [observation] + [env.step(2 * (k % 9))[:2] for k in range(60)]  # each cue in turn, no lift
+
+    def same(a: list[Any], b: list[Any]) -> bool:
+        return all(np.array_equal(np.asarray(x[0]), np.asarray(y[0])) for x, y in zip(a, b, strict=True))
+
+    first = trace(curriculum, 5)
+    assert same(first, trace(easy, 5)) and not same(first, trace(hard, 5))
+    assert same(trace(curriculum, None), trace(easy, None))  # the easy env's own stream goes on
+    cleanrl._STEPS_TAKEN[0] = cleanrl.CURRICULUM_STEPS  # the learner's budget for the easy level is spent
+    assert same(trace(curriculum, 7), trace(hard, 7))
+    defaults = _bench("library_defaults")
+    assert f"{cleanrl.CURRICULUM_STEPS:,} steps" in defaults.NEVER_LIFT_CELLS["cleanrl-ppo-curriculum"].what
+    cleanrl.clear_outcome_log()
+
+
 def test_a_lift_hazard_policy_lifts_with_its_probability_and_cues_at_random() -> None:
     defaults = _bench("library_defaults")
     observations = np.zeros((4000, 11))
