@@ -368,6 +368,7 @@ def train_one(
     result = evaluate(agent, ENV_ID, "test", episodes, 0, env_kwargs=row.env_kwargs, name=f"{name}:{seed}")
     return {
         **result.summary(),  # its "seed" is the first held-out episode's
+        "by_persona": result.persona_rates(),
         "row": name,
         "training_seed": seed,
         "timesteps": timesteps,
@@ -417,10 +418,28 @@ def people_report(runs: list[dict[str, Any]]) -> dict[str, Any] | None:
 
 
 def scripted(episodes: int) -> dict[str, dict[str, Any]]:
-    """The reference caregivers on the held-out episodes."""
+    """The reference caregivers on the held-out episodes (each with its rates per persona, ``by_persona``)."""
     from agents.evaluate import evaluate
 
-    return {name: evaluate(name, ENV_ID, "test", episodes, 0).summary() for name in SCRIPTED}
+    results = {name: evaluate(name, ENV_ID, "test", episodes, 0) for name in SCRIPTED}
+    return {name: {**result.summary(), "by_persona": result.persona_rates()} for name, result in results.items()}
+
+
+def rescore_by_persona(name: str, run: dict[str, Any], folder: Path, timesteps: int) -> dict[str, Any]:
+    """``run`` with the per-persona rates of its saved model replayed on the same held-out episodes.
+
+    Raises:
+        ValueError: the replay does not reproduce the run's recorded success (another model, or other episodes).
+    """
+    from agents.evaluate import evaluate
+    from agents.rl import load_agent
+
+    seed = run["training_seed"]
+    agent = load_agent(folder / f"{name}__{seed}__{timesteps}")
+    result = evaluate(agent, ENV_ID, "test", run["episodes"], 0, env_kwargs=_row(name)[0].env_kwargs)
+    if result.success_rate != run["success_rate"]:
+        raise ValueError(f"{name} seed {seed}: replayed success {result.success_rate} != {run['success_rate']}")
+    return {**run, "by_persona": result.persona_rates()}
 
 
 def aggregate(runs: list[dict[str, Any]], blind: float, oracle: float) -> dict[str, Any]:
@@ -466,6 +485,12 @@ def _parser() -> argparse.ArgumentParser:
         help="score every candidate policy on the validation people and the held-out episodes too: how well "
         "each selecting set predicts the held-out people (the report's 'people' of each row)",
     )
+    parser.add_argument(
+        "--by-persona",
+        action="store_true",
+        help="replay the saved model of each run without a per-persona record on its held-out episodes, and "
+        "report each row's rates per test persona beside the scripted caregivers'",
+    )
     add_save_argument(parser, "learners.json")
     return parser
 
@@ -490,6 +515,9 @@ def _row_runs(name: str, args: argparse.Namespace, parser: argparse.ArgumentPars
         run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
         if run["episodes"] != args.episodes:
             parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
+        if args.by_persona and "by_persona" not in run and _row(name)[0].framework != "cleanrl":
+            run = rescore_by_persona(name, run, args.runs, args.timesteps)
+            write_json(path, {k: v for k, v in run.items() if k != "training_seed"})
         runs.append(run)
         print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
     if not runs:
@@ -510,6 +538,7 @@ def main(argv: list[str] | None = None) -> int:
     """Train and score every (row, seed) not yet in ``--runs``; print the table (and save it)."""
     parser = _parser()
     args = parser.parse_args(argv)
+    from agents.evaluate.results import persona_rates_over_runs
     from coop_gym.cli import output_path_problem
     from coop_gym.io import write_json
 
@@ -528,7 +557,9 @@ def main(argv: list[str] | None = None) -> int:
 
     args.runs.mkdir(parents=True, exist_ok=True)
     reference_file = args.runs / f"scripted__{args.episodes}.json"
-    if not reference_file.exists():
+    if not reference_file.exists() or (
+        args.by_persona and "by_persona" not in json.loads(reference_file.read_text())["oracle"]
+    ):
         write_json(reference_file, scripted(args.episodes))
     reference = json.loads(reference_file.read_text())
     blind, oracle = reference["blind"]["success_rate"], reference["oracle"]["success_rate"]
@@ -538,6 +569,8 @@ def main(argv: list[str] | None = None) -> int:
         table[name] = {"what": _what(name), **aggregate(runs, blind, oracle), "per_seed": runs}
         if (people := people_report(runs)) is not None:
             table[name]["people"] = people
+        if all("by_persona" in run for run in runs):
+            table[name]["by_persona"] = persona_rates_over_runs([run["by_persona"] for run in runs])
     for name, row in table.items():
         s, c = row["success"], row["score"]
         print(f"{name:>17}: success IQM {s['iqm']:.3f} {s['ci95']}, score IQM {c['iqm']} {c['ci95']}")
@@ -548,6 +581,8 @@ def main(argv: list[str] | None = None) -> int:
         "rows": table,
         "scripted": {k: {m: v[m] for m in ("success_rate", "unsafe_rate")} for k, v in reference.items()},
     }
+    if all("by_persona" in v for v in reference.values()):
+        report["scripted_by_persona"] = {k: v["by_persona"] for k, v in reference.items()}
     if args.save:
         import stable_baselines3  # noqa: F401 -- the runs' torch, SB3 and JAX versions go into the results file
         import torch  # noqa: F401

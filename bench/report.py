@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.p
 from report_format import Results
 from report_learners import (
     best_of_seeds,
+    by_persona,
     learners,
     learners_across_cpus,
     ppo_learner,
@@ -71,6 +72,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     learners,
     learners_across_cpus,
     ppo_learner,
+    by_persona,
     training_budget,
     selection_people,
     best_of_seeds,

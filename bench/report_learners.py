@@ -208,8 +208,8 @@ def training_budget(results: Results) -> str:
     return f"""{head}
 {provenance}
 
-`train.py`'s learner (`jax-kalman-lag`) on other budgets, its learning rate decaying to 0 over
-each, the same sixteen seeds on one CPU ({cpu or "not recorded"}), each run keeping its
+`train.py`'s settings (`jax-kalman-lag`, trained by `JaxPPO` in these records) on other budgets, its learning
+rate decaying to 0 over each, the same sixteen seeds on one CPU ({cpu or "not recorded"}), each run keeping its
 best-validated policy of the last half and scored on the held-out episodes of [Learners and
 observations](#learners-and-observations-on-the-hard-level); the {_count(train_steps)}-step row is
 that section's on this CPU ([The same seeds on another CPU](#the-same-seeds-on-another-cpu)).
@@ -365,10 +365,48 @@ def ppo_learner(results: Results) -> str:
 
 The rows train as those of [Learners and observations](#learners-and-observations-on-the-hard-level)
 do ({report["timesteps"]:,} steps, the wider training personas, the best policy of the last half on the training
-personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes; `ppo-lag` is
-`train.py`'s learner (`agents.ppo`, policy lag 1; `bench/learners.py` now trains it as `jax-kalman-lag`),
-`jax-kalman-lag`: `JaxPPO` the learner before it (policy lag 1, the same settings) from the records named (their
-machines: the records' provenance). The two learners' seeds draw different initial weights and actions.
+personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes. The first row is
+`train.py`'s learner (`agents.ppo`, policy lag 1), the `JaxPPO` rows the learner before it (policy lag 1, the same
+settings) from the records named (their machines: the records' provenance). The two learners' seeds draw different
+initial weights and actions.
+
+{_table(header, rows)}
+"""
+
+
+_PERSONA_COMMAND = "python bench/learners.py --rows jax-kalman-lag --seeds 0,1,...,31 --by-persona --save PATH"
+
+
+@_from_results("learners_ppo", "### Where the learned caregiver loses, by held-out person", _PERSONA_COMMAND)
+def by_persona(report: dict[str, Any], record: dict[str, Any]) -> str:
+    """Each held-out persona's outcomes: the learned rows (mean over seeds, lowest..highest) beside the scripted."""
+    scripted = report.get("scripted_by_persona")
+    rows_with = {name: row for name, row in report["rows"].items() if "by_persona" in row}
+    if scripted is None or not rows_with:
+        return f"The record has no rates per persona: `{_PERSONA_COMMAND}`.\n"
+    header = ["persona", "caregiver", "success", "unsafe", "premature", "timeout"]
+    rows = []
+    for persona in sorted(scripted["oracle"]):
+        for name, row in rows_with.items():
+            found = row["by_persona"][persona]
+            low, high = found["success_rate_range"]
+            label = f"`{name}`, mean of {row['runs']} seeds"
+            success = f"{_pct(found['success_rate'])} ({100 * low:.1f}..{100 * high:.1f})"
+            rows.append(
+                [persona, label, success] + [_pct(found[f"{o}_rate"]) for o in ("unsafe", "premature", "timeout")]
+            )
+        for agent in ("belief", "prober", "blind", "oracle"):
+            found = scripted[agent][persona]
+            rows.append(
+                [persona, agent] + [_pct(found[f"{o}_rate"]) for o in ("success", "unsafe", "premature", "timeout")]
+            )
+    episodes = {p: scripted["oracle"][p]["episodes"] for p in sorted(scripted["oracle"])}
+    split = ", ".join(f"{p} {n}" for p, n in episodes.items())
+    return f"""The held-out episodes of [The PPO learner](#the-ppo-learner-agentsppo-against-jaxppo) split by the
+persona each person was drawn from ({split}): every seed's kept policy (success: the mean over seeds, then the
+lowest and highest seed), and the scripted caregivers on the same episodes. The outcomes are the env's: success a
+lift with the person cooperative and leaning forward, unsafe a lift while they resist or sit upright, premature any
+other lift, timeout no lift in time.
 
 {_table(header, rows)}
 """

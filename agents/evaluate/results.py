@@ -17,7 +17,15 @@ import numpy as np
 
 from coop_gym.envs.config import Outcome
 
-__all__ = ["DEFAULT_ENV_ID", "OUTCOMES", "PLOT_SUFFIXES", "EpisodeRecord", "EvaluationResult", "wilson_interval"]
+__all__ = [
+    "DEFAULT_ENV_ID",
+    "OUTCOMES",
+    "PLOT_SUFFIXES",
+    "EpisodeRecord",
+    "EvaluationResult",
+    "persona_rates_over_runs",
+    "wilson_interval",
+]
 
 DEFAULT_ENV_ID = "CoopGym/SitToStand-v0"
 PLOT_SUFFIXES: tuple[str, ...] = (".png", ".pdf", ".svg")
@@ -226,6 +234,13 @@ class EvaluationResult:
             for name in names
         }
 
+    def persona_rates(self) -> dict[str, dict[str, Any]]:
+        """Each persona's episode count and outcome rates: ``{persona: {"episodes": n, "success_rate": ..., ...}}``."""
+        return {
+            name: {"episodes": sub.episodes, **{f"{o}_rate": sub.rate(o) for o in OUTCOMES}}
+            for name, sub in self.by_persona().items()
+        }
+
     def summary(self) -> dict[str, Any]:
         """The metrics as a flat JSON-ready dict (NaN becomes None)."""
         out: dict[str, Any] = {
@@ -254,3 +269,19 @@ class EvaluationResult:
             "backend": self.backend,
         }
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in out.items()}
+
+
+def persona_rates_over_runs(runs: Sequence[dict[str, dict[str, Any]]]) -> dict[str, dict[str, Any]]:
+    """Each persona's mean rates over several runs' :meth:`EvaluationResult.persona_rates`, with its range of success.
+
+    ``runs``: one per training seed, on the same episodes; ``success_rate_range`` is the lowest and highest.
+    """
+    out = {}
+    for persona in runs[0]:
+        found = [run[persona] for run in runs]
+        out[persona] = {
+            "episodes": found[0]["episodes"],
+            **{f"{o}_rate": float(np.mean([f[f"{o}_rate"] for f in found])) for o in OUTCOMES},
+            "success_rate_range": [min(f["success_rate"] for f in found), max(f["success_rate"] for f in found)],
+        }
+    return out

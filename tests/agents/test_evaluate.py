@@ -455,3 +455,21 @@ def test_selection_study_keeps_each_rules_best_and_correlates_it_with_the_target
     assert study["validation"]["best_of_pairs_target_success"] == [0.9, 0.7]  # runs (0, 2) and (1, 3)
     with pytest.raises(ValueError, match="selection_study needs >= 3 runs"):
         selection_study(runs[:2], ("train",))
+
+
+def test_persona_rates_split_an_evaluation_and_average_over_runs():
+    """Each persona's rates weigh back to the whole; over runs, the mean and the range of each persona's success."""
+    from agents.evaluate.results import persona_rates_over_runs
+
+    result = evaluate("blind", env_id="CoopGym/SitToStandHard-v2", personas="test", episodes=40, seed=0)
+    rates = result.persona_rates()
+    assert set(rates) == {"frail", "forgetful"} and sum(r["episodes"] for r in rates.values()) == 40
+    for outcome in OUTCOMES:
+        whole = sum(r["episodes"] * r[f"{outcome}_rate"] for r in rates.values()) / 40
+        assert whole == pytest.approx(result.rate(outcome))
+    other = {p: {**r, "success_rate": r["success_rate"] / 2} for p, r in rates.items()}
+    over = persona_rates_over_runs([rates, other])
+    frail = rates["frail"]["success_rate"]
+    assert over["frail"]["success_rate"] == pytest.approx(0.75 * frail)
+    assert over["frail"]["success_rate_range"] == [frail / 2, frail]
+    assert over["frail"]["unsafe_rate"] == pytest.approx(rates["frail"]["unsafe_rate"])
