@@ -15,8 +15,8 @@ and the observation it gets (:data:`ROWS`):
   on the measurements alone / on the default observation;
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO trained by ``train.py``'s learner,
   :class:`agents.ppo.PPO`, on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
-  ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by ``agents.ppo``'s recurrent
-  PPO (the hard level's RecurrentPPO settings: PPO's, with an LSTM before the heads); ``ROW@N``
+  ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by
+  :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO's settings, an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no observation normaliser;
@@ -24,10 +24,9 @@ and the observation it gets (:data:`ROWS`):
   next rollout plays, one update behind): what ``python train.py`` trains; ``jax-kalman-lag-population``:
   the same trained across bodies (``personas="train_population"``, other people of the validation people's population);
   ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
-  :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no observation normaliser).
-  Records saved before ``JaxPPO`` was removed (``bench/results/learners*.json`` up to
-  ``learners_ppo.json``) hold ``jax-*`` rows trained by ``JaxPPO``, the same PPO with another
-  sampler and initial draw, and ``agents.ppo``'s as ``ppo-lag``; their ``what`` says which;
+  :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no observation normaliser);
+  records saved before these rows moved to ``agents.ppo`` hold ``jax-*`` PPO rows trained by
+  ``JaxPPO``, the same PPO with another sampler and initial draw (each row's ``what`` says which);
 - ``cleanrl-ppo``: CleanRL's public ``ppo.py``, unmodified, on its defaults (4 envs x 128
   steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
   :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
@@ -166,12 +165,10 @@ ROWS: dict[str, Row] = {
     "jax-lstm-raw": Row(
         "recurrent_ppo",
         {"observation_mode": "raw"},
-        "agents.ppo's recurrent PPO (LSTM: memory), measurements only",
+        "JaxRecurrentPPO (LSTM: memory), measurements only",
         "jax",
     ),
-    "jax-lstm-kalman": Row(
-        "recurrent_ppo", {}, "agents.ppo's recurrent PPO (LSTM), Kalman estimate + measurements", "jax"
-    ),
+    "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
     "jax-unit": Row(
         "ppo",
         {"observation_scale": "unit"},
@@ -380,9 +377,9 @@ def train_one(
 
 
 def _learn(row: Row, config: Any, seed: int, timesteps: int, selection: Any) -> tuple[Any, dict[str, Any]]:
-    """``(model, selected)``: row ``row`` trained (an SB3 row on SB3's vector env, a ``jax`` row by ``agents.ppo``
-    on coop_gym's), the policy kept."""
-    if row.framework == "jax":
+    """``(model, selected)``: row ``row`` trained (a ``jax`` PPO row by ``agents.ppo`` on coop_gym's vector env,
+    the others, ``JaxRecurrentPPO`` too, on SB3's), the policy kept."""
+    if row.framework == "jax" and row.algo == "ppo":
         from agents.ppo import PPO, PPOConfig
         from agents.rl.ppo_run import learn_selected
 

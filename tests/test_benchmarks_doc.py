@@ -275,6 +275,10 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     assert isinstance(built["env"], VecFrameStack) and isinstance(built["env"].venv, VecNormalize)
     with pytest.raises(argparse.ArgumentTypeError, match="jax-raw-stack4"):
         learners._rows("jax-raw-stack4")
+    built.clear()  # the recurrent jax rows are JaxRecurrentPPO's, built as an SB3 class on SB3's vector env
+    with pytest.raises(Built):
+        learners.train_one("jax-lstm-kalman", 0, 64, 4, tmp_path, 4)
+    assert "env" in built and "config" not in built
     # The same sizing names a time_to_quality contender.
     from agents.hyperparams import hyperparams_for
 
