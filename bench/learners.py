@@ -554,11 +554,10 @@ def main(argv: list[str] | None = None) -> int:
 
     args.runs.mkdir(parents=True, exist_ok=True)
     reference_file = args.runs / f"scripted__{args.episodes}.json"
-    if not reference_file.exists() or (
-        args.by_persona and "by_persona" not in json.loads(reference_file.read_text())["oracle"]
-    ):
-        write_json(reference_file, scripted(args.episodes))
-    reference = json.loads(reference_file.read_text())
+    reference = json.loads(reference_file.read_text()) if reference_file.exists() else None
+    if reference is None or (args.by_persona and "by_persona" not in reference["oracle"]):
+        reference = scripted(args.episodes)
+        write_json(reference_file, reference)
     blind, oracle = reference["blind"]["success_rate"], reference["oracle"]["success_rate"]
     table: dict[str, Any] = {}
     for name in args.rows:
