@@ -115,9 +115,10 @@ class Row:
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
-"""The switching rows' filter: the light one ``hard-ppo-switching`` trains and plays with. A filter step
-costs about one person step per particle, so the default filter (1024 particles, 128 hypotheses, what
-the belief caregiver reads) would make each run about four times longer."""
+"""The switching rows' filter: the light one ``hard-ppo-switching`` trains and plays with. A filter step's
+work grows with its particles, so the default filter (1024 particles, 128 hypotheses, what the belief
+caregiver reads) would make each run several times longer (the rows' training time: ``train_wall_s`` in
+``bench/results/learners.json``)."""
 
 TRAINPY_FLAGS = (
     "--num-envs", "16", "--num-steps", "256", "--num-minibatches", "8", "--update-epochs", "10",

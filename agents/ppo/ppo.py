@@ -270,8 +270,8 @@ def make_update(network: Any, config: PPOConfig, nvec: tuple[int, ...], samples:
 
     ``batch``: ``(obs, actions, old_log_probs, advantages, returns)``, one row per sample;
     ``orders``: one permutation of the samples per epoch, (n_epochs, samples), cut into the
-    epoch's minibatches in order. (NumPy draws them: ``jax.random.permutation`` on the CPU costs
-    as much as a fifth of the update.) Built once per process for each set of arguments: the
+    epoch's minibatches in order; NumPy draws them, outside the compiled update (the learner's speed:
+    ``python bench/time_to_quality.py``). Built once per process for each set of arguments: the
     learners of one configuration (seeds, a resumed run) share one compiled update.
     """
     jax, jnp, optax = jax_modules()

@@ -285,7 +285,7 @@ def _sb3() -> Any:
     return pytest.importorskip("stable_baselines3.common.vec_env", reason="stable-baselines3 not installed")
 
 
-@pytest.mark.slow  # ~2 spawned interpreters importing torch: 8-20 s on 2 shared cores
+@pytest.mark.slow  # two spawned interpreters importing torch
 def test_sb3_subproc_spawn_matches_dummy() -> None:
     """Spawned children import the env by its ``coop_gym:`` id; 350 steps cross the time limit."""
     vec_env = _sb3()
