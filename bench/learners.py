@@ -515,7 +515,7 @@ def _row_runs(name: str, args: argparse.Namespace, parser: argparse.ArgumentPars
             parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
         if args.by_persona and "by_persona" not in run and _row(name)[0].framework != "cleanrl":
             run = rescore_by_persona(name, run, args.runs, args.timesteps)
-            write_json(path, {k: v for k, v in run.items() if k != "training_seed"})
+            write_json(path, run)  # the file's own keys (its training_seed too) and the rates per persona
         runs.append(run)
         print(f"{name:>17} seed {seed}: success {run['success_rate']:.3f}", file=sys.stderr)
     if not runs:
