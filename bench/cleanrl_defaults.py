@@ -224,7 +224,8 @@ class Curriculum(gym.Wrapper[Any, Any, Any, Any]):
     the wrapped (hard) id's: a curriculum of levels by id inside one training run, at episode boundaries.
 
     Both levels have the same observations and actions, so the learner sees one env. A start of a training run,
-    not an env version: each episode is one of the two ids' own. The easy env is seeded as the hard one is.
+    not an env version: each episode is one of the two ids' own. A seeded reset seeds both levels, so the hard
+    episodes after the switch follow the run's seed as the easy ones before it do.
     """
 
     def __init__(self, env: gym.Env[Any, Any]) -> None:
@@ -235,9 +236,9 @@ class Curriculum(gym.Wrapper[Any, Any, Any, Any]):
         self.active: gym.Env[Any, Any] = self.easy
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        if seed is not None:
-            self.easy.reset(seed=seed)
         self.active = self.easy if _STEPS_TAKEN[0] < CURRICULUM_STEPS else self.env
+        if seed is not None:  # the level not playing now takes the seed too
+            (self.env if self.active is self.easy else self.easy).reset(seed=seed)
         return self.active.reset(seed=seed, options=options)
 
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:

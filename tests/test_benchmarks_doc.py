@@ -555,7 +555,8 @@ def test_the_never_lift_studys_envs_log_outcomes_and_start_mid_guidance_or_as_th
 
 def test_the_curriculum_plays_the_easy_level_until_its_step_count_then_the_hard_one() -> None:
     """``LoggedCurriculum/...``: episodes of the paper's level, seeded as the hard id's, until the process's learner has
-    taken ``CURRICULUM_STEPS`` steps; from the next reset on, exactly the hard id's episodes."""
+    taken ``CURRICULUM_STEPS`` steps; from the next reset on, exactly the hard id's episodes, their stream seeded by
+    the run's first seeded reset."""
     import gymnasium as gym
 
     _bench("cleanrl_defaults")
@@ -575,6 +576,8 @@ def test_the_curriculum_plays_the_easy_level_until_its_step_count_then_the_hard_
     assert same(first, trace(easy, 5)) and not same(first, trace(hard, 5))
     assert same(trace(curriculum, None), trace(easy, None))  # the easy env's own stream goes on
     cleanrl._STEPS_TAKEN[0] = cleanrl.CURRICULUM_STEPS  # the learner's budget for the easy level is spent
+    hard.reset(seed=5)  # the hard level's stream, as the curriculum's first (seeded) reset left it
+    assert same(trace(curriculum, None), trace(hard, None))
     assert same(trace(curriculum, 7), trace(hard, 7))
     defaults = _bench("library_defaults")
     assert f"{cleanrl.CURRICULUM_STEPS:,} steps" in defaults.NEVER_LIFT_CELLS["cleanrl-ppo-curriculum"].what
