@@ -6,40 +6,23 @@
 Does the paper's estimator help a learner, and can memory replace it? Each row is a learner
 and the observation it gets (:data:`ROWS`):
 
-- ``ppo-kalman``: SB3's PPO (MLP) on the default observation, the paper's Kalman estimate
-  of ``xi`` beside the measurements -- what ``python train.py --framework sb3`` trains;
-- ``ppo-switching``: the same PPO with the switching particle filter's ``P(xi)`` added
-  (``estimator="switching"``, the light filter of :data:`SWITCHING`);
-- ``ppo-raw``: the same PPO on the measurements alone (no estimate, no memory);
-- ``recurrent-raw`` / ``recurrent-kalman``: sb3-contrib's RecurrentPPO (an LSTM: memory)
-  on the measurements alone / on the default observation;
+- ``ppo-kalman``: SB3's PPO (MLP) on the default observation, the paper's Kalman estimate of ``xi`` beside
+  the measurements (``python train.py --framework sb3``); ``ppo-switching``: + the switching filter's
+  ``P(xi)`` (:data:`SWITCHING`); ``ppo-raw``: the measurements alone; ``recurrent-raw`` / ``recurrent-kalman``:
+  sb3-contrib's RecurrentPPO (an LSTM: memory) on the measurements alone / on the default observation;
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO trained by ``train.py``'s learner,
   :class:`agents.ppo.PPO`, on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
   ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by
   :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO's settings, an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
-  ``jax-unit``: ``jax-kalman`` on the unit-scaled observations, no observation normaliser;
-  ``jax-kalman-lag``: ``jax-kalman`` with ``policy_lag=1`` (each update on a second core while the
-  next rollout plays, one update behind): what ``python train.py`` trains; ``jax-kalman-lag-population``:
-  the same trained across bodies (``personas="train_population"``, other people of the validation people's population);
-  ``jax-discreteunit``: ``jax-kalman`` on CleanRL's interface (the 18 joint actions of
-  :data:`CLEANRL_ENV_ID`, its unit-scaled observations, no observation normaliser);
-  records saved before these rows moved to ``agents.ppo`` hold ``jax-*`` PPO rows trained by
-  ``JaxPPO``, the same PPO with another sampler and initial draw (each row's ``what`` says which);
-- ``cleanrl-ppo``: CleanRL's public ``ppo.py``, unmodified, on its defaults (4 envs x 128
-  steps, 4 epochs, its own seed; the id's personas; the final policy, greedy), given
-  :data:`CLEANRL_ENV_ID` as a user of that script would (``--cleanrl-script PATH``; the script
-  is not part of coop_gym, see ``bench/cleanrl_defaults.py``): the library-defaults row;
-  ``cleanrl-ppo-priced``: the same, trained with a timeout priced as a failed assistance
-  (``bench/cleanrl_defaults.py``'s ``PricedTimeout``, a wrapper: no coop_gym id has this reward) and scored on the id;
-  ``cleanrl-ppo-ent02``: the same script on the id with one flag changed, ``--ent-coef 0.02``
-  (``train.py``'s entropy bonus, CleanRL's default is 0.01); ``cleanrl-ppo-trainpy``: the script
-  with all of ``train.py``'s PPO settings as flags (:data:`TRAINPY_FLAGS`), ``cleanrl-ppo-rollout`` and
-  ``cleanrl-ppo-loss`` with its first half (rollout and update size) or second half (learning rate,
-  discount, entropy bonus, value clipping); ``cleanrl-ppo-wide``: on
-  its defaults, trained on ``train.py``'s wider personas (``bench/cleanrl_defaults.py``'s ``WidePersonas``);
-  ``cleanrl-ppo-trainpy-wide``: both;
+  ``jax-unit``, ``jax-kalman-lag`` (``train.py``'s default), ``jax-kalman-lag-population`` (trained across
+  bodies), ``jax-switching-*``, ``jax-discreteunit``: variations of ``jax-kalman``, each row's ``what``;
+  records saved before these rows moved to ``agents.ppo`` hold ``jax-*`` PPO rows trained by ``JaxPPO``;
+- ``cleanrl-*``: CleanRL's public ``ppo.py`` as its user runs it (``--cleanrl-script PATH``; the script is
+  not part of coop_gym, see ``bench/cleanrl_defaults.py``), given :data:`CLEANRL_ENV_ID`, its final policy
+  greedy: ``cleanrl-ppo`` unmodified on its defaults (the library-defaults row), the others with the flags,
+  people or reward wrapper their ``what`` names (:data:`TRAINPY_FLAGS`: all of ``train.py``'s PPO settings);
 - ``ROW-stackK`` (e.g. ``ppo-raw-stack16``): an SB3 row with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
@@ -54,15 +37,14 @@ the mind-reading score ``(success - blind) / (oracle - blind)`` with a stratifie
 95 % interval (rliable's method, :func:`agents.evaluate.headroom.iqm_across_runs`) and
 the training wall time.
 
-Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with the kept
-model beside it) as soon as it is done; a rerun with the same ``--runs`` skips what is
-there, so an interrupted sweep loses only the run in progress (a ``cleanrl-*`` run's file also holds its
-policy's score on the validation people, ``validation_people``: what a choice of the script's flags is
-made on, never the held-out score); ``--no-train`` reports the runs
-there and trains none (rows may then have different seeds). ``--save`` writes the report
-to ``bench/results/learners.json`` (``bench/result_files.py``). ``--people`` has every scored policy also
-play the validation people and the held-out episodes: each row's ``people`` says how well each selecting
-set predicts the held-out people (``bench/results/selection_people.json``).
+Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with the kept model beside
+it) as soon as it is done; a rerun with the same ``--runs`` skips what is there, so an interrupted sweep
+loses only the run in progress. Each run's file also holds its kept policy's score on the validation
+people, ``validation_people``: what a choice of settings is made on, never the held-out score.
+``--no-train`` reports the runs there and trains none (rows may then have different seeds). ``--save``
+writes the report to ``bench/results/learners.json`` (``bench/result_files.py``). ``--people`` has every
+scored policy also play the validation people and the held-out episodes: each row's ``people`` says how
+well each selecting set predicts the held-out people (``bench/results/selection_people.json``).
 """
 
 from __future__ import annotations
@@ -111,7 +93,7 @@ class Row:
     """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``). A JaxPPO row without
     ``policy_lag`` here runs ``policy_lag=0``, whatever ``train.py``'s default."""
     personas: str = "train_wide"
-    """The people trained on (``train.py``'s wider training personas, or e.g. ``"train_population"``)."""
+    """The people trained on (``train.py``'s wider training personas, or ``"train_population"``)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -119,6 +101,11 @@ SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_
 work grows with its particles, so the default filter (1024 particles, 128 hypotheses, what the belief
 caregiver reads) would make each run several times longer (the rows' training time: ``train_wall_s`` in
 ``bench/results/learners.json``)."""
+SWITCHING_TRUE: dict[str, Any] = {
+    "estimator": "switching",
+    "estimator_options": {"n_particles": 256, "hypotheses": 1, "true_person": True},
+}
+"""The switching filter given each episode's true person: what a caregiver that had identified the person reads."""
 
 TRAINPY_FLAGS = (
     "--num-envs", "16", "--num-steps", "256", "--num-minibatches", "8", "--update-epochs", "10",
@@ -155,6 +142,22 @@ ROWS: dict[str, Row] = {
         "ppo",
         {},
         "jax-kalman-lag trained across bodies: 512 persons of the validation people's population (train_population)",
+        "jax",
+        algo_kwargs={"policy_lag": 1},
+        personas="train_population",
+    ),
+    "jax-switching-population": Row(
+        "ppo",
+        SWITCHING,
+        "jax-kalman-lag-population + the switching filter's P(xi) (32 person hypotheses weighed in each episode)",
+        "jax",
+        algo_kwargs={"policy_lag": 1},
+        personas="train_population",
+    ),
+    "jax-switching-true-population": Row(
+        "ppo",
+        SWITCHING_TRUE,
+        "jax-switching-population with the filter given each episode's true person (the bound of identifying them)",
         "jax",
         algo_kwargs={"policy_lag": 1},
         personas="train_population",
@@ -288,7 +291,7 @@ def _rows(text: str) -> list[str]:
 
 
 VALIDATION_PEOPLE_KEYS = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
-"""What a ``cleanrl-*`` run records of its policy on the validation people (``personas="validation"``)."""
+"""What a run records of its kept policy on the validation people (``personas="validation"``)."""
 
 
 def train_cleanrl(
@@ -364,6 +367,7 @@ def train_one(
     saved = save_agent(model, folder / f"{name}__{seed}__{timesteps}", algo=row.algo, env_id=ENV_ID)
     agent = load_agent(saved)  # what a user loads, not the object in memory
     result = evaluate(agent, ENV_ID, "test", episodes, 0, env_kwargs=row.env_kwargs, name=f"{name}:{seed}")
+    people_rates = evaluate(agent, ENV_ID, "validation", validation, VALIDATION_SEED, env_kwargs=row.env_kwargs)
     return {
         **result.summary(),  # its "seed" is the first held-out episode's
         "by_persona": result.persona_rates(),
@@ -373,6 +377,7 @@ def train_one(
         "train_wall_s": wall_s,
         "kept_step": selected["timesteps"],
         "validation_success_rate": selected["validation_success_rate"],
+        "validation_people": {key: people_rates.summary()[key] for key in VALIDATION_PEOPLE_KEYS},
         **({"candidates": selected["scores"]} if people else {}),
     }
 

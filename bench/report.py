@@ -21,6 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from report_format import Results
 from report_learners import (
+    across_bodies,
     best_of_seeds,
     by_persona,
     learners,
@@ -76,6 +77,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     training_budget,
     selection_people,
     best_of_seeds,
+    across_bodies,
     library_defaults,
     outside_learners,
     never_lift,

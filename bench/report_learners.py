@@ -426,3 +426,62 @@ def _learner_row(label: str, row: dict[str, Any]) -> list[str]:
         _pct(row["unsafe_rate_mean"]),
         f"{row['train_wall_s_median']:.0f} s",
     ]
+
+
+_BODIES_COMMAND = (
+    "python bench/learners.py --rows jax-switching-population,jax-switching-true-population --seeds 0,1,2,3"
+    " --save bench/results/learners_bodies.json"
+)
+
+
+def _bodies_cells(label: str, pairs: list[tuple[float, float]], frail: list[float], report: Any) -> list[str]:
+    """One row of :func:`across_bodies`: ``pairs`` of (validation people's, held-out success) per seed."""
+    validation, held_out = [v for v, _ in pairs], [h for _, h in pairs]
+    gap = statistics.mean(v - h for v, h in pairs)
+    belief = report["scripted"]["belief"]["success_rate"]
+    return [
+        label,
+        str(len(pairs)),
+        _pct(statistics.mean(validation)),
+        _iqm_cell(held_out, report),
+        f"{100 * gap:+.1f}",
+        _pct(min(held_out)),
+        _pct(statistics.mean(frail)) if frail else "—",
+        f"{sum(h >= belief for h in held_out)} of {len(held_out)}",
+    ]
+
+
+def across_bodies(results: Results) -> str:
+    """Training across bodies with and without the switching filter's ``P(xi)``: validation people against test."""
+    head = "### Across bodies: what the observation carries to people not met\n"
+    record = results.get("learners_bodies")
+    if record is None:
+        return f"{head}\nNo results file yet: `{_BODIES_COMMAND}`, then `python bench/report.py`.\n"
+    report, rows = record["results"], []
+    for stem in ("selection_people",):
+        found = results.get(stem)
+        for name, row in (found["results"]["rows"] if found else {}).items():
+            if kept := _kept_of_seeds(row):
+                label = f"`{name}` (`bench/results/{stem}.json`)"
+                rows.append(_bodies_cells(label, [kept[s][:2] for s in sorted(kept)], [], report))
+    for name, row in report["rows"].items():
+        pairs = [(run["validation_people"]["success_rate"], run["success_rate"]) for run in row["per_seed"]]
+        frail = [run["by_persona"]["frail"]["success_rate"] for run in row["per_seed"] if "by_persona" in run]
+        rows.append(_bodies_cells(f"`{name}`: {row['what']}", pairs, frail, report))
+    header = ["learner: observation", "seeds", "validation people: mean", "held-out success, IQM [95 % CI]; score"]
+    header += ["validation minus held-out (points, mean)", "held-out: lowest seed", "frail: mean", "seeds ≥ belief"]
+    scripted = ", ".join(f"{name} {_pct(report['scripted'][name]['success_rate'])}" for name in report["scripted"])
+    return f"""{head}
+{_provenance(record)}
+
+Each row trains as [Learners and observations](#learners-and-observations-on-the-hard-level) does
+({report["timesteps"]:,} steps, the best policy of the last half on the training personas' validation episodes kept);
+`train_population` rows on 512 persons of the validation people's population instead of the wider training personas.
+Each seed's kept policy plays 1000 episodes of the validation people (the set every choice is made on) and the same
+{report["episodes"]} held-out episodes of the test people ({scripted}); the gap column is the mean over seeds of the
+first minus the second. The `switching` rows observe the switching filter's `P(xi)` beside the Kalman estimate:
+its person hypotheses are weighed by the readings within each episode, and the `true` row's filter is given each
+episode's true person instead (what a caregiver that had identified the person would read).
+
+{_table(header, rows)}
+"""

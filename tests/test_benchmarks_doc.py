@@ -592,3 +592,55 @@ def test_a_lift_hazard_policy_lifts_with_its_probability_and_cues_at_random() ->
     assert set(never % 2) == {0} and set(always % 2) == {1}
     assert set(never // 2) == set(range(9))
     assert abs(np.mean(defaults.LiftHazard(0.5).predict(observations)[0] % 2) - 0.5) < 0.05
+
+
+def test_the_switching_population_rows_train_across_bodies_on_their_filter(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``jax-switching-population``: the light filter's hypotheses; ``-true-``: the filter given the true person."""
+    pytest.importorskip("jax")
+    import agents.ppo
+
+    learners = _bench("learners")
+    built: dict[str, Any] = {}
+
+    class Built(Exception):
+        pass
+
+    def capture(env_id: str, config: Any, seed: int, env_kwargs: dict[str, Any]) -> Any:
+        built.update(config=config, env_kwargs=env_kwargs)
+        raise Built
+
+    monkeypatch.setattr(agents.ppo, "PPO", capture)
+    for name, options in (
+        ("jax-switching-population", {"n_particles": 256, "hypotheses": 32}),
+        ("jax-switching-true-population", {"n_particles": 256, "hypotheses": 1, "true_person": True}),
+    ):
+        with pytest.raises(Built):
+            learners.train_one(name, 0, 64, 4, tmp_path, 4)
+        kwargs = built["env_kwargs"]
+        assert kwargs["personas"] == "train_population" and kwargs["estimator"] == "switching", name
+        assert kwargs["estimator_options"] == options and built["config"].policy_lag == 1, name
+
+
+def test_across_bodies_reports_each_rows_validation_people_against_the_test_people() -> None:
+    """The gap column is the mean over seeds of validation-people minus held-out success, in points."""
+    report = _bench("report_learners")
+    scripted = {name: {"success_rate": rate} for name, rate in (("oracle", 1.0), ("blind", 0.6), ("belief", 0.85))}
+
+    def run(seed: int, validation: float, held_out: float) -> dict[str, Any]:
+        frail = {"frail": {"success_rate": held_out - 0.1}}
+        people = {"success_rate": validation}
+        return {"training_seed": seed, "success_rate": held_out, "validation_people": people, "by_persona": frail}
+
+    runs = [run(0, 0.9, 0.86), run(1, 0.8, 0.82), run(2, 0.7, 0.80)]
+    row = {"what": "a row", "per_seed": runs}
+    body = {"env_id": "E", "timesteps": 1000, "episodes": 10, "scripted": scripted, "rows": {"jax-x": row}}
+    machine = {"cpu_count": 2, "load_average_1min": 1.0}
+    record = {"command": "python bench/learners.py", "date": "2026-12-07", "machine": machine, "results": body}
+    assert "No results file yet" in report.across_bodies({})
+    page = report.across_bodies({"learners_bodies": record})
+    line = next(line for line in page.splitlines() if line.startswith("| `jax-x`"))
+    cells = [cell.strip() for cell in line.strip("|").split("|")]
+    assert cells[1:3] == ["3", "80.0 %"] and cells[4] == "-2.7" and cells[5] == "80.0 %", cells
+    assert cells[6] == "72.7 %" and cells[7] == "1 of 3", cells
