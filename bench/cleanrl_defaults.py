@@ -215,24 +215,26 @@ class MidGuidance(gym.Wrapper[Any, Any, Any, Any]):
 
 CURRICULUM_EASY_ENV_ID = "CoopGym/SitToStandDiscreteUnit-v0"
 """The curriculum's first level: the paper's (its personas and timing), CleanRL's interface as on the hard id."""
+CURRICULUM_EASY_SB3_ENV_ID = "CoopGym/SitToStand-v0"
+"""The same level on the interface SB3's defaults train on (``CoopGym/SitToStandHard-v2``'s spaces)."""
 CURRICULUM_STEPS = 100_000
 """The learner's steps (all its envs: :data:`OUTCOME_LOG`'s count) after which :class:`Curriculum` plays hard."""
 
 
 class Curriculum(gym.Wrapper[Any, Any, Any, Any]):
-    """Episodes of :data:`CURRICULUM_EASY_ENV_ID` until the process has taken :data:`CURRICULUM_STEPS` steps, then
-    the wrapped (hard) id's: a curriculum of levels by id inside one training run, at episode boundaries.
+    """Episodes of ``easy_id`` (:data:`CURRICULUM_EASY_ENV_ID`) until the process has taken :data:`CURRICULUM_STEPS`
+    steps, then the wrapped (hard) id's: a curriculum of levels by id inside one training run, at episode boundaries.
 
     Both levels have the same observations and actions, so the learner sees one env. A start of a training run,
     not an env version: each episode is one of the two ids' own. A seeded reset seeds both levels, so the hard
     episodes after the switch follow the run's seed as the easy ones before it do.
     """
 
-    def __init__(self, env: gym.Env[Any, Any]) -> None:
+    def __init__(self, env: gym.Env[Any, Any], easy_id: str = CURRICULUM_EASY_ENV_ID) -> None:
         super().__init__(env)
-        self.easy = gym.make(CURRICULUM_EASY_ENV_ID)
+        self.easy = gym.make(easy_id)
         if self.easy.observation_space != env.observation_space or self.easy.action_space != env.action_space:
-            raise ValueError(f"Curriculum: {CURRICULUM_EASY_ENV_ID} and {env.spec and env.spec.id} differ in spaces")
+            raise ValueError(f"Curriculum: {easy_id} and {env.spec and env.spec.id} differ in spaces")
         self.active: gym.Env[Any, Any] = self.easy
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -267,6 +269,7 @@ STUDY_ENV_IDS: dict[str, dict[str, Any]] = {
     "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "mid_guidance": True},
     "LoggedPriced/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "priced": True},
     "LoggedCurriculum/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "curriculum": True},
+    "LoggedPopulation/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "personas": "train_population"},
 }
 """Measurement aids, not env versions: what CleanRL's script trains on in the never-lift study
 (``--env-id cleanrl_defaults:<id>``; ``gym.make`` passes no keyword, so each id's settings are in its

@@ -252,6 +252,8 @@ class Cell:
     """The id the final policy is scored on: its starts seated, its reward the id's own."""
     flags: tuple[str, ...] = ()
     """CleanRL's flags beyond its defaults."""
+    sb3_curriculum: bool = False
+    """SB3's defaults' envs each in :class:`cleanrl_defaults.Curriculum` (the paper's level first)."""
 
 
 _LOGGED = "Logged/SitToStandHardDiscreteUnit-v2"
@@ -271,6 +273,12 @@ NEVER_LIFT_CELLS: dict[str, Cell] = {
         "the same, its first 100,000 steps on the paper's level (SitToStandDiscreteUnit-v0), then hard-v2's "
         "(cleanrl_defaults.Curriculum)",
         "LoggedCurriculum/SitToStandHardDiscreteUnit-v2",
+        CLEANRL_ENV_ID,
+    ),
+    "cleanrl-ppo-population": Cell(
+        "the same, trained across bodies: 512 persons of the validation people's population (personas "
+        "train_population)",
+        "LoggedPopulation/SitToStandHardDiscreteUnit-v2",
         CLEANRL_ENV_ID,
     ),
     "cleanrl-ppo-priced": Cell(
@@ -294,6 +302,13 @@ NEVER_LIFT_CELLS: dict[str, Cell] = {
         TRAINPY_FLAGS[:8],
     ),
     "sb3-defaults": Cell('PPO("MlpPolicy", make_vec_env(id, n_envs=8)): SB3 defaults', None, HARD_ID),
+    "sb3-defaults-curriculum": Cell(
+        "SB3's defaults, their first 100,000 steps on the paper's level (SitToStand-v0), then hard-v2's "
+        "(cleanrl_defaults.Curriculum)",
+        None,
+        HARD_ID,
+        sb3_curriculum=True,
+    ),
 }
 """The study's cells (:class:`Cell`)."""
 STUDY_SETS = ("validation", "train")
@@ -375,7 +390,10 @@ def _train_cell(cell: str, seed: int, timesteps: int, script: Path | None, folde
     cleanrl_defaults.clear_outcome_log()
     train_env, flags = NEVER_LIFT_CELLS[cell].train_env, NEVER_LIFT_CELLS[cell].flags
     if train_env is None:
-        _train_defaults(seed, folder / f"{cell}__{seed}.zip", timesteps, cleanrl_defaults.OutcomeLog)
+        log, curriculum = cleanrl_defaults.OutcomeLog, cleanrl_defaults.Curriculum
+        easy = cleanrl_defaults.CURRICULUM_EASY_SB3_ENV_ID
+        wrapper = (lambda env: log(curriculum(env, easy))) if NEVER_LIFT_CELLS[cell].sb3_curriculum else log
+        _train_defaults(seed, folder / f"{cell}__{seed}.zip", timesteps, wrapper)
         return SB3Agent(PPO.load(folder / f"{cell}__{seed}.zip", device="cpu"), "ppo", HARD_ID, name=cell)
     if script is None:
         raise SystemExit(f"--cleanrl-script: the {cell} cell needs CleanRL's ppo.py")

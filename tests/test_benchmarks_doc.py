@@ -644,3 +644,30 @@ def test_across_bodies_reports_each_rows_validation_people_against_the_test_peop
     cells = [cell.strip() for cell in line.strip("|").split("|")]
     assert cells[1:3] == ["3", "80.0 %"] and cells[4] == "-2.7" and cells[5] == "80.0 %", cells
     assert cells[6] == "72.7 %" and cells[7] == "1 of 3", cells
+
+
+def test_the_never_lift_studys_population_and_sb3_curriculum_cells_train_on_what_they_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``cleanrl-ppo-population`` trains on ``train_population``; ``sb3-defaults-curriculum`` wraps each of SB3's
+    envs in the curriculum from the paper's level on the hard id's interface, its outcomes logged."""
+    import gymnasium as gym
+
+    _bench("cleanrl_defaults")
+    cleanrl = sys.modules[gym.spec("LoggedPopulation/SitToStandHardDiscreteUnit-v2").entry_point.__module__]
+    assert gym.spec("LoggedPopulation/SitToStandHardDiscreteUnit-v2").kwargs["personas"] == "train_population"
+    env = gym.make("LoggedPopulation/SitToStandHardDiscreteUnit-v2")
+    people = env.unwrapped.personas  # type: ignore[attr-defined]
+    assert len(people) == 512 and all(p.name.startswith("population_") for p in people)
+    defaults = _bench("library_defaults")
+    wrappers: list[Any] = []
+    monkeypatch.setattr(defaults, "_train_defaults", lambda seed, path, steps, wrapper: wrappers.append(wrapper))
+    monkeypatch.setattr(defaults, "SB3Agent", lambda *args, **kwargs: None)
+    monkeypatch.setattr(defaults.PPO, "load", lambda *args, **kwargs: None)
+    for cell in ("sb3-defaults", "sb3-defaults-curriculum"):
+        defaults._train_cell(cell, 0, 64, None, tmp_path)
+    cleanrl = sys.modules["cleanrl_defaults"]  # the module the cells train with
+    assert wrappers[0] is cleanrl.OutcomeLog
+    wrapped = wrappers[1](gym.make(defaults.HARD_ID))
+    assert isinstance(wrapped, cleanrl.OutcomeLog) and isinstance(wrapped.env, cleanrl.Curriculum)
+    assert wrapped.env.easy.spec.id == cleanrl.CURRICULUM_EASY_SB3_ENV_ID
