@@ -161,6 +161,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "selection_people",
         ),
         (
+            "learners",
+            [
+                *["--rows", "jax-switching-true-population", "--seeds", "0", "--timesteps", "4096", "--episodes", "4"],
+                *["--validation-episodes", "4", "--runs", str(tmp / "learners")],
+            ],
+            "learners_bodies.json",
+            "learners_bodies",
+        ),
+        (
             "cleanrl_defaults",
             [
                 "--script",
