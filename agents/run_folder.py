@@ -36,6 +36,7 @@ __all__ = [
     "ARGS_FILE",
     "CHECKPOINTS_DIR",
     "COMPLETE_FILE",
+    "ENSEMBLE_PREFIX",
     "INTERRUPTED_FILE",
     "MODEL_FILE",
     "RLLIB_CHECKPOINT_DIR",
@@ -45,6 +46,9 @@ __all__ = [
     "is_rllib_run",
     "is_unfinished_run",
 ]
+
+ENSEMBLE_PREFIX = "ensemble:"
+"""``ensemble:MODEL+MODEL+...`` names saved agents played as one (:mod:`agents.rl.ensemble`)."""
 
 MODEL_FILE = "model.zip"
 """The SB3 model, self-contained (metadata and normaliser inside)."""

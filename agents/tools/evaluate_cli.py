@@ -26,7 +26,7 @@ from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import tyro
 
@@ -52,7 +52,7 @@ from agents.evaluate.runs import (
     training_seed,
 )
 from agents.pretrained import PREFIX, is_pretrained, pretrained_names
-from agents.run_folder import MODEL_FILE, is_rllib_run
+from agents.run_folder import ENSEMBLE_PREFIX, MODEL_FILE, is_rllib_run
 from coop_gym.cli import BadArgs, fail, output_path_problem, parse, seed_range_problem
 from coop_gym.model.personas import resolve_personas
 
@@ -66,7 +66,8 @@ DESCRIPTION = "Score agents on the same seeded sit-to-stand episodes (episode k 
 _AGENT_HELP = f"a scripted agent: {', '.join(SCRIPTED_AGENTS)}"
 _MODEL_HELP = (
     "a saved SB3 model (.zip, loaded with agents.rl.load_agent), an RLlib run folder (agents.rl.rllib) "
-    f"or a model shipped with the package ({', '.join(PREFIX + n for n in pretrained_names())})"
+    f"or a model shipped with the package ({', '.join(PREFIX + n for n in pretrained_names())}); "
+    "ensemble:MODEL+MODEL+...: saved MLP models acting on their mean action probabilities (agents.rl.ensemble)"
 )
 _ENV_HELP = f"env id (default: the models' env, scripted agents' too; else {DEFAULT_ENV_ID})"
 _COMPARE_HELP = (
@@ -254,6 +255,11 @@ def _entries_problem(entries: list[str]) -> str | None:
     """The first agent given twice, or neither a scripted agent nor a saved model (None if all are fine)."""
     given: dict[str, str] = {}
     for entry in entries:
+        if entry.startswith(ENSEMBLE_PREFIX):
+            members = entry.removeprefix(ENSEMBLE_PREFIX).split("+")
+            if missing := [m for m in members if not is_pretrained(m) and not Path(m).exists()]:
+                return f"{entry!r}: no saved model at {', '.join(map(repr, missing))}"
+            continue
         same = entry if entry in SCRIPTED_AGENTS or is_pretrained(entry) else _model_file(entry)
         if same in given:  # two rows of one agent, and one score would overwrite the other
             first = given[same]
@@ -316,16 +322,20 @@ def _planned(args: Args, entry: str, name: str) -> tuple[Agent | str, str, str]:
         env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
         return rllib_agent, env_id, f"rllib_ppo:{name}"
     from agents.rl import load_agent, observation_features
+    from agents.rl.ensemble import load_ensemble
 
     try:
-        loaded = load_agent(entry)
+        if entry.startswith(ENSEMBLE_PREFIX):
+            loaded: Any = load_ensemble(entry.removeprefix(ENSEMBLE_PREFIX).split("+"), name=entry)
+        else:
+            loaded = load_agent(entry)
     except (OSError, ValueError) as exc:
         fail(PROG, f"--model {entry}: {exc}")
     env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
     problem = feature_mismatch(loaded.features, observation_features(env_id, env_kwargs=loaded.env_kwargs), env_id)
     if problem:
         fail(PROG, f"--model {entry}: {problem}")
-    label = loaded.name if is_pretrained(entry) else f"{loaded.algo}:{name}"
+    label = loaded.name if is_pretrained(entry) or entry.startswith(ENSEMBLE_PREFIX) else f"{loaded.algo}:{name}"
     return loaded, env_id, label
 
 

@@ -1,0 +1,92 @@
+"""Several trained caregivers as one: the greedy action of their averaged action probabilities.
+
+An :class:`EnsembleAgent` holds saved MLP policies (``train.py`` runs, ``--seeds`` folders' seeds) of
+one env and observation. Each member normalises the observation with its own statistics and gives
+its probabilities per action head; the ensemble takes, per head, the action of highest mean
+probability. It follows the agents' ``predict`` protocol, so :func:`agents.evaluate.evaluate`
+scores it as any other agent.
+
+Example:
+    >>> from agents.rl.ensemble import load_ensemble
+    >>> agent = load_ensemble(["runs/a", "runs/b"])  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.rl.bundle import GreedyActor, SB3Agent, load_agent
+from agents.run_folder import ENSEMBLE_PREFIX
+
+__all__ = ["ENSEMBLE_PREFIX", "EnsembleAgent", "load_ensemble"]
+
+
+class EnsembleAgent:
+    """The greedy action of the members' mean action probabilities (see the module docstring).
+
+    Raises:
+        ValueError: fewer than two members, a member that is not a feed-forward actor-critic on a
+            ``Discrete`` or ``MultiDiscrete`` action, or members of other envs, features or env kwargs.
+    """
+
+    def __init__(self, members: Sequence[SB3Agent], name: str | None = None) -> None:
+        """Check that the members agree on what they play (their env, features and kwargs are the ensemble's)."""
+        if len(members) < 2:
+            raise ValueError(f"an ensemble needs at least 2 members, got {len(members)}")
+        self.members, self.actors = list(members), [GreedyActor.of(m.model.policy) for m in members]
+        first = self.members[0]
+        for index, (member, actor) in enumerate(zip(self.members, self.actors, strict=True)):
+            if actor is None or member.frame_stack != 1:
+                raise ValueError(f"ensemble member {index} ({member.name}): MLP actor-critics only, no frame stack")
+            for what in ("env_id", "features", "env_kwargs", "action_space"):
+                if getattr(member, what) != getattr(first, what):
+                    raise ValueError(
+                        f"ensemble member {index} ({member.name}) has {what} {getattr(member, what)!r}, "
+                        f"member 0 has {getattr(first, what)!r}"
+                    )
+        self.env_id, self.features, self.env_kwargs = first.env_id, first.features, dict(first.env_kwargs)
+        self.observation_space, self.action_space, self.algo = first.observation_space, first.action_space, first.algo
+        self.name = name or f"ensemble of {len(self.members)}"
+
+    def probabilities(self, observation: NDArray[Any]) -> list[NDArray[np.float64]]:
+        """Per action head, the members' mean probabilities ``(N, n_head)`` for a batch ``(N, D)``."""
+        import torch
+
+        total: list[NDArray[np.float64]] | None = None
+        for member, actor in zip(self.members, self.actors, strict=True):
+            assert actor is not None
+            policy = actor.policy
+            if policy.training:
+                policy.set_training_mode(False)
+            with torch.inference_mode():
+                obs = torch.as_tensor(member.normalize(np.asarray(observation).reshape(-1, self._width())))
+                logits = policy.action_net(policy.mlp_extractor.forward_actor(policy.pi_features_extractor(obs)))
+                heads = torch.split(logits, actor.heads or [logits.shape[1]], dim=1)
+                probs = [torch.softmax(h.double(), dim=1).numpy() for h in heads]
+            total = probs if total is None else [t + p for t, p in zip(total, probs, strict=True)]
+        assert total is not None
+        return [t / len(self.members) for t in total]
+
+    def _width(self) -> int:
+        return int(np.prod(self.observation_space.shape or (1,)))
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[NDArray[np.int64], Any]:
+        """``(actions, state)``: per head the action of highest mean probability (``deterministic`` only)."""
+        if not deterministic:
+            raise ValueError("EnsembleAgent plays greedy only (deterministic=True)")
+        single = np.asarray(observation).ndim == 1
+        heads = [p.argmax(axis=1) for p in self.probabilities(observation)]
+        actions = heads[0] if self.actors[0].heads is None else np.stack(heads, axis=1)  # type: ignore[union-attr]
+        return (actions[0] if single else actions), state
+
+
+def load_ensemble(paths: Sequence[str | Path], name: str | None = None) -> EnsembleAgent:
+    """The saved agents at ``paths`` (run folders, ``model.zip`` files or ``pretrained:NAME``) as one ensemble."""
+    return EnsembleAgent([load_agent(path) for path in paths], name)
