@@ -1,9 +1,8 @@
 """Train a robot-caregiver guidance agent, then score it against the scripted baselines.
 
-``python train.py`` trains PPO on ``CoopGym/SitToStandHard-v2`` (training personas only; ``--seeds N``: N seeds, the
-best on the validation people kept), scores it and every scripted baseline on the same 1000 seeded episodes of the
-held-out personas, prints the comparison and saves ``runs/{env}__{algo}__{seed}__{time}/``. Ctrl-C stops at a
-checkpoint; ``--resume RUN`` continues it. Read top to bottom: :class:`Args` (its ``--help``), training, the report.
+``python train.py`` trains PPO on ``CoopGym/SitToStandHard-v2`` (training personas only; ``--seeds N`` seeds played as
+one), scores it and every scripted baseline on the same 1000 seeded held-out episodes, prints the comparison and saves
+``runs/{env}__{algo}__{seed}__{time}/``. Ctrl-C stops at a checkpoint; ``--resume RUN`` continues it.
 """
 
 from __future__ import annotations
@@ -34,7 +33,9 @@ class Args:
     seed: int = 0
     """seed of training (envs, network init, sampling)"""
     seeds: int | None = None
-    """seeds trained (--seed, --seed+1, ...), the best on the validation people kept; None: 2 for jax ppo, else 1"""
+    """seeds trained (--seed, --seed+1, ...); None: 4 for jax ppo, else 1"""
+    keep: Literal["ensemble", "best"] | None = None
+    """with --seeds > 1: ensemble (the seeds act as one) or the best on the validation people; None: ensemble for ppo"""
     out: str = "runs"
     """folder that receives the run folder {env}__{algo}__{seed}__{time}"""
     resume: str | None = None
@@ -102,10 +103,9 @@ def main(argv: list[str] | None = None) -> int:
         folder = plan.run_dir
         with stop:
             finished = read_training(folder)  # a run stopped after training: only the evaluation is left
-            if finished is None and args.eval_only:
-                finished = {"training": {}, "learning_curve": [], "start_steps": 0}
-            elif finished is None:
-                finished = train(args, plan, stop)
+            if finished is None:
+                untrained = {"training": {}, "learning_curve": [], "start_steps": 0}
+                finished = untrained if args.eval_only else train(args, plan, stop)
             evaluate_and_report(args, plan, finished, stop)
         return 0
     except Stopped:

@@ -4,6 +4,7 @@ A run folder ``runs/{env}__{algo}__{seed}__{time}/`` holds::
 
     args.json                                 the run's settings (what --resume continues)
     model.zip                                 the trained agent, self-contained (agents.rl.load_agent)
+    ensemble.json                             --keep ensemble: the seeds played as one (the folder loads as them)
     vecnormalize.pkl, agent.json              the same normaliser and metadata beside it
     checkpoints/step_N/                       while training: the newest two checkpoints
     checkpoints/best_step_N.zip               while training: the best-validated policies so far
@@ -36,6 +37,7 @@ __all__ = [
     "ARGS_FILE",
     "CHECKPOINTS_DIR",
     "COMPLETE_FILE",
+    "ENSEMBLE_FILE",
     "ENSEMBLE_PREFIX",
     "INTERRUPTED_FILE",
     "MODEL_FILE",
@@ -47,6 +49,8 @@ __all__ = [
     "is_unfinished_run",
 ]
 
+ENSEMBLE_FILE = "ensemble.json"
+"""A run folder kept as an ensemble (``train.py --seeds N --keep ensemble``): its members' folders, relative to it."""
 ENSEMBLE_PREFIX = "ensemble:"
 """``ensemble:MODEL+MODEL+...`` names saved agents played as one (:mod:`agents.rl.ensemble`)."""
 

@@ -19,11 +19,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
-from report_format import Results
 from report_learners import (
     across_bodies,
     best_of_seeds,
     by_persona,
+    ensembles,
     learners,
     learners_across_cpus,
     ppo_learner,
@@ -41,7 +41,7 @@ from report_quality import (
     train_py,
 )
 from report_speed import against_gymnasium, cold_start, rendering, reset, soak, threads, time_to_quality
-from result_files import RESULTS, ROOT, load_all
+from result_files import RESULTS, ROOT, Results, load_all
 
 DOC = ROOT / "docs" / "BENCHMARKS.md"
 
@@ -77,6 +77,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     training_budget,
     selection_people,
     best_of_seeds,
+    ensembles,
     across_bodies,
     library_defaults,
     outside_learners,

@@ -11,8 +11,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/report_format.py, however this runs
-from report_format import (
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+from result_files import (
     Results,
     _ci,
     _count,
@@ -482,6 +482,51 @@ Each seed's kept policy plays 1000 episodes of the validation people (the set ev
 first minus the second. The `switching` rows observe the switching filter's `P(xi)` beside the Kalman estimate:
 its person hypotheses are weighed by the readings within each episode, and the `true` row's filter is given each
 episode's true person instead (what a caregiver that had identified the person would read).
+
+{_table(header, rows)}
+"""
+
+
+_ENSEMBLES_COMMAND = "python bench/ensembles.py --runs DIR --sizes 2,4 --save (DIR: bench/learners.py --runs DIR)"
+
+
+@_from_results("ensembles", "### Seeds played as one: `train.py --seeds N --keep ensemble`", _ENSEMBLES_COMMAND)
+def ensembles(report: dict[str, Any], record: dict[str, Any]) -> str:
+    """What ``train.py --seeds N`` keeps as an ensemble and as the best seed, over runs ``--seed s``."""
+    scripted = report["scripted"]
+    belief, last = scripted["belief"]["success_rate"], len(report["sizes"]["1"]["best"]["runs"]) - 1
+    rows = []
+    for size, kept in report["sizes"].items():
+        for keep, found in kept.items():
+            runs = found["runs"]
+            held_out = [r["success_rate"] for r in runs]
+            r, interval = found["pearson_r"], found["pearson_r_ci95"] or [None, None]
+            frail = [r["by_persona"]["frail"]["success_rate"] for r in runs if "by_persona" in r]
+            rows.append(
+                [
+                    f"`--seeds {size}`" + ("" if size == "1" else f" `--keep {keep}`"),
+                    str(len(runs)),
+                    _iqm_cell(held_out, report),
+                    f"{_pct(statistics.mean(held_out))} / {_pct(min(held_out))}",
+                    f"{sum(h >= belief for h in held_out)} of {len(runs)}",
+                    f"{_pct(found['unsafe_mean'])} / {_pct(max(r['unsafe_rate'] for r in runs))}",
+                    _pct(statistics.mean(frail)) if frail else "—",
+                    f"{_corr(r)} [{_corr(interval[0])}, {_corr(interval[1])}]",
+                ]
+            )
+    header = ["kept", "runs", "held-out success, IQM [95 % CI]; score", "mean / lowest"]
+    header += [f"runs ≥ belief ({_pct(belief)})", "unsafe: mean / highest", "frail: mean"]
+    header += ["r: validation people vs held-out [95 % CI]"]
+    references = ", ".join(f"{name} {_pct(scripted[name]['success_rate'])}" for name in scripted)
+    unsafe = _pct(scripted["prober"]["unsafe_rate"])
+    return f"""The runs `python train.py --seed s --seeds N` for s = 0..{last}, from the seeds of `{report["row"]}`
+that `bench/learners.py` trained ({report["timesteps"]:,} steps each, as `train.py` trains a seed):
+`--keep ensemble` plays the N seeds as one (`agents.rl.ensemble`: per action head, the action of highest
+mean probability), `--keep best` keeps the seed best on {report["validation_episodes"]} episodes of the
+validation people. Runs of consecutive s share seeds, as those commands do. Every caregiver plays the same
+{report["episodes"]} held-out episodes of the test people ({references}; the prober's unsafe rate
+{unsafe}); the last column is how each run's success on the validation people predicts its held-out
+success over the runs. Nothing is chosen on the held-out scores.
 
 {_table(header, rows)}
 """

@@ -9,8 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/report_format.py, however this runs
-from report_format import (
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+from result_files import (
     TIMES,
     Results,
     _count,

@@ -161,6 +161,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "selection_people",
         ),
         (
+            "ensembles",
+            [
+                *["--runs", str(tmp / "people"), "--runs-of", "2", "--sizes", "2", "--timesteps", "4096"],
+                *["--episodes", "4", "--validation-episodes", "4"],
+            ],
+            "ensembles.json",
+            "ensembles",
+        ),
+        (
             "learners",
             [
                 *["--rows", "jax-switching-true-population", "--seeds", "0", "--timesteps", "4096", "--episodes", "4"],

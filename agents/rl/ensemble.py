@@ -1,10 +1,12 @@
 """Several trained caregivers as one: the greedy action of their averaged action probabilities.
 
-An :class:`EnsembleAgent` holds saved MLP policies (``train.py`` runs, ``--seeds`` folders' seeds) of
+An :class:`EnsembleAgent` holds saved MLP policies (``train.py`` runs, the seeds of a ``--seeds`` run) of
 one env and observation. Each member normalises the observation with its own statistics and gives
 its probabilities per action head; the ensemble takes, per head, the action of highest mean
 probability. It follows the agents' ``predict`` protocol, so :func:`agents.evaluate.evaluate`
-scores it as any other agent.
+scores it as any other agent. ``train.py --seeds N`` (``--keep ensemble``, PPO's default) keeps its
+seeds this way: the run folder's ``ensemble.json`` names them, and :func:`agents.rl.load_agent` of the
+folder gives :func:`load_run_ensemble`.
 
 Example:
     >>> from agents.rl.ensemble import load_ensemble
@@ -13,6 +15,7 @@ Example:
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -21,13 +24,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.rl.bundle import GreedyActor, SB3Agent, load_agent
-from agents.run_folder import ENSEMBLE_PREFIX
+from agents.run_folder import ENSEMBLE_FILE, ENSEMBLE_PREFIX
 
-__all__ = ["ENSEMBLE_PREFIX", "EnsembleAgent", "load_ensemble"]
+__all__ = ["ENSEMBLE_PREFIX", "EnsembleAgent", "load_ensemble", "load_run_ensemble"]
 
 
-class EnsembleAgent:
+class EnsembleAgent(SB3Agent):
     """The greedy action of the members' mean action probabilities (see the module docstring).
+
+    An :class:`SB3Agent` whose env, features, env kwargs, algorithm (and ``model``: the first member's, for
+    what reads a model's settings) are its members'; only :meth:`predict` plays them all.
 
     Raises:
         ValueError: fewer than two members, a member that is not a feed-forward actor-critic on a
@@ -49,8 +55,9 @@ class EnsembleAgent:
                         f"ensemble member {index} ({member.name}) has {what} {getattr(member, what)!r}, "
                         f"member 0 has {getattr(first, what)!r}"
                     )
-        self.env_id, self.features, self.env_kwargs = first.env_id, first.features, dict(first.env_kwargs)
-        self.observation_space, self.action_space, self.algo = first.observation_space, first.action_space, first.algo
+        super().__init__(
+            first.model, first.algo, first.env_id, first.obs_normalizer, first.features, first.env_kwargs, name
+        )
         self.name = name or f"ensemble of {len(self.members)}"
 
     def probabilities(self, observation: NDArray[Any]) -> list[NDArray[np.float64]]:
@@ -77,7 +84,7 @@ class EnsembleAgent:
 
     def predict(
         self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
-    ) -> tuple[NDArray[np.int64], Any]:
+    ) -> tuple[NDArray[Any], Any]:
         """``(actions, state)``: per head the action of highest mean probability (``deterministic`` only)."""
         if not deterministic:
             raise ValueError("EnsembleAgent plays greedy only (deterministic=True)")
@@ -90,3 +97,24 @@ class EnsembleAgent:
 def load_ensemble(paths: Sequence[str | Path], name: str | None = None) -> EnsembleAgent:
     """The saved agents at ``paths`` (run folders, ``model.zip`` files or ``pretrained:NAME``) as one ensemble."""
     return EnsembleAgent([load_agent(path) for path in paths], name)
+
+
+def load_run_ensemble(folder: Path) -> EnsembleAgent:
+    """The ensemble a run folder's ``ensemble.json`` names (its members' folders, relative to it).
+
+    Raises:
+        ValueError: the file is unreadable, names no members, or a member outside the folder or not saved.
+    """
+    file = folder / ENSEMBLE_FILE
+    try:
+        members = json.loads(file.read_text(encoding="utf-8"))["members"]
+        if not isinstance(members, list) or not all(isinstance(m, str) for m in members):
+            raise ValueError("'members' is not a list of folder names")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        expected = '{"members": ["seeds/seed_0", ...]}'
+        raise ValueError(f"{file} is unreadable ({exc!r}); it should be {expected}") from None
+    paths = [(folder / member).resolve() for member in members]
+    for member, path in zip(members, paths, strict=True):
+        if not path.is_relative_to(folder.resolve()) or not path.exists():
+            raise ValueError(f"{file}: member {member!r} is not a saved agent inside {folder}")
+    return load_ensemble(paths, name=f"ensemble of {len(paths)} ({folder.name})")

@@ -6,7 +6,8 @@
 * :func:`train` -- the training env, the model (restored from the last checkpoint, continued
   from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
   checkpoints), ``learn``, then the saved agent and ``training.json``; with ``--seeds N``, N such runs
-  in ``RUN/seeds/``, the one best on the validation people kept. PPO on the JAX learner trains
+  in ``RUN/seeds/``, kept as one (``--keep ensemble``) or the one best on the validation people. PPO on the JAX
+  learner trains
   :class:`agents.ppo.PPO` with the same tools at its rollout ends (:mod:`agents.rl.ppo_run`).
 
 What happens after training (the evaluation against the baselines, the report) is
@@ -49,6 +50,7 @@ from agents.run_folder import (
     AGENT_FILE,
     ARGS_FILE,
     CHECKPOINTS_DIR,
+    ENSEMBLE_FILE,
     MODEL_FILE,
     TRAINING_FILE,
     VECNORMALIZE_FILE,
@@ -59,6 +61,7 @@ from agents.trainer.train_args import (
     PROG,
     RunCannotContinue,
     RunProblem,
+    keep_of,
     personas_arg,
     read_training,
     recorded_settings,
@@ -152,9 +155,10 @@ def _open_run_folder(args: Any, plan: Plan, in_place: bool, folder: Path | None)
 def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     """Train to the step budget, checkpointing on the way; the training summary (also in ``training.json``).
 
-    With ``--seeds N``, each seed is a run of its own in ``RUN/seeds/seed_S/`` and the one that scores best on the
-    validation people (never the held-out personas) lends ``RUN`` its model, normaliser and monitor; ``training.json``
-    lists every seed's score. A stopped run resumes seed by seed: finished seeds are kept, a begun one continues.
+    With ``--seeds N``, each seed is a run of its own in ``RUN/seeds/seed_S/``; the one that scores best on the
+    validation people (never the held-out personas) lends ``RUN`` its model, normaliser and monitor, and with
+    ``--keep ensemble`` ``RUN/ensemble.json`` names them all (:func:`_train_seeds`); ``training.json`` lists every
+    seed's score. A stopped run resumes seed by seed: finished seeds are kept, a begun one continues.
 
     Raises:
         agents.trainer.training_run.Stopped: a signal stopped training (after a checkpoint) or came after its last
@@ -294,7 +298,11 @@ def seed_folder(run_dir: Path, seed: int) -> Path:
 
 
 def _train_seeds(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
-    """Train ``args.seeds`` seeds, keep the best on the validation people; the training summary (``training.json``).
+    """Train ``args.seeds`` seeds; the training summary (``training.json``).
+
+    ``RUN`` takes the model of the seed best on the validation people; with ``--keep ensemble`` its
+    ``ensemble.json`` names every seed's folder, and ``RUN`` loads as them played as one
+    (:mod:`agents.rl.ensemble`).
 
     Raises:
         agents.trainer.training_run.Stopped: a signal stopped one seed's training (after its checkpoint).
@@ -310,12 +318,23 @@ def _train_seeds(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
         if source.exists():  # written whole or not at all, as every file of a run folder
             save_with(plan.run_dir / name, functools.partial(shutil.copyfile, source))
     summary = finished[kept["seed"]]
-    training = {**summary["training"], "kept_seed": kept["seed"], "seeds": scores}
+    training = {**summary["training"], "kept_seed": kept["seed"], "seeds": scores, "keep": keep_of(args)}
     rates = ", ".join(f"seed {s['seed']} {s['success_rate']:.1%}" for s in scores)
-    print(f"kept seed {kept['seed']}: validation people's success {rates} ({args.select_episodes} episodes)")
+    print(f"best seed {kept['seed']}: validation people's success {rates} ({args.select_episodes} episodes)")
+    if keep_of(args) == "ensemble":
+        training["ensemble"] = _keep_ensemble(args, plan, seeds)
     result = {**summary, "training": training}
     write_json(plan.run_dir / TRAINING_FILE, result)
     return result
+
+
+def _keep_ensemble(args: Any, plan: Plan, seeds: list[int]) -> dict[str, Any]:
+    """Write ``RUN/ensemble.json`` naming the seeds' folders; the ensemble's score on the validation people."""
+    members = [str(seed_folder(plan.run_dir, seed).relative_to(plan.run_dir)) for seed in seeds]
+    write_json(plan.run_dir / ENSEMBLE_FILE, {"members": members})
+    score = _validation_score(args, plan, None)
+    print(f"kept the {len(seeds)} seeds as one: validation people's success {score['success_rate']:.1%}")
+    return score
 
 
 def _train_one(args: Any, plan: Plan, seed: int, stop: StopSignals) -> dict[str, Any]:
@@ -333,13 +352,13 @@ def _train_one(args: Any, plan: Plan, seed: int, stop: StopSignals) -> dict[str,
     return train(seed_args, seed_plan, stop)
 
 
-def _validation_score(args: Any, plan: Plan, seed: int) -> dict[str, Any]:
-    """One seed's saved policy scored on the validation people (the episodes the selection plays)."""
+def _validation_score(args: Any, plan: Plan, seed: int | None) -> dict[str, Any]:
+    """One seed's saved policy (None: the run's ensemble) scored on the validation people (the selection's episodes)."""
     from agents.evaluate import evaluate
     from agents.rl import load_agent
     from agents.rl.callbacks import VALIDATION_SEED
 
-    agent = load_agent(seed_folder(plan.run_dir, seed))
+    agent = load_agent(plan.run_dir if seed is None else seed_folder(plan.run_dir, seed))
     result = evaluate(agent, plan.env_id, "validation", args.select_episodes, VALIDATION_SEED)
     return {
         "seed": seed,

@@ -29,7 +29,7 @@ from agents.evaluate import (
     write_json,
 )
 from agents.evaluate.runs import aggregate_runs, run_score_of, runs_in
-from agents.run_folder import COMPLETE_FILE, INTERRUPTED_FILE, MODEL_FILE
+from agents.run_folder import COMPLETE_FILE, ENSEMBLE_FILE, INTERRUPTED_FILE, MODEL_FILE
 from agents.trainer.train_args import baseline_names, personas_arg
 from coop_gym.io import make_unique_folder, write_text
 from coop_gym.io import write_json as write_json_file
@@ -121,7 +121,8 @@ def evaluate_and_report(args: Any, plan: Plan, finished: dict[str, Any], stop: S
     from agents.tools.plots import plot_learning_curve, plot_outcome_rates
 
     run_dir, env_id = plan.run_dir, plan.env_id
-    model_path = args.model if args.eval_only and args.model else run_dir / MODEL_FILE
+    kept = run_dir if (run_dir / ENSEMBLE_FILE).is_file() else run_dir / MODEL_FILE  # the folder: its ensemble
+    model_path = args.model if args.eval_only and args.model else kept
     # The saved agent (what a user loads) and the baselines, on the same episodes.
     label = f"{plan.algo} (learned)"
     agent = load_agent(model_path)

@@ -38,6 +38,7 @@ __all__ = [
     "RunProblem",
     "args_problem",
     "baseline_names",
+    "keep_of",
     "learner_framework",
     "parse_train_args",
     "personas_arg",
@@ -69,6 +70,7 @@ RUN_FIELDS = (
     "select_points",
     "select_episodes",
     "select_on",
+    "keep",
     "checkpoint_every",
     "framework",
     "policy_lag",
@@ -101,12 +103,18 @@ def learner_framework(args: Any) -> str:
     return "jax" if args.algo == "ppo" else "sb3"
 
 
+def keep_of(args: Any) -> str:
+    """``--keep``, or its default: ``ensemble`` for PPO (an MLP policy, what an ensemble plays), else ``best``."""
+    keep = getattr(args, "keep", None)
+    return str(keep) if keep is not None else ("ensemble" if args.algo == "ppo" else "best")
+
+
 def seeds_of(args: Any) -> int:
-    """``--seeds``, or its default: 2 for PPO on the JAX learner (two runs fit ``train.py``'s five minutes), else 1."""
+    """``--seeds``, or its default: 4 for PPO on the JAX learner (four runs fit ``train.py``'s five minutes), else 1."""
     seeds = getattr(args, "seeds", None)
     if seeds is not None:
         return int(seeds)
-    return 2 if args.algo == "ppo" and learner_framework(args) == "jax" and not args.eval_only else 1
+    return 4 if args.algo == "ppo" and learner_framework(args) == "jax" and not args.eval_only else 1
 
 
 def settings_framework(args: Any, algo: str) -> str:
@@ -246,6 +254,8 @@ def _problem_with_paths(args: Any) -> str | None:
         return "--eval-only and --resume exclude each other"
     if seeds_of(args) > 1 and (args.eval_only or args.framework == "rllib"):  # only a --seeds given asks for it
         return f"--seeds {args.seeds} trains several seeds; not with --eval-only or --framework rllib"
+    if keep_of(args) == "ensemble" and args.algo != "ppo":
+        return f"--keep ensemble plays PPO's MLP policies as one, not {args.algo}'s: give --keep best"
     if args.eval_only and args.model is None:
         return "--eval-only needs --model PATH"
     if args.model is not None and not args.eval_only:
@@ -368,6 +378,7 @@ def recorded_settings(run_dir: Path, args_type: type[Any]) -> dict[str, Any]:
     settings.setdefault("framework", "sb3")  # written before there was a choice: SB3's run
     settings.setdefault("select_on", "train")  # likewise: selected on the training personas
     settings.setdefault("seeds", 1)  # likewise: one training seed
+    settings.setdefault("keep", "best")  # likewise: the best seed kept
     try:
         args_type(**settings)
     except BadArgs as exc:

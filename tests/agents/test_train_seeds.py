@@ -64,6 +64,32 @@ def test_each_seed_is_the_run_of_that_seed_and_the_best_on_validation_people_is_
 
     again = evaluate(load_agent(run / "seeds" / "seed_6"), results["env_id"], "validation", 32, VALIDATION_SEED)
     assert again.success_rate == scores[1]["success_rate"]
+    # PPO's seeds are kept as one: the folder loads as their ensemble, and that is what the run scored.
+    from agents.rl.ensemble import EnsembleAgent
+
+    assert training["keep"] == "ensemble"
+    assert json.loads((run / "ensemble.json").read_text()) == {"members": ["seeds/seed_5", "seeds/seed_6"]}
+    ensemble = load_agent(run)
+    assert isinstance(ensemble, EnsembleAgent) and len(ensemble.members) == 2 and results["model"] == str(run)
+    both = evaluate(ensemble, results["env_id"], "validation", 32, VALIDATION_SEED)
+    assert both.success_rate == training["ensemble"]["success_rate"]
+
+
+def test_keep_best_keeps_one_seed_and_a_damaged_ensemble_file_is_named(tmp_path):
+    import train
+    from agents.rl import load_agent
+
+    assert train.main([*TINY, "--seeds", "2", "--keep", "best", "--out", str(tmp_path / "best")]) == 0
+    run = _only_run(tmp_path / "best")
+    results = json.loads((run / "results.json").read_text())
+    assert not (run / "ensemble.json").exists() and results["model"] == str(run / "model.zip")
+    assert results["training"]["keep"] == "best" and "ensemble" not in results["training"]
+    (run / "ensemble.json").write_text('{"members": ["seeds/seed_0", "../elsewhere"]}')
+    with pytest.raises(ValueError, match=r"member '../elsewhere' is not a saved agent inside"):
+        load_agent(run)
+    (run / "ensemble.json").write_text("{")
+    with pytest.raises(ValueError, match=r"ensemble.json is unreadable"):
+        load_agent(run)
 
 
 def test_ctrl_c_in_the_second_seed_resumes_it_and_keeps_the_first(tmp_path, capsys):
@@ -102,6 +128,7 @@ def test_ctrl_c_in_the_second_seed_resumes_it_and_keeps_the_first(tmp_path, caps
         (["--seeds", "0"], "--seeds must be >= 1, got 0"),
         (["--seeds", "2", "--eval-only", "--model", "x"], "--seeds 2 trains several seeds; not with --eval-only"),
         (["--seed", str(2**32 - 8), "--seeds", "2"], "must be below 2**32"),
+        (["--algo", "dqn", "--seeds", "2", "--keep", "ensemble"], "--keep ensemble plays PPO's MLP policies"),
     ],
 )
 def test_seeds_out_of_reach_are_refused(argv, message, capsys):
