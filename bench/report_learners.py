@@ -296,7 +296,7 @@ def _iqm_cell(success: list[float], report: dict[str, Any]) -> str:
     return f"{_pct(found.iqm)} {_ci(found.ci95)}; {score}"
 
 
-_SEEDS_COMMAND = "python train.py --seeds N (its seeds' records: " + _PEOPLE_COMMAND + ")"
+_SEEDS_COMMAND = "python train.py --seeds N --keep best (its seeds' records: " + _PEOPLE_COMMAND + ")"
 
 
 @_from_results("selection_people", "### Best of N seeds: `train.py --seeds N`", _SEEDS_COMMAND)
@@ -329,9 +329,11 @@ def best_of_seeds(report: dict[str, Any], record: dict[str, Any]) -> str:
     header = ["N", "held-out success: mean / 10th percentile / lowest", f"below belief ({_pct(belief)})"]
     header += [f"below prober ({_pct(prober)})", "unsafe (mean)", "`--seed 0, N, 2N, ...`: held-out success"]
     header += ["their IQM [95 % CI]; mind-reading score"]
-    return f"""`train.py --seeds N` trains seeds `--seed` .. `--seed + N - 1`, each as `train.py --seed S` does (its
-own selection on the training personas' validation episodes), scores each kept policy on 1000 episodes of the validation
-people and keeps the best. Since a seed trains the same policy alone or in a `--seeds` run, what `--seeds N` keeps
+    return f"""`train.py --seeds N --keep best` trains seeds `--seed` .. `--seed + N - 1`, each as `train.py --seed S`
+does (its own selection on the training personas' validation episodes), scores each kept policy on 1000 episodes of the
+validation people and keeps the best (PPO's default keeps them all as one: [Seeds played as
+one](#seeds-played-as-one-trainpy-seeds-n-keep-ensemble)). Since a seed trains the same policy alone or in a `--seeds`
+run, what `--seeds N --keep best` keeps
 follows from the {len(seeds)} seeds of `{row_name}` above: every set of N of them (the first three columns), and
 the runs `--seed 0`, `--seed N`, ... (the last). Held-out success on the {report["episodes"]} test episodes, recorded
 only to report; nothing is chosen on them.
