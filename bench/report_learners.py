@@ -508,6 +508,7 @@ def ensembles(report: dict[str, Any], record: dict[str, Any]) -> str:
                 [
                     f"`--seeds {size}`" + ("" if size == "1" else f" `--keep {keep}`"),
                     str(len(runs)),
+                    _pct(statistics.mean(r["validation_people"]["success_rate"] for r in runs)),
                     _iqm_cell(held_out, report),
                     f"{_pct(statistics.mean(held_out))} / {_pct(min(held_out))}",
                     f"{sum(h >= belief for h in held_out)} of {len(runs)}",
@@ -516,7 +517,7 @@ def ensembles(report: dict[str, Any], record: dict[str, Any]) -> str:
                     f"{_corr(r)} [{_corr(interval[0])}, {_corr(interval[1])}]",
                 ]
             )
-    header = ["kept", "runs", "held-out success, IQM [95 % CI]; score", "mean / lowest"]
+    header = ["kept", "runs", "validation people: mean", "held-out success, IQM [95 % CI]; score", "mean / lowest"]
     header += [f"runs ≥ belief ({_pct(belief)})", "unsafe: mean / highest", "frail: mean"]
     header += ["r: validation people vs held-out [95 % CI]"]
     references = ", ".join(f"{name} {_pct(scripted[name]['success_rate'])}" for name in scripted)
@@ -528,7 +529,8 @@ mean probability), `--keep best` keeps the seed best on {report["validation_epis
 validation people. Runs of consecutive s share seeds, as those commands do. Every caregiver plays the same
 {report["episodes"]} held-out episodes of the test people ({references}; the prober's unsafe rate
 {unsafe}); the last column is how each run's success on the validation people predicts its held-out
-success over the runs. Nothing is chosen on the held-out scores.
+success over the runs. Nothing is chosen on the held-out scores: the keep and N are read from the validation
+people's column (where `--keep best` is scored on the episodes it was picked on).
 
 {_table(header, rows)}
 """
