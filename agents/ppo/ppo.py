@@ -45,9 +45,10 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
+from agents.ppo.normalizer import ObsNormalizer
 from coop_gym.envs.kernels.report import REPORT
 
-__all__ = ["PPO", "PPOConfig", "Rollout", "jax_modules"]
+__all__ = ["PPO", "ObsNormalizer", "PPOConfig", "Rollout", "compile_update", "jax_modules", "ppo_loss"]
 
 
 def jax_modules() -> tuple[Any, Any, Any]:
@@ -94,20 +95,20 @@ class PPOConfig:
         for name in ("n_envs", "n_steps", "batch_size", "n_epochs"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"PPOConfig.{name} must be a positive integer, got {value!r}")
+                raise ValueError(f"{type(self).__name__}.{name} must be a positive integer, got {value!r}")
         if not self.hidden or not all(isinstance(w, int) and not isinstance(w, bool) and w > 0 for w in self.hidden):
-            raise ValueError(f"PPOConfig.hidden must be positive layer widths, got {self.hidden!r}")
+            raise ValueError(f"{type(self).__name__}.hidden must be positive layer widths, got {self.hidden!r}")
         samples = self.n_envs * self.n_steps
         if samples % self.batch_size:
             raise ValueError(
-                f"PPOConfig: n_envs * n_steps ({samples}) must be a multiple of batch_size ({self.batch_size})"
+                f"{type(self).__name__}: n_envs * n_steps ({samples}) must be a multiple of batch_size ({self.batch_size})"
             )
         if self.policy_lag not in (0, 1):
-            raise ValueError(f"PPOConfig.policy_lag must be 0 or 1, got {self.policy_lag!r}")
+            raise ValueError(f"{type(self).__name__}.policy_lag must be 0 or 1, got {self.policy_lag!r}")
         if self.activation not in ("tanh", "relu"):
-            raise ValueError(f"PPOConfig.activation must be 'tanh' or 'relu', got {self.activation!r}")
+            raise ValueError(f"{type(self).__name__}.activation must be 'tanh' or 'relu', got {self.activation!r}")
 
-    def replace(self, **changes: Any) -> PPOConfig:
+    def replace(self, **changes: Any) -> Any:
         """A copy with ``changes``."""
         return dataclasses.replace(self, **changes)
 
@@ -143,42 +144,6 @@ class PPOConfig:
         )
 
 
-class ObsNormalizer:
-    """Observations scaled by their running mean and standard deviation, clipped (SB3's ``VecNormalize``).
-
-    The statistics start at mean 0 and variance 1 with a weight of 1e-4 observations and
-    take every observation the envs return, as sums of ``x`` and ``x**2`` in float64.
-    """
-
-    def __init__(self, shape: tuple[int, ...], clip: float = 10.0, epsilon: float = 1e-8) -> None:
-        """Mean 0, variance 1, a count of 1e-4."""
-        self.count, self.sum, self.sum_sq = 1e-4, np.zeros(shape), np.full(shape, 1e-4)
-        self.clip, self.epsilon = clip, epsilon
-        self.mean, self.var = np.zeros(shape), np.ones(shape)
-        self._scale = 1.0 / np.sqrt(self.var + epsilon)
-
-    def restore(self, count: float, mean: np.ndarray, var: np.ndarray) -> None:
-        """Take the statistics of ``count`` observations of mean ``mean`` and variance ``var``."""
-        self.count = float(count)
-        self.sum = np.asarray(mean, np.float64) * self.count
-        self.sum_sq = (np.asarray(var, np.float64) + np.square(mean)) * self.count
-        self.update(np.zeros((0, *self.sum.shape)))
-
-    def update(self, batch: np.ndarray) -> None:
-        """Fold a batch of observations (one per row) into the statistics."""
-        self.count += batch.shape[0]
-        self.sum += batch.sum(axis=0, dtype=np.float64)
-        self.sum_sq += np.square(batch, dtype=np.float64).sum(axis=0)
-        self.mean = self.sum / self.count
-        self.var = np.maximum(self.sum_sq / self.count - self.mean * self.mean, 0.0)
-        self._scale = (self.var + self.epsilon) ** -0.5
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        """``obs`` scaled and clipped."""
-        scaled = (obs - self.mean) * self._scale
-        return np.clip(scaled, -self.clip, self.clip, out=scaled).astype(np.float32)
-
-
 # --- 2. the rollout --------------------------------------------------------------------
 
 
@@ -196,6 +161,8 @@ class Rollout(NamedTuple):
     """V of the observations after the last step, (n_envs,)."""
     last_starts: np.ndarray
     """1 where an episode begins after the last step, (n_envs,)."""
+    lstm_states: tuple[np.ndarray, ...] = ()
+    """A recurrent policy's LSTM states when the rollout began, each (n_envs, hidden); none for the MLP."""
 
 
 class NumpyPolicy:
@@ -233,16 +200,26 @@ class NumpyPolicy:
 
     def act(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(actions (n, dims), log pi(a|s), V(s))``: each dimension drawn by its inverse CDF."""
-        n = len(obs)
-        logits = self._mlp(self.pi, obs)
+        actions, log_prob = self.sample(self._mlp(self.pi, obs), rng)
+        return actions, log_prob, self.value(obs).astype(np.float32)
+
+    def sample(
+        self, logits: np.ndarray, rng: np.random.Generator, actions: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(actions (n, dims), log pi(a|s))`` drawn from ``logits`` (n, sum(nvec)), a dimension at once.
+
+        ``actions``: take these instead of drawing (a replay of another learner's rollout), ``rng`` unused.
+        """
+        n = len(logits)
         padded = np.concatenate([logits, np.full((n, 1), -np.inf, np.float32)], axis=1)[:, self.columns]
         weights = np.exp(padded - padded.max(axis=2, keepdims=True))  # unnormalised probabilities
         cdf = np.cumsum(weights, axis=2)
         total = cdf[:, :, -1]
-        actions = np.minimum((rng.random((n, len(self.last), 1)) * total[:, :, None] >= cdf).sum(axis=2), self.last)
+        if actions is None:
+            draws = rng.random((n, len(self.last), 1)) * total[:, :, None]
+            actions = np.minimum((draws >= cdf).sum(axis=2), self.last)
         chosen = weights.reshape(n, -1)[np.arange(n)[:, None], self.offsets + actions]
-        log_prob = np.log(chosen / total).sum(axis=1)
-        return actions, log_prob.astype(np.float32), self.value(obs).astype(np.float32)
+        return actions, np.log(chosen / total).sum(axis=1).astype(np.float32)
 
 
 # --- 3. the advantages ------------------------------------------------------------------
@@ -270,38 +247,55 @@ def make_update(network: Any, config: PPOConfig, nvec: tuple[int, ...], samples:
 
     ``batch``: ``(obs, actions, old_log_probs, advantages, returns)``, one row per sample;
     ``orders``: one permutation of the samples per epoch, (n_epochs, samples), cut into the
-    epoch's minibatches in order; NumPy draws them, outside the compiled update (the learner's speed:
-    ``python bench/time_to_quality.py``). Built once per process for each set of arguments: the
-    learners of one configuration (seeds, a resumed run) share one compiled update.
+    epoch's minibatches in order; NumPy draws them, outside the compiled update. Built once per process
+    for each set of arguments: the learners of one configuration (seeds, a resumed run) share it.
     """
-    jax, jnp, optax = jax_modules()
     from agents.ppo.networks import log_prob_entropy
-
-    optimizer = optax.inject_hyperparams(
-        lambda learning_rate: optax.chain(
-            optax.clip_by_global_norm(config.max_grad_norm), optax.adam(learning_rate, eps=1e-5)
-        )
-    )(learning_rate=config.learning_rate)
-    minibatches = samples // config.batch_size
 
     def loss(params: Any, batch: tuple[Any, ...], clip: Any) -> tuple[Any, dict[str, Any]]:
         obs, actions, old_log_prob, adv, returns = batch
         logits, values = network.apply(params, obs)
         log_prob, entropy = log_prob_entropy(logits, actions, nvec)
-        if config.batch_size > 1:  # as SB3: a minibatch of one is left as it is
-            adv = (adv - adv.mean()) / (adv.std(ddof=1) + 1e-8)
-        log_ratio = log_prob - old_log_prob
-        ratio = jnp.exp(log_ratio)
-        policy_loss = -jnp.minimum(adv * ratio, adv * jnp.clip(ratio, 1 - clip, 1 + clip)).mean()
-        value_loss = ((returns - values) ** 2).mean()
-        total = policy_loss - config.ent_coef * entropy.mean() + config.vf_coef * value_loss
-        return total, {
-            "policy_gradient_loss": policy_loss,
-            "value_loss": value_loss,
-            "entropy_loss": -entropy.mean(),
-            "approx_kl": ((ratio - 1) - log_ratio).mean(),
-            "clip_fraction": (jnp.abs(ratio - 1) > clip).mean(),
-        }
+        return ppo_loss(config, log_prob, entropy, values, (old_log_prob, adv, returns), clip)
+
+    shape = (samples // config.batch_size, config.batch_size)
+    return compile_update(config, loss, lambda batch, index: [c[index] for c in batch], shape)
+
+
+def ppo_loss(
+    config: PPOConfig, log_prob: Any, entropy: Any, values: Any, targets: tuple[Any, Any, Any], clip: Any
+) -> tuple[Any, dict[str, Any]]:
+    """PPO's loss (the module docstring's) of a minibatch; ``targets``: ``(old log-probs, advantages, returns)``."""
+    _, jnp, _ = jax_modules()
+    old_log_prob, adv, returns = targets
+    if config.batch_size > 1:  # as SB3: a minibatch of one is left as it is
+        adv = (adv - adv.mean()) / (adv.std(ddof=1) + 1e-8)
+    log_ratio = log_prob - old_log_prob
+    ratio = jnp.exp(log_ratio)
+    policy_loss = -jnp.minimum(adv * ratio, adv * jnp.clip(ratio, 1 - clip, 1 + clip)).mean()
+    value_loss = ((returns - values) ** 2).mean()
+    total = policy_loss - config.ent_coef * entropy.mean() + config.vf_coef * value_loss
+    return total, {
+        "policy_gradient_loss": policy_loss,
+        "value_loss": value_loss,
+        "entropy_loss": -entropy.mean(),
+        "approx_kl": ((ratio - 1) - log_ratio).mean(),
+        "clip_fraction": (jnp.abs(ratio - 1) > clip).mean(),
+    }
+
+
+def compile_update(config: PPOConfig, loss: Any, select: Any, shape: tuple[int, int]) -> tuple[Any, Any]:
+    """``(optimiser, update)`` of ``loss(params, minibatch, clip)``, one jitted call for all epochs and minibatches.
+
+    ``select(batch, index)`` is the minibatch of ``index``, a row of an epoch's order cut to ``shape``
+    (minibatches, units per minibatch). SB3's optimiser: Adam (eps 1e-5) after clipping by global norm.
+    """
+    jax, jnp, optax = jax_modules()
+    optimizer = optax.inject_hyperparams(
+        lambda learning_rate: optax.chain(
+            optax.clip_by_global_norm(config.max_grad_norm), optax.adam(learning_rate, eps=1e-5)
+        )
+    )(learning_rate=config.learning_rate)
 
     @jax.jit
     def update(params: Any, opt_state: Any, orders: Any, batch: Any, lr: Any, clip: Any) -> Any:
@@ -309,12 +303,12 @@ def make_update(network: Any, config: PPOConfig, nvec: tuple[int, ...], samples:
 
         def minibatch(carry: Any, index: Any) -> Any:
             params, opt_state = carry
-            (_, stats), grads = jax.value_and_grad(loss, has_aux=True)(params, [c[index] for c in batch], clip)
+            (_, stats), grads = jax.value_and_grad(loss, has_aux=True)(params, select(batch, index), clip)
             updates, opt_state = optimizer.update(grads, opt_state, params)
             return (optax.apply_updates(params, updates), opt_state), stats
 
         def epoch(carry: Any, order: Any) -> Any:
-            return jax.lax.scan(minibatch, carry, order.reshape(minibatches, config.batch_size))
+            return jax.lax.scan(minibatch, carry, order.reshape(shape))
 
         (params, opt_state), stats = jax.lax.scan(epoch, (params, opt_state), orders)
         return params, opt_state, jax.tree_util.tree_map(jnp.mean, stats)
@@ -347,8 +341,6 @@ class PPO:
         self, env_id: str, config: PPOConfig | None = None, seed: int = 0, env_kwargs: dict[str, Any] | None = None
     ) -> None:
         """Build the envs (seeded ``seed .. seed + n_envs - 1``), the network and the optimiser."""
-        from agents.ppo.networks import ActorCritic
-
         jax, _, _ = jax_modules()
         self.env_id, self.config, self.seed = env_id, config or PPOConfig(), int(seed)
         self.env_kwargs = dict(env_kwargs or {})
@@ -362,9 +354,9 @@ class PPO:
         else:
             raise ValueError(f"PPO needs a Discrete or MultiDiscrete action space, got {space}")
         obs_shape = tuple(self.env.single_observation_space.shape or ())
-        self.network = ActorCritic(self.nvec, cfg.hidden, cfg.activation)
-        self.params = self.network.init(jax.random.PRNGKey(self.seed % 2**31), np.zeros((1, *obs_shape), np.float32))
-        self.optimizer, self._update = make_update(self.network, cfg, self.nvec, cfg.n_envs * cfg.n_steps)
+        self.network = self._make_network()
+        self.params = self.network.init(jax.random.PRNGKey(self.seed % 2**31), *self._example_inputs(obs_shape))
+        self.optimizer, self._update = self._make_update()
         self.opt_state = self.optimizer.init(self.params)
         # Two streams from the seed: the actions' and the minibatches'.
         streams = np.random.PCG64(self.seed).spawn(2)
@@ -383,6 +375,22 @@ class PPO:
         self._obs = self._observe(raw)
         self._starts = np.ones(cfg.n_envs, dtype=np.float32)
         self._returns, self._lengths = np.zeros(cfg.n_envs), np.zeros(cfg.n_envs, dtype=np.int64)
+
+    def _make_network(self) -> Any:
+        from agents.ppo.networks import ActorCritic
+
+        return ActorCritic(self.nvec, self.config.hidden, self.config.activation)
+
+    def _example_inputs(self, obs_shape: tuple[int, ...]) -> tuple[np.ndarray, ...]:
+        """What the network's initialisation is called with."""
+        return (np.zeros((1, *obs_shape), np.float32),)
+
+    def _make_update(self) -> tuple[Any, Any]:
+        return make_update(self.network, self.config, self.nvec, self.config.n_envs * self.config.n_steps)
+
+    def _policy(self, params: Any) -> Any:
+        """The rollout's NumPy policy over ``params``."""
+        return NumpyPolicy(params, self.nvec, self.config.activation)
 
     def _observe(self, raw: np.ndarray) -> np.ndarray:
         """The policy's input: ``raw`` scaled by the statistics (which take it in first)."""
@@ -464,17 +472,21 @@ class PPO:
     def update(self, rollout: Rollout, progress_remaining: float) -> None:
         """Start one PPO update on ``rollout``; with ``policy_lag=0`` wait for it and act with its weights."""
         cfg = self.config
-        adv, returns = advantages(rollout, cfg.gamma, cfg.gae_lambda)
-        flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
-        batch = [flat(rollout.obs), flat(rollout.actions), flat(rollout.log_probs), flat(adv), flat(returns)]
+        batch, units = self._batch(rollout)
         lr = cfg.learning_rate * (progress_remaining if cfg.anneal_lr else 1.0)
         self.learning_rate = lr
-        samples = len(batch[0])
-        orders = np.stack([self.minibatch_rng.permutation(samples) for _ in range(cfg.n_epochs)]).astype(np.int32)
+        orders = np.stack([self.minibatch_rng.permutation(units) for _ in range(cfg.n_epochs)]).astype(np.int32)
         self._land()
         self._pending = self._update(self.params, self.opt_state, orders, batch, lr, cfg.clip_range)
         if cfg.policy_lag == 0:
             self._land()
+
+    def _batch(self, rollout: Rollout) -> tuple[list[Any], int]:
+        """``(what the update reads, how many units its minibatches are drawn from)``: one row per sample."""
+        adv, returns = advantages(rollout, self.config.gamma, self.config.gae_lambda)
+        flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
+        batch = [flat(rollout.obs), flat(rollout.actions), flat(rollout.log_probs), flat(adv), flat(returns)]
+        return batch, len(batch[0])
 
     def set_params(self, params: Any) -> None:
         """Take ``params`` (the network's tree) as the weights, and act with them."""
@@ -491,7 +503,7 @@ class PPO:
     def _act_with(self, params: Any) -> None:
         """The rollout plays ``params`` from now on."""
         self._acting_params = params
-        self._acting = NumpyPolicy(params, self.nvec, self.config.activation)
+        self._acting = self._policy(params)
 
     def wait_for_update(self) -> None:
         """Wait until the update in flight (``policy_lag``) has finished, without landing it: nothing changes.
