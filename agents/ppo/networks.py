@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["ACTIVATIONS", "ActorCritic", "LstmActorCritic", "lstm_cell", "log_prob_entropy"]
+__all__ = ["ACTIVATIONS", "ActorCritic", "LstmActorCritic", "log_prob_entropy", "lstm_cell"]
 
 ACTIVATIONS = {"tanh": nn.tanh, "relu": nn.relu}
 """The hidden layers' activation, by the name a config gives."""

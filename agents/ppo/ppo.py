@@ -38,7 +38,7 @@ import pickle
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -46,9 +46,10 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
 from agents.ppo.normalizer import ObsNormalizer
+from agents.ppo.numpy_policy import NumpyPolicy
 from coop_gym.envs.kernels.report import REPORT
 
-__all__ = ["PPO", "ObsNormalizer", "PPOConfig", "Rollout", "compile_update", "jax_modules", "ppo_loss"]
+__all__ = ["PPO", "NumpyPolicy", "ObsNormalizer", "PPOConfig", "Rollout", "compile_update", "jax_modules", "ppo_loss"]
 
 
 def jax_modules() -> tuple[Any, Any, Any]:
@@ -89,6 +90,10 @@ class PPOConfig:
     normalize_obs: bool = True
     """Observations scaled by their running mean and std (SB3's ``VecNormalize``: clipped to +-10)."""
     policy_lag: int = 1
+    ALGO: ClassVar[str] = "ppo"
+    """The :mod:`agents.hyperparams` algorithm whose settings :meth:`from_training` reads."""
+    POLICY_KWARGS: ClassVar[dict[str, str]] = {"net_arch": "hidden"}
+    """The field of each ``policy_kwargs`` setting :meth:`from_training` takes."""
 
     def __post_init__(self) -> None:
         """Refuse settings the loop cannot run."""
@@ -101,7 +106,8 @@ class PPOConfig:
         samples = self.n_envs * self.n_steps
         if samples % self.batch_size:
             raise ValueError(
-                f"{type(self).__name__}: n_envs * n_steps ({samples}) must be a multiple of batch_size ({self.batch_size})"
+                f"{type(self).__name__}: n_envs * n_steps ({samples}) must be a multiple of "
+                f"batch_size ({self.batch_size})"
             )
         if self.policy_lag not in (0, 1):
             raise ValueError(f"{type(self).__name__}.policy_lag must be 0 or 1, got {self.policy_lag!r}")
@@ -113,8 +119,8 @@ class PPOConfig:
         return dataclasses.replace(self, **changes)
 
     @classmethod
-    def from_training(cls, config: Any) -> PPOConfig:
-        """The settings of a PPO :class:`agents.hyperparams.TrainingConfig` (``"lin_X"``: X, annealed).
+    def from_training(cls, config: Any) -> Any:
+        """The settings of a :class:`agents.hyperparams.TrainingConfig` of :attr:`ALGO` (``"lin_X"``: X, annealed).
 
         A rollout smaller than a minibatch is one minibatch, as in SB3.
 
@@ -125,11 +131,12 @@ class PPOConfig:
         rate = kwargs.pop("learning_rate", cls.learning_rate)
         anneal = isinstance(rate, str) and rate.startswith("lin_")
         policy_kwargs = dict(config.policy_kwargs or {})
-        hidden = tuple(policy_kwargs.pop("net_arch", cls.hidden))
+        network = {field: policy_kwargs.pop(key) for key, field in cls.POLICY_KWARGS.items() if key in policy_kwargs}
+        network["hidden"] = tuple(network.get("hidden", cls.hidden))
         fields = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(kwargs) - fields) + sorted(policy_kwargs)
-        if config.algo != "ppo" or unknown:
-            raise ValueError(f"PPOConfig.from_training: {config.algo!r} settings {unknown} are not this PPO's")
+        if config.algo != cls.ALGO or unknown:
+            raise ValueError(f"{cls.__name__}.from_training: {config.algo!r} settings {unknown} are not this learner's")
         n_steps = int(kwargs.pop("n_steps", cls.n_steps))
         batch_size = min(int(kwargs.pop("batch_size", cls.batch_size)), config.n_envs * n_steps)  # one at least
         return cls(
@@ -138,8 +145,8 @@ class PPOConfig:
             batch_size=batch_size,
             learning_rate=float(rate[4:] if anneal else rate),
             anneal_lr=anneal,
-            hidden=hidden,
             normalize_obs=bool(config.normalize),
+            **network,
             **kwargs,
         )
 
@@ -163,63 +170,6 @@ class Rollout(NamedTuple):
     """1 where an episode begins after the last step, (n_envs,)."""
     lstm_states: tuple[np.ndarray, ...] = ()
     """A recurrent policy's LSTM states when the rollout began, each (n_envs, hidden); none for the MLP."""
-
-
-class NumpyPolicy:
-    """The actor-critic's forward pass in NumPy over flax's weights, and its sampling.
-
-    The logits are laid out as a (dims, widest) table, padded with -inf, so that every action
-    dimension is sampled at once.
-    """
-
-    def __init__(self, params: Any, nvec: tuple[int, ...], activation: str) -> None:
-        """Weights as NumPy (``params``: ``{"params": {"pi": {...}, "vf": {...}}}`` of :class:`ActorCritic`)."""
-
-        def layers(net: dict[str, Any]) -> list[tuple[np.ndarray, np.ndarray]]:
-            names = sorted(net, key=lambda name: int(name.split("_")[1]))
-            return [(np.asarray(net[n]["kernel"]), np.asarray(net[n]["bias"])) for n in names]
-
-        self.pi, self.vf = layers(params["params"]["pi"]), layers(params["params"]["vf"])
-        self.act_fn = np.tanh if activation == "tanh" else (lambda x: np.maximum(x, 0.0))
-        n_logits, widest, bounds = int(sum(nvec)), max(nvec), np.cumsum([0, *nvec])
-        self.columns = np.full((len(nvec), widest), n_logits)  # column n_logits: the -inf pad
-        for head, n in enumerate(nvec):
-            self.columns[head, :n] = np.arange(bounds[head], bounds[head] + n)
-        self.last = np.asarray(nvec) - 1
-        self.offsets = np.arange(len(nvec)) * widest  # of each dimension's row in the flattened table
-
-    def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
-        for weight, bias in layers[:-1]:
-            x = self.act_fn(x @ weight + bias)
-        weight, bias = layers[-1]
-        return x @ weight + bias
-
-    def value(self, obs: np.ndarray) -> np.ndarray:
-        """V(s) of each row."""
-        return self._mlp(self.vf, obs)[:, 0]
-
-    def act(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(actions (n, dims), log pi(a|s), V(s))``: each dimension drawn by its inverse CDF."""
-        actions, log_prob = self.sample(self._mlp(self.pi, obs), rng)
-        return actions, log_prob, self.value(obs).astype(np.float32)
-
-    def sample(
-        self, logits: np.ndarray, rng: np.random.Generator, actions: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``(actions (n, dims), log pi(a|s))`` drawn from ``logits`` (n, sum(nvec)), a dimension at once.
-
-        ``actions``: take these instead of drawing (a replay of another learner's rollout), ``rng`` unused.
-        """
-        n = len(logits)
-        padded = np.concatenate([logits, np.full((n, 1), -np.inf, np.float32)], axis=1)[:, self.columns]
-        weights = np.exp(padded - padded.max(axis=2, keepdims=True))  # unnormalised probabilities
-        cdf = np.cumsum(weights, axis=2)
-        total = cdf[:, :, -1]
-        if actions is None:
-            draws = rng.random((n, len(self.last), 1)) * total[:, :, None]
-            actions = np.minimum((draws >= cdf).sum(axis=2), self.last)
-        chosen = weights.reshape(n, -1)[np.arange(n)[:, None], self.offsets + actions]
-        return actions, np.log(chosen / total).sum(axis=1).astype(np.float32)
 
 
 # --- 3. the advantages ------------------------------------------------------------------
@@ -444,14 +394,14 @@ class PPO:
 
     def rollout(self) -> Rollout:
         """``n_steps`` steps of every env with the acting weights."""
-        cfg, policy, step = self.config, self._acting, self._env_step
+        cfg, step, memory = self.config, self._env_step, self._memory()
         shape = (cfg.n_steps, cfg.n_envs)
         obs = np.zeros((*shape, *self._obs.shape[1:]), np.float32)
         actions = np.zeros((*shape, len(self.nvec)), np.int64)
         log_probs, values, rewards, starts = (np.zeros(shape, np.float32) for _ in range(4))
         for t in range(cfg.n_steps):
             obs[t], starts[t] = self._obs, self._starts
-            actions[t], log_probs[t], values[t] = policy.act(self._obs, self.rng)
+            actions[t], log_probs[t], values[t] = self._act(self._obs, self._starts)
             raw, reward, terminated, truncated, final = step(actions[t, :, 0] if self._discrete else actions[t])
             self._obs = self._observe(raw)
             self._returns += reward
@@ -460,14 +410,31 @@ class PPO:
             if final is not None:
                 cut = truncated & ~terminated
                 if cut.any():  # a time-limit end: bootstrap from the final observation
-                    rewards[t, cut] += cfg.gamma * policy.value(
-                        self.normalizer(final[1][cut]) if self.normalizer else final[1][cut]
-                    )
+                    final_obs = self.normalizer(final[1][cut]) if self.normalizer else final[1][cut]
+                    rewards[t, cut] += cfg.gamma * self._final_values(final_obs, cut)
                 self._record(final)
             self._starts = final[0].astype(np.float32) if final is not None else np.zeros(cfg.n_envs, np.float32)
         self.num_timesteps += cfg.n_steps * cfg.n_envs
-        last_values = policy.value(self._obs).astype(np.float32)
-        return Rollout(obs, actions, log_probs, values, rewards, starts, last_values, self._starts.copy())
+        last_values = self._last_values().astype(np.float32)
+        return Rollout(obs, actions, log_probs, values, rewards, starts, last_values, self._starts.copy(), memory)
+
+    # The MLP policy's step and values; a recurrent learner carries its LSTM states through them.
+
+    def _act(self, obs: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(actions, log pi(a|s), V(s))`` of a step (``starts``: 1 where ``obs`` begins an episode)."""
+        return self._acting.act(obs, self.rng)  # type: ignore[no-any-return]
+
+    def _final_values(self, final_obs: np.ndarray, cut: np.ndarray) -> np.ndarray:
+        """V of the final observations of the envs ``cut`` (a mask), which just hit their time limit."""
+        return self._acting.value(final_obs)  # type: ignore[no-any-return]
+
+    def _last_values(self) -> np.ndarray:
+        """V of the observations after the rollout."""
+        return self._acting.value(self._obs)  # type: ignore[no-any-return]
+
+    def _memory(self) -> tuple[np.ndarray, ...]:
+        """What the policy carries between steps, as the rollout begins (none for the MLP)."""
+        return ()
 
     def update(self, rollout: Rollout, progress_remaining: float) -> None:
         """Start one PPO update on ``rollout``; with ``policy_lag=0`` wait for it and act with its weights."""

@@ -1,6 +1,7 @@
 """A trained :class:`~agents.ppo.ppo.PPO` as Stable-Baselines3's PPO, through SB3's public API.
 
-:func:`to_sb3` builds SB3's ``PPO("MlpPolicy", ...)`` with the learner's settings and network,
+:func:`to_sb3` builds SB3's ``PPO("MlpPolicy", ...)`` with the learner's settings and network
+(a :class:`~agents.ppo.recurrent.RecurrentPPO`: sb3-contrib's ``RecurrentPPO("MlpLstmPolicy", ...)``),
 loads the flax weights into its torch policy (``policy.load_state_dict``) and its observation
 statistics into a ``VecNormalize``; the package's bundle (:func:`agents.rl.save_model_bundle`)
 then saves the two as any SB3 model, so a learner's ``model.zip`` loads, plays and scores
@@ -14,14 +15,19 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
+from sb3_contrib import RecurrentPPO as SB3RecurrentPPO
 from stable_baselines3 import PPO as SB3PPO
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from agents.ppo.ppo import PPO
+from agents.ppo.recurrent import RecurrentPPO
 
-__all__ = ["from_sb3", "sb3_state_dict", "to_sb3"]
+__all__ = ["from_sb3", "sb3_class", "sb3_state_dict", "to_sb3"]
 
 _NETS = {"pi": ("mlp_extractor.policy_net", "action_net"), "vf": ("mlp_extractor.value_net", "value_net")}
+_LSTMS = {"lstm_pi": "lstm_actor", "lstm_vf": "lstm_critic"}
+"""sb3-contrib's name of each LSTM; its one layer's weights are ``<name>.<weight>_l0``, as flax's."""
 
 
 def _layer_names(net: dict[str, Any]) -> list[str]:
@@ -29,8 +35,11 @@ def _layer_names(net: dict[str, Any]) -> list[str]:
 
 
 def sb3_state_dict(params: Any) -> dict[str, torch.Tensor]:
-    """The flax weights as SB3's ``MlpPolicy`` state dict (``Linear`` weights are ``W^T``)."""
+    """The flax weights as SB3's ``MlpPolicy`` state dict (``Linear`` weights are ``W^T``), or ``MlpLstmPolicy``'s."""
     state = {}
+    for net, name in _LSTMS.items():
+        for weight, value in params["params"].get(net, {}).items():
+            state[f"{name}.{weight}_l0"] = torch.from_numpy(np.array(value).copy())
     for net, (hidden, head) in _NETS.items():
         layers = params["params"][net]
         names = _layer_names(layers)
@@ -41,8 +50,13 @@ def sb3_state_dict(params: Any) -> dict[str, torch.Tensor]:
     return state
 
 
-def to_sb3(learner: PPO, params: Any = None) -> SB3PPO:
-    """SB3's PPO playing the learner's weights (or ``params``), with its observation statistics.
+def sb3_class(learner: PPO) -> type[BaseAlgorithm]:
+    """The SB3 class a learner saves as: SB3's PPO, or sb3-contrib's RecurrentPPO for a recurrent one."""
+    return SB3RecurrentPPO if isinstance(learner, RecurrentPPO) else SB3PPO  # type: ignore[no-any-return]
+
+
+def to_sb3(learner: PPO, params: Any = None) -> Any:
+    """SB3's PPO (or RecurrentPPO) playing the learner's weights (or ``params``), with its observation statistics.
 
     The model's env is ``n_envs`` envs of the learner's id and kwargs, inside a ``VecNormalize``
     holding the learner's statistics (not updating them) when it normalises observations;
@@ -59,8 +73,11 @@ def to_sb3(learner: PPO, params: Any = None) -> SB3PPO:
         env.obs_rms.var = learner.normalizer.var.copy()
         env.obs_rms.count = float(learner.normalizer.count)
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[cfg.activation]
-    model = SB3PPO(
-        "MlpPolicy",
+    policy_kwargs: dict[str, Any] = {"net_arch": list(cfg.hidden), "activation_fn": activation}
+    if isinstance(learner, RecurrentPPO):
+        policy_kwargs["lstm_hidden_size"] = learner.config.lstm_hidden_size
+    model = sb3_class(learner)(
+        "MlpLstmPolicy" if isinstance(learner, RecurrentPPO) else "MlpPolicy",
         env,
         n_steps=cfg.n_steps,
         batch_size=cfg.batch_size,
@@ -72,7 +89,7 @@ def to_sb3(learner: PPO, params: Any = None) -> SB3PPO:
         ent_coef=cfg.ent_coef,
         vf_coef=cfg.vf_coef,
         max_grad_norm=cfg.max_grad_norm,
-        policy_kwargs={"net_arch": list(cfg.hidden), "activation_fn": activation},
+        policy_kwargs=policy_kwargs,
         seed=learner.seed,
         device="cpu",
     )
@@ -83,8 +100,8 @@ def to_sb3(learner: PPO, params: Any = None) -> SB3PPO:
     return model
 
 
-def from_sb3(learner: PPO, model: SB3PPO) -> None:
-    """Load an SB3 PPO's policy weights (same network) into ``learner``'s params."""
+def from_sb3(learner: PPO, model: Any) -> None:
+    """Load an SB3 PPO's (a recurrent learner: RecurrentPPO's) weights, same network, into ``learner``'s params."""
     import jax
 
     state = model.policy.state_dict()
@@ -96,4 +113,7 @@ def from_sb3(learner: PPO, model: SB3PPO) -> None:
         for name, target in zip(names, targets, strict=True):
             layers[name]["kernel"] = state[f"{target}.weight"].numpy().T.copy()
             layers[name]["bias"] = state[f"{target}.bias"].numpy().copy()
+    for net, name in _LSTMS.items():
+        for weight in params["params"].get(net, {}):
+            params["params"][net][weight] = state[f"{name}.{weight}_l0"].numpy().copy()
     learner.set_params(params)
