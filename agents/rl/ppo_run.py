@@ -10,7 +10,9 @@ methods -- and checkpoints every so many steps and when a stop is asked (then ra
 :class:`~agents.rl.checkpoints.TrainingInterrupted`). A checkpoint is ``step_N/`` with the
 policy's ``model.zip`` and ``state.pkl`` (:meth:`agents.ppo.PPO.state`, the episode log's
 length, the caller's state); :func:`restore_learner` continues from it exactly.
-:func:`learn_selected` is the selection alone (``bench/learners.py``).
+:func:`learn_selected` is the selection alone (``bench/learners.py``). :func:`make_learner` builds
+the learner of a ``framework="jax"`` setting: :class:`agents.ppo.PPO`, or
+:class:`agents.ppo.recurrent.RecurrentPPO` for ``recurrent_ppo``.
 """
 
 from __future__ import annotations
@@ -25,10 +27,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3 import PPO as SB3PPO
 
-from agents.ppo import PPO
-from agents.ppo.sb3_format import from_sb3, to_sb3
+from agents.ppo import PPO, PPOConfig
+from agents.ppo.recurrent import RecurrentPPO, RecurrentPPOConfig
+from agents.ppo.sb3_format import from_sb3, sb3_class, to_sb3
 from agents.rl.bundle import bundle_problem, load_model, read_bundle, save_model_bundle
 from agents.rl.callbacks import PeriodicEvalCallback, SelectionCallback
 from agents.rl.checkpoints import TrainingInterrupted
@@ -37,9 +39,21 @@ from agents.run_folder import CHECKPOINTS_DIR, MODEL_FILE, VECNORMALIZE_FILE
 from coop_gym.envs.config import Outcome
 from coop_gym.io import atomic_path
 
-__all__ = ["RunHooks", "continue_from_saved", "learn_selected", "restore_learner"]
+__all__ = ["RunHooks", "continue_from_saved", "learn_selected", "make_learner", "restore_learner"]
 
 STATE_FILE = "state.pkl"
+
+
+def make_learner(config: Any, env_id: str, seed: int, env_kwargs: dict[str, Any] | None = None) -> PPO:
+    """The learner of ``config`` (a :class:`agents.hyperparams.TrainingConfig`) on ``env_id``'s envs of its personas.
+
+    ``recurrent_ppo``: :class:`~agents.ppo.recurrent.RecurrentPPO`; ``ppo``: :class:`~agents.ppo.PPO`
+    (their configs' ``from_training`` refuse any other setting).
+    """
+    kwargs = {"personas": config.personas, **(env_kwargs or {})}
+    if config.algo == "recurrent_ppo":
+        return RecurrentPPO(env_id, RecurrentPPOConfig.from_training(config), seed, kwargs)
+    return PPO(env_id, PPOConfig.from_training(config), seed, kwargs)
 
 
 class RunHooks:
@@ -207,8 +221,9 @@ def continue_from_saved(learner: PPO, path: str | Path) -> None:
     if stats is None and (model_path.parent / VECNORMALIZE_FILE).exists():
         stats = pickle.loads((model_path.parent / VECNORMALIZE_FILE).read_bytes())
     model, _ = load_model(model_path)
-    if not isinstance(model, SB3PPO):
-        raise ValueError(f"{model_path}: a {type(model).__name__}, not a PPO")
+    expected = sb3_class(learner)
+    if not isinstance(model, expected):
+        raise ValueError(f"{model_path}: a {type(model).__name__}, not a {expected.__name__}")
     from_sb3(learner, model)
     if stats is not None and learner.normalizer is not None:
         rms: Any = stats.obs_rms
@@ -218,8 +233,8 @@ def continue_from_saved(learner: PPO, path: str | Path) -> None:
 
 def learn_selected(
     learner: PPO, total_timesteps: int, selection: SelectionCallback | None
-) -> tuple[SB3PPO, dict[str, Any] | None]:
-    """``(model, selected)``: train to ``total_timesteps``; the kept policy as SB3's PPO and the selection's record.
+) -> tuple[Any, dict[str, Any] | None]:
+    """``(model, selected)``: train to ``total_timesteps``; the kept policy as SB3's (:func:`to_sb3`) and the record.
 
     The selection scores the policy the next rollout plays, at the rollouts it asks for; without
     one the final policy is kept and the record is None.
