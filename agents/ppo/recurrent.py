@@ -10,6 +10,12 @@ LSTMs from the states the rollout began with, zeroed where an episode starts ins
 learner saves as sb3-contrib's ``RecurrentPPO`` (:func:`agents.ppo.sb3_format.to_sb3`), which loads,
 plays and is scored without JAX.
 
+Not yet what ``train.py --algo recurrent_ppo --framework jax`` trains: that is still
+:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`. The two agree rollout for rollout and update for
+update from the same weights and actions (``tests/agents/test_recurrent_equivalence.py``), yet the
+caregivers this one trains score below the other's on the held-out people, for a cause not yet found
+(docs/agents.md, "The PPO learner").
+
 Example:
     >>> import coop_gym
     >>> config = RecurrentPPOConfig(n_envs=4, n_steps=32, batch_size=64)

@@ -17,7 +17,6 @@ import numpy as np
 import torch
 from sb3_contrib import RecurrentPPO as SB3RecurrentPPO
 from stable_baselines3 import PPO as SB3PPO
-from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from agents.ppo.ppo import PPO
@@ -50,9 +49,9 @@ def sb3_state_dict(params: Any) -> dict[str, torch.Tensor]:
     return state
 
 
-def sb3_class(learner: PPO) -> type[BaseAlgorithm]:
+def sb3_class(learner: PPO) -> type[SB3PPO] | type[SB3RecurrentPPO]:
     """The SB3 class a learner saves as: SB3's PPO, or sb3-contrib's RecurrentPPO for a recurrent one."""
-    return SB3RecurrentPPO if isinstance(learner, RecurrentPPO) else SB3PPO  # type: ignore[no-any-return]
+    return SB3RecurrentPPO if isinstance(learner, RecurrentPPO) else SB3PPO
 
 
 def to_sb3(learner: PPO, params: Any = None) -> Any:
@@ -96,7 +95,7 @@ def to_sb3(learner: PPO, params: Any = None) -> Any:
     model.policy.load_state_dict(sb3_state_dict(learner.params if params is None else params), strict=True)
     model.num_timesteps = learner.num_timesteps
     model.set_logger(Logger(None, []))
-    model.framework = "jax"  # type: ignore[attr-defined]  # what agent.json records: train.py --framework jax
+    model.framework = "jax"  # type: ignore[union-attr]  # what agent.json records: train.py --framework jax
     return model
 
 

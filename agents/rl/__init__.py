@@ -5,7 +5,8 @@ One import for everything the trainer and the loaders use; each part has a modul
 * :mod:`agents.rl.training` -- :func:`make_train_env` (the training ``VecEnv``) and
   :func:`make_model` (the algorithm with the defaults of :mod:`agents.hyperparams`);
   :func:`sb3_settings` (those defaults as the dict and wrappers an SB3 script passes);
-* :mod:`agents.rl.bundle` -- :func:`save_agent` / :func:`load_agent`: a self-contained
+* :mod:`agents.rl.bundle` -- :func:`save_agent` / :func:`load_agent` (:mod:`agents.rl.ensemble`'s, which
+  also loads a run folder whose seeds play as one): a self-contained
   ``model.zip`` that loads as an :class:`SB3Agent`, scored by :func:`agents.evaluate.evaluate`
   like any other agent;
 * :mod:`agents.rl.callbacks` -- TensorBoard under CleanRL's names, outcome rates, periodic
@@ -29,7 +30,6 @@ from agents.rl.bundle import (
     BUNDLE_INFO,
     BUNDLE_VECNORMALIZE,
     SB3Agent,
-    load_agent,
     load_model,
     load_to_continue,
     read_bundle,
@@ -52,6 +52,7 @@ from agents.rl.checkpoints import (
     restore_checkpoint,
     save_checkpoint,
 )
+from agents.rl.ensemble import load_agent
 from agents.rl.normalize import ObsNormalizer
 from agents.rl.training import (
     VEC_NORMALIZE_KWARGS,

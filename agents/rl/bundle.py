@@ -33,7 +33,7 @@ from agents.hyperparams import ALGORITHMS
 from agents.pretrained import PREFIX, is_pretrained, pretrained_card, pretrained_model_path
 from agents.rl.normalize import ObsNormalizer
 from agents.rl.training import algorithm_class, find_frame_stack, find_vec_normalize, observation_features
-from agents.run_folder import AGENT_FILE, ENSEMBLE_FILE, MODEL_FILE, VECNORMALIZE_FILE
+from agents.run_folder import AGENT_FILE, MODEL_FILE, VECNORMALIZE_FILE
 from coop_gym.io import atomic_path, write_bytes, write_json
 
 __all__ = [
@@ -418,9 +418,8 @@ def load_agent(path: str | Path) -> SB3Agent:
     """Load a saved agent (a model folder, its ``model.zip``, or ``pretrained:NAME``) for evaluation.
 
     ``pretrained:NAME`` is a model shipped in :mod:`agents.pretrained`; its card's env kwargs
-    come along (``agent.env_kwargs``) and its name is ``pretrained:NAME``. A run folder kept as an
-    ensemble (its ``ensemble.json``) loads as its members played as one
-    (:class:`agents.rl.ensemble.EnsembleAgent`); its ``model.zip`` is the member best on the validation people.
+    come along (``agent.env_kwargs``) and its name is ``pretrained:NAME``. (``agents.rl.load_agent`` is
+    :func:`agents.rl.ensemble.load_agent`, which also loads a run folder kept as an ensemble.)
 
     Returns:
         An :class:`SB3Agent` with the model's algorithm, env id and normalisation.
@@ -437,10 +436,6 @@ def load_agent(path: str | Path) -> SB3Agent:
         agent.name = PREFIX + card["name"]
         agent.env_kwargs = dict(card.get("env_kwargs") or {})
         return agent
-    if Path(path).is_dir() and (Path(path) / ENSEMBLE_FILE).is_file():
-        from agents.rl.ensemble import load_run_ensemble
-
-        return load_run_ensemble(Path(path))
     model_path, saved_info = resolve_saved(path)
     model, info = load_model(model_path)
     _, bundled = read_bundle(model_path)

@@ -23,10 +23,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.rl.bundle import GreedyActor, SB3Agent, load_agent
+from agents.rl.bundle import GreedyActor, SB3Agent
+from agents.rl.bundle import load_agent as load_saved
 from agents.run_folder import ENSEMBLE_FILE, ENSEMBLE_PREFIX
 
-__all__ = ["ENSEMBLE_PREFIX", "EnsembleAgent", "load_ensemble", "load_run_ensemble"]
+__all__ = ["ENSEMBLE_PREFIX", "EnsembleAgent", "load_agent", "load_ensemble", "load_run_ensemble"]
 
 
 class EnsembleAgent(SB3Agent):
@@ -96,7 +97,7 @@ class EnsembleAgent(SB3Agent):
 
 def load_ensemble(paths: Sequence[str | Path], name: str | None = None) -> EnsembleAgent:
     """The saved agents at ``paths`` (run folders, ``model.zip`` files or ``pretrained:NAME``) as one ensemble."""
-    return EnsembleAgent([load_agent(path) for path in paths], name)
+    return EnsembleAgent([load_saved(path) for path in paths], name)
 
 
 def load_run_ensemble(folder: Path) -> EnsembleAgent:
@@ -118,3 +119,19 @@ def load_run_ensemble(folder: Path) -> EnsembleAgent:
         if not path.is_relative_to(folder.resolve()) or not path.exists():
             raise ValueError(f"{file}: member {member!r} is not a saved agent inside {folder}")
     return load_ensemble(paths, name=f"ensemble of {len(paths)} ({folder.name})")
+
+
+def load_agent(path: str | Path) -> SB3Agent:
+    """A saved agent for evaluation (``agents.rl.load_agent``), a run folder of seeds played as one included.
+
+    A run folder kept as an ensemble (its ``ensemble.json``) loads as its members played as one; its
+    ``model.zip`` (the member best on the validation people) and anything else as
+    :func:`agents.rl.bundle.load_agent` loads it.
+
+    Raises:
+        FileNotFoundError, ValueError: as :func:`agents.rl.bundle.load_agent`, or a damaged ``ensemble.json``.
+    """
+    if not isinstance(path, str) or not path.startswith("pretrained:"):
+        if Path(path).is_dir() and (Path(path) / ENSEMBLE_FILE).is_file():
+            return load_run_ensemble(Path(path))
+    return load_saved(path)
