@@ -431,8 +431,8 @@ def _learner_row(label: str, row: dict[str, Any]) -> list[str]:
 
 
 _BODIES_COMMAND = (
-    "python bench/learners.py --rows jax-switching-population,jax-switching-true-population --seeds 0,1,2,3"
-    " --save bench/results/learners_bodies.json"
+    "python bench/learners.py --rows jax-kalman-lag,jax-kalman-lag-population,jax-switching-population,"
+    "jax-switching-true-population --seeds 0,1,2,3 --save bench/results/learners_bodies.json"
 )
 
 
@@ -460,12 +460,6 @@ def across_bodies(results: Results) -> str:
     if record is None:
         return f"{head}\nNo results file yet: `{_BODIES_COMMAND}`, then `python bench/report.py`.\n"
     report, rows = record["results"], []
-    for stem in ("selection_people",):
-        found = results.get(stem)
-        for name, row in (found["results"]["rows"] if found else {}).items():
-            if kept := _kept_of_seeds(row):
-                label = f"`{name}` (`bench/results/{stem}.json`)"
-                rows.append(_bodies_cells(label, [kept[s][:2] for s in sorted(kept)], [], report))
     for name, row in report["rows"].items():
         pairs = [(run["validation_people"]["success_rate"], run["success_rate"]) for run in row["per_seed"]]
         frail = [run["by_persona"]["frail"]["success_rate"] for run in row["per_seed"] if "by_persona" in run]
@@ -477,13 +471,14 @@ def across_bodies(results: Results) -> str:
 {_provenance(record)}
 
 Each row trains as [Learners and observations](#learners-and-observations-on-the-hard-level) does
-({report["timesteps"]:,} steps, the best policy of the last half on the training personas' validation episodes kept);
-`train_population` rows on 512 persons of the validation people's population instead of the wider training personas.
-Each seed's kept policy plays 1000 episodes of the validation people (the set every choice is made on) and the same
-{report["episodes"]} held-out episodes of the test people ({scripted}); the gap column is the mean over seeds of the
-first minus the second. The `switching` rows observe the switching filter's `P(xi)` beside the Kalman estimate:
-its person hypotheses are weighed by the readings within each episode, and the `true` row's filter is given each
-episode's true person instead (what a caregiver that had identified the person would read).
+({report["timesteps"]:,} steps, the best policy of the last half on the training personas' validation episodes
+kept, `agents.ppo` with policy lag 1: `train.py`'s learner), the `-population` rows on 512 persons of the
+validation people's population instead of the wider training personas. Each seed's kept policy plays 1000
+episodes of the validation people (the set every choice is made on) and the same {report["episodes"]} held-out
+episodes of the test people ({scripted}); the gap column is the mean over seeds of the first minus the second.
+The `switching` rows observe the switching filter's `P(xi)` beside the Kalman estimate: its person hypotheses
+are weighed by the readings within each episode, and the `true` row's filter is given each episode's true
+person instead (what a caregiver that had identified the person would read).
 
 {_table(header, rows)}
 """

@@ -281,6 +281,16 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
         learners.train_one("jax-kalman", 0, 64, 4, tmp_path, 4)
     assert built["config"].policy_lag == 0  # a jax row is sequential unless it says otherwise, whatever train.py's
     assert built["config"].normalize_obs and built["env_kwargs"] == {"personas": "train_wide"}
+    # The switching rows across bodies: the light filter's hypotheses, or the filter given the true person.
+    for name, options in (
+        ("jax-switching-population", {"n_particles": 256, "hypotheses": 32}),
+        ("jax-switching-true-population", {"n_particles": 256, "hypotheses": 1, "true_person": True}),
+    ):
+        with pytest.raises(Built):
+            learners.train_one(name, 0, 64, 4, tmp_path, 4)
+        kwargs = built["env_kwargs"]
+        assert kwargs["personas"] == "train_population" and kwargs["estimator"] == "switching", name
+        assert kwargs["estimator_options"] == options and built["config"].policy_lag == 1, name
     # A row without normalisation trains on its own env, as CleanRL's script would see it.
     with pytest.raises(Built):
         learners.train_one("jax-discreteunit", 0, 64, 4, tmp_path, 4)
@@ -610,35 +620,6 @@ def test_a_lift_hazard_policy_lifts_with_its_probability_and_cues_at_random() ->
     assert set(never % 2) == {0} and set(always % 2) == {1}
     assert set(never // 2) == set(range(9))
     assert abs(np.mean(defaults.LiftHazard(0.5).predict(observations)[0] % 2) - 0.5) < 0.05
-
-
-def test_the_switching_population_rows_train_across_bodies_on_their_filter(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """``jax-switching-population``: the light filter's hypotheses; ``-true-``: the filter given the true person."""
-    pytest.importorskip("jax")
-    import agents.ppo
-
-    learners = _bench("learners")
-    built: dict[str, Any] = {}
-
-    class Built(Exception):
-        pass
-
-    def capture(env_id: str, config: Any, seed: int, env_kwargs: dict[str, Any]) -> Any:
-        built.update(config=config, env_kwargs=env_kwargs)
-        raise Built
-
-    monkeypatch.setattr(agents.ppo, "PPO", capture)
-    for name, options in (
-        ("jax-switching-population", {"n_particles": 256, "hypotheses": 32}),
-        ("jax-switching-true-population", {"n_particles": 256, "hypotheses": 1, "true_person": True}),
-    ):
-        with pytest.raises(Built):
-            learners.train_one(name, 0, 64, 4, tmp_path, 4)
-        kwargs = built["env_kwargs"]
-        assert kwargs["personas"] == "train_population" and kwargs["estimator"] == "switching", name
-        assert kwargs["estimator_options"] == options and built["config"].policy_lag == 1, name
 
 
 def test_across_bodies_reports_each_rows_validation_people_against_the_test_people() -> None:
