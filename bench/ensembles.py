@@ -31,12 +31,11 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
+from learners import ENV_ID
+from learners import VALIDATION_PEOPLE_KEYS as RATES
 from result_files import add_save_argument, save
 
 from coop_gym.cli import positive_int, seed_list
-
-ENV_ID = "CoopGym/SitToStandHard-v2"
-RATES = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
 
 
 def _record(folder: Path, row: str, seed: int, timesteps: int) -> dict[str, Any]:
@@ -62,9 +61,10 @@ def _ensemble(folder: Path, row: str, members: list[int], args: argparse.Namespa
         return dict(json.loads(path.read_text(encoding="utf-8")))
     agent = load_ensemble([folder / f"{row}__{s}__{args.timesteps}" for s in members])
     test = evaluate(agent, ENV_ID, "test", args.episodes, 0)
+    held_out = test.summary()
     people = evaluate(agent, ENV_ID, "validation", args.validation_episodes, VALIDATION_SEED).summary()
     found = {
-        **{key: test.summary()[key] for key in RATES},
+        **{key: held_out[key] for key in RATES},
         "members": members,
         "by_persona": test.persona_rates(),
         "validation_people": {key: people[key] for key in RATES},

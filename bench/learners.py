@@ -367,7 +367,7 @@ def train_one(
     saved = save_agent(model, folder / f"{name}__{seed}__{timesteps}", algo=row.algo, env_id=ENV_ID)
     agent = load_agent(saved)  # what a user loads, not the object in memory
     result = evaluate(agent, ENV_ID, "test", episodes, 0, env_kwargs=row.env_kwargs, name=f"{name}:{seed}")
-    people_rates = evaluate(agent, ENV_ID, "validation", validation, VALIDATION_SEED, env_kwargs=row.env_kwargs)
+    on_people = evaluate(agent, ENV_ID, "validation", validation, VALIDATION_SEED, env_kwargs=row.env_kwargs).summary()
     return {
         **result.summary(),  # its "seed" is the first held-out episode's
         "by_persona": result.persona_rates(),
@@ -377,7 +377,7 @@ def train_one(
         "train_wall_s": wall_s,
         "kept_step": selected["timesteps"],
         "validation_success_rate": selected["validation_success_rate"],
-        "validation_people": {key: people_rates.summary()[key] for key in VALIDATION_PEOPLE_KEYS},
+        "validation_people": {key: on_people[key] for key in VALIDATION_PEOPLE_KEYS},
         **({"candidates": selected["scores"]} if people else {}),
     }
 

@@ -277,8 +277,8 @@ class GreedyActor:
             return cls(policy, [int(n) for n in policy.action_dist.action_dims])
         return None
 
-    def __call__(self, obs: NDArray[Any]) -> NDArray[np.int64]:
-        """Actions ``(N,)`` or ``(N, heads)`` for a batch of (normalised) observations ``(N, D)``."""
+    def head_logits(self, obs: NDArray[Any]) -> list[Any]:
+        """Each action head's logits (torch tensors, ``(N, n_head)``) for a batch of (normalised) observations."""
         import torch
 
         policy = self.policy
@@ -287,10 +287,14 @@ class GreedyActor:
         with torch.inference_mode():
             features = policy.pi_features_extractor(torch.as_tensor(np.asarray(obs)).float())
             logits = policy.action_net(policy.mlp_extractor.forward_actor(features))
-            if self.heads is None:
-                return _mode(logits).numpy()  # type: ignore[no-any-return]
-            modes = [_mode(head) for head in torch.split(logits, self.heads, dim=1)]
-            return torch.stack(modes, dim=1).numpy()  # type: ignore[no-any-return]
+        return [logits] if self.heads is None else list(torch.split(logits, self.heads, dim=1))
+
+    def __call__(self, obs: NDArray[Any]) -> NDArray[np.int64]:
+        """Actions ``(N,)`` or ``(N, heads)`` for a batch of (normalised) observations ``(N, D)``."""
+        import torch
+
+        modes = [_mode(head) for head in self.head_logits(obs)]
+        return (modes[0] if self.heads is None else torch.stack(modes, dim=1)).numpy()  # type: ignore[no-any-return]
 
 
 def _mode(logits: Any) -> Any:

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.pretrained import is_pretrained
 from agents.rl.bundle import GreedyActor, SB3Agent
 from agents.rl.bundle import load_agent as load_saved
 from agents.run_folder import ENSEMBLE_FILE, ENSEMBLE_PREFIX
@@ -68,14 +69,8 @@ class EnsembleAgent(SB3Agent):
         total: list[NDArray[np.float64]] | None = None
         for member, actor in zip(self.members, self.actors, strict=True):
             assert actor is not None
-            policy = actor.policy
-            if policy.training:
-                policy.set_training_mode(False)
-            with torch.inference_mode():
-                obs = torch.as_tensor(member.normalize(np.asarray(observation).reshape(-1, self._width())))
-                logits = policy.action_net(policy.mlp_extractor.forward_actor(policy.pi_features_extractor(obs)))
-                heads = torch.split(logits, actor.heads or [logits.shape[1]], dim=1)
-                probs = [torch.softmax(h.double(), dim=1).numpy() for h in heads]
+            heads = actor.head_logits(member.normalize(np.asarray(observation).reshape(-1, self._width())))
+            probs = [torch.softmax(h.double(), dim=1).numpy() for h in heads]
             total = probs if total is None else [t + p for t, p in zip(total, probs, strict=True)]
         assert total is not None
         return [t / len(self.members) for t in total]
@@ -131,7 +126,6 @@ def load_agent(path: str | Path) -> SB3Agent:
     Raises:
         FileNotFoundError, ValueError: as :func:`agents.rl.bundle.load_agent`, or a damaged ``ensemble.json``.
     """
-    if not isinstance(path, str) or not path.startswith("pretrained:"):
-        if Path(path).is_dir() and (Path(path) / ENSEMBLE_FILE).is_file():
-            return load_run_ensemble(Path(path))
+    if not is_pretrained(path) and Path(path).is_dir() and (Path(path) / ENSEMBLE_FILE).is_file():
+        return load_run_ensemble(Path(path))
     return load_saved(path)
