@@ -119,13 +119,15 @@ def load_run_ensemble(folder: Path) -> EnsembleAgent:
 def load_agent(path: str | Path) -> SB3Agent:
     """A saved agent for evaluation (``agents.rl.load_agent``), a run folder of seeds played as one included.
 
-    A run folder kept as an ensemble (its ``ensemble.json``) loads as its members played as one; its
-    ``model.zip`` (the member best on the validation people) and anything else as
-    :func:`agents.rl.bundle.load_agent` loads it.
+    ``ensemble:MODEL+MODEL+...`` loads those saved models as one, and a run folder kept as an ensemble (its
+    ``ensemble.json``) its members; its ``model.zip`` (the member best on the validation people) and
+    anything else load as :func:`agents.rl.bundle.load_agent` loads them.
 
     Raises:
         FileNotFoundError, ValueError: as :func:`agents.rl.bundle.load_agent`, or a damaged ``ensemble.json``.
     """
+    if isinstance(path, str) and path.startswith(ENSEMBLE_PREFIX):
+        return load_ensemble(path.removeprefix(ENSEMBLE_PREFIX).split("+"), name=path)
     if not is_pretrained(path) and Path(path).is_dir() and (Path(path) / ENSEMBLE_FILE).is_file():
         return load_run_ensemble(Path(path))
     return load_saved(path)

@@ -26,7 +26,7 @@ from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 import tyro
 
@@ -322,13 +322,9 @@ def _planned(args: Args, entry: str, name: str) -> tuple[Agent | str, str, str]:
         env_id = args.env or rllib_agent.env_id or DEFAULT_ENV_ID
         return rllib_agent, env_id, f"rllib_ppo:{name}"
     from agents.rl import load_agent, observation_features
-    from agents.rl.ensemble import load_ensemble
 
     try:
-        if entry.startswith(ENSEMBLE_PREFIX):
-            loaded: Any = load_ensemble(entry.removeprefix(ENSEMBLE_PREFIX).split("+"), name=entry)
-        else:
-            loaded = load_agent(entry)
+        loaded = load_agent(entry)
     except (OSError, ValueError) as exc:
         fail(PROG, f"--model {entry}: {exc}")
     env_id = args.env or loaded.env_id or DEFAULT_ENV_ID
