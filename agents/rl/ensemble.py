@@ -6,7 +6,8 @@ its probabilities per action head; the ensemble takes, per head, the action of h
 probability. It follows the agents' ``predict`` protocol, so :func:`agents.evaluate.evaluate`
 scores it as any other agent. ``train.py --seeds N`` (``--keep ensemble``, PPO's default) keeps its
 seeds this way: the run folder's ``ensemble.json`` names them, and :func:`agents.rl.load_agent` of the
-folder gives :func:`load_run_ensemble`.
+folder gives :func:`load_run_ensemble`; a pretrained ensemble (``pretrained:NAME`` whose card names
+``members``) loads as :func:`load_pretrained_ensemble`.
 
 Example:
     >>> from agents.rl.ensemble import load_ensemble
@@ -23,12 +24,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.pretrained import is_pretrained
+from agents.pretrained import PREFIX, is_pretrained, pretrained_card, pretrained_members
 from agents.rl.bundle import GreedyActor, SB3Agent
 from agents.rl.bundle import load_agent as load_saved
 from agents.run_folder import ENSEMBLE_FILE, ENSEMBLE_PREFIX
 
-__all__ = ["ENSEMBLE_PREFIX", "EnsembleAgent", "load_agent", "load_ensemble", "load_run_ensemble"]
+__all__ = [
+    "ENSEMBLE_PREFIX",
+    "EnsembleAgent",
+    "load_agent",
+    "load_ensemble",
+    "load_pretrained_ensemble",
+    "load_run_ensemble",
+]
 
 
 class EnsembleAgent(SB3Agent):
@@ -116,10 +124,34 @@ def load_run_ensemble(folder: Path) -> EnsembleAgent:
     return load_ensemble(paths, name=f"ensemble of {len(paths)} ({folder.name})")
 
 
+def load_pretrained_ensemble(entry: str) -> EnsembleAgent:
+    """The ensemble ``pretrained:NAME`` whose card names its ``members``, named ``pretrained:NAME``.
+
+    Its card's env kwargs come along (``agent.env_kwargs``), as a single pretrained model's do.
+
+    Raises:
+        ValueError: an unknown name, not an ensemble, or a member missing or not loadable (the message names it).
+    """
+    card, paths = pretrained_card(entry), pretrained_members(entry)
+    name = PREFIX + card["name"]
+    if not paths:
+        raise ValueError(f"{name} is one model, not an ensemble: load it with agents.rl.load_agent")
+    members = []
+    for member, path in zip(card["members"], paths, strict=True):
+        try:
+            members.append(load_saved(path))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{name}: member {member!r} does not load ({exc})") from None
+    agent = EnsembleAgent(members, name=name)
+    agent.env_kwargs = dict(card.get("env_kwargs") or {})
+    return agent
+
+
 def load_agent(path: str | Path) -> SB3Agent:
     """A saved agent for evaluation (``agents.rl.load_agent``), a run folder of seeds played as one included.
 
-    ``ensemble:MODEL+MODEL+...`` loads those saved models as one, and a run folder kept as an ensemble (its
+    ``ensemble:MODEL+MODEL+...`` loads those saved models as one, a pretrained ensemble
+    (:func:`load_pretrained_ensemble`) the members its card names, and a run folder kept as an ensemble (its
     ``ensemble.json``) its members; its ``model.zip`` (the member best on the validation people) and
     anything else load as :func:`agents.rl.bundle.load_agent` loads them.
 
@@ -128,6 +160,8 @@ def load_agent(path: str | Path) -> SB3Agent:
     """
     if isinstance(path, str) and path.startswith(ENSEMBLE_PREFIX):
         return load_ensemble(path.removeprefix(ENSEMBLE_PREFIX).split("+"), name=path)
+    if is_pretrained(path) and pretrained_members(str(path)):
+        return load_pretrained_ensemble(str(path))
     if not is_pretrained(path) and Path(path).is_dir() and (Path(path) / ENSEMBLE_FILE).is_file():
         return load_run_ensemble(Path(path))
     return load_saved(path)
