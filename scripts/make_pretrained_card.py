@@ -15,6 +15,14 @@ exactly (the evaluation is deterministic: the same seeds, a deterministic policy
 
     python scripts/make_pretrained_card.py hard-ppo --model /tmp/pre/RUN/model.zip \
         --command "python train.py --out /tmp/pre" --training-json /tmp/pre/RUN/training.json
+
+A run folder kept as an ensemble (``train.py``'s default, its ``ensemble.json``) ships as one: give
+the folder as ``--model``, and its members' ``model.zip`` files go to ``agents/pretrained/NAME/``
+(``seed_K.zip``), which the card's ``members`` names; its training section lists each member's
+seed, steps, wall time and selection and the ensemble's score on the validation people::
+
+    python scripts/make_pretrained_card.py hard-v2-ppo-ensemble --model /tmp/pre/runs/RUN \
+        --command "python train.py --seed 0 --out /tmp/pre/runs" --training-json /tmp/pre/runs/RUN/training.json
 """
 
 from __future__ import annotations
@@ -27,6 +35,8 @@ from pathlib import Path
 from typing import Any
 
 import tyro
+
+from agents.run_folder import ENSEMBLE_FILE, MODEL_FILE, TRAINING_FILE
 
 BASELINES = ("blind", "push_then_lift", "prober", "belief", "oracle")
 """The agents beside the model: the blind family's two best, the two readers (the prober's
@@ -41,7 +51,7 @@ class Args:
     name: tyro.conf.Positional[str]
     """the pretrained model's name (hard-ppo: loaded as pretrained:hard-ppo)"""
     model: str
-    """the trained model.zip (agents.rl.save_agent's bundle)"""
+    """the trained model.zip (agents.rl.save_agent's bundle), or a run folder kept as an ensemble (ensemble.json)"""
     command: str
     """the command that trained it (recorded in the card)"""
     training_json: str
@@ -83,7 +93,7 @@ def _counts(result: Any) -> dict[str, Any]:
     }
 
 
-def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, Any]:
+def _training(args: Args, training: dict[str, Any], env_id: str, model_zip: Path) -> dict[str, Any]:
     """The card's training section, from the training summary (train.py's or the script's).
 
     A card's own training section is a summary too: carding a model again keeps its
@@ -91,7 +101,7 @@ def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, An
     """
     from agents.rl.bundle import read_bundle
 
-    framework = read_bundle(args.model)[0].get("framework", "sb3")
+    framework = read_bundle(model_zip)[0].get("framework", "sb3")
     sizing = " with JAX_SIZING" if framework == "jax" else ""
     section = {
         "command": args.command,
@@ -104,11 +114,47 @@ def _training(args: Args, training: dict[str, Any], env_id: str) -> dict[str, An
         "hyperparams": f"agents/hyperparams.py: HYPERPARAMS['ppo']['{env_id}']{sizing}",
     }
     if "selected" in training:  # train.py kept the best-validated policy, not the final one
-        selected = training["selected"]
-        section["selected"] = {k: selected[k] for k in ("timesteps", "validation_success_rate", "personas", "episodes")}
+        section["selected"] = _selected(training["selected"])
     if "defaults" in training:
         section["defaults"] = training["defaults"]
     return section
+
+
+def _selected(selected: dict[str, Any]) -> dict[str, Any]:
+    """What the card says of the best-validated policy train.py kept."""
+    return {k: selected[k] for k in ("timesteps", "validation_success_rate", "personas", "episodes")}
+
+
+def _members(run: Path) -> list[str]:
+    """The member folders a run folder kept as an ensemble names (relative to it)."""
+    members: list[str] = json.loads((run / ENSEMBLE_FILE).read_text())["members"]
+    return members
+
+
+def _ensemble_training(section: dict[str, Any], training: dict[str, Any], run: Path) -> None:
+    """Turn the kept seed's training section into the ensemble's: every member's seed, steps, wall time, selection.
+
+    ``wall_time_s`` becomes the members' training times added up (they train one after another);
+    ``validation`` is the ensemble's score on the validation people (``train.py``'s ``--keep ensemble``).
+    """
+    members = _members(run)
+    summaries = [json.loads((run / m / TRAINING_FILE).read_text())["training"] for m in members]
+    seeds = [score["seed"] for score in training["seeds"]]
+    if len(seeds) != len(members) or len({s["timesteps"] for s in summaries}) != 1:
+        raise ValueError(f"{run}: the training summary's seeds do not match ensemble.json's members")
+    section.pop("selected", None)  # the kept seed's; each member's is below
+    section |= {"seed": seeds[0], "seeds": seeds, "wall_time_s": round(sum(s["wall_time_s"] for s in summaries), 1)}
+    section["members"] = [
+        {
+            "seed": seed,
+            "timesteps": summary["timesteps"],
+            "wall_time_s": round(float(summary["wall_time_s"]), 1),
+            "validation_people_success_rate": score["success_rate"],
+            **({"selected": _selected(summary["selected"])} if "selected" in summary else {}),
+        }
+        for seed, summary, score in zip(seeds, summaries, training["seeds"], strict=True)
+    ]
+    section["validation"] = training["ensemble"]
 
 
 def _evaluation(args: Args, label: str, results: list[Any]) -> dict[str, Any]:
@@ -144,22 +190,42 @@ def _check(args: Args, model_result: Any, check: Any) -> dict[str, Any]:
     }
 
 
+def _ship(args: Args) -> tuple[dict[str, Any], list[Path]]:
+    """Copy the model (or the ensemble's members) into ``agents/pretrained``: the card's files and the zips.
+
+    A single model becomes ``NAME.zip`` (the card's ``model``); an ensemble's members become
+    ``NAME/seed_K.zip`` (the card's ``members``, relative to ``agents/pretrained``).
+    """
+    source = Path(args.model)
+    if not (source / ENSEMBLE_FILE).is_file():
+        target = PRETRAINED / f"{args.name}.zip"
+        shutil.copyfile(source, target)
+        return {"model": target.name}, [target]
+    folder = PRETRAINED / args.name
+    folder.mkdir(exist_ok=True)
+    targets = []
+    for member in _members(source):
+        targets.append(folder / f"{Path(member).name}.zip")
+        shutil.copyfile(source / member / MODEL_FILE, targets[-1])
+    return {"members": [t.relative_to(PRETRAINED).as_posix() for t in targets]}, targets
+
+
 def main() -> None:
     """Copy the model, evaluate it and the baselines, write the card."""
     args = tyro.cli(Args)
     from agents.evaluate import evaluate, print_table
     from agents.rl import load_agent
+    from agents.rl.ensemble import load_ensemble
 
     env_kwargs = json.loads(args.env_kwargs)
     training = json.loads(Path(args.training_json).read_text())
     training = training.get("training", training)
-    target = PRETRAINED / f"{args.name}.zip"
-    shutil.copyfile(args.model, target)
-    agent = load_agent(target)
+    files, zips = _ship(args)
+    label = f"pretrained:{args.name}"
+    agent = load_agent(zips[0]) if len(zips) == 1 else load_ensemble(zips, name=label)
     if agent.env_id is None:
         raise ValueError(f"{args.model} does not record the env it was trained on")
     env_id = agent.env_id
-    label = f"pretrained:{args.name}"
     common: dict[str, Any] = {"personas": "test", "seed": args.seed, "n_envs": args.n_envs}
 
     model_result = evaluate(agent, env_id, episodes=args.episodes, env_kwargs=env_kwargs, name=label, **common)
@@ -168,22 +234,25 @@ def main() -> None:
     print_table(results)
     check = evaluate(agent, env_id, episodes=args.check_episodes, env_kwargs=env_kwargs, name=label, **common)
 
+    section = _training(args, training, env_id, zips[0])
+    if "members" in files:
+        _ensemble_training(section, training, Path(args.model))
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False)
     card = {
         "name": args.name,
-        "model": target.name,
+        **files,
         "algo": agent.algo,
         "env_id": env_id,
         "env_kwargs": env_kwargs,
         "features": list(agent.features or ()),
-        "training": _training(args, training, env_id),
+        "training": section,
         "evaluation": evaluation,
         "check": _check(args, model_result, check),
         "carded_at_commit": commit.stdout.strip(),
         "notes": args.notes,
     }
     (PRETRAINED / f"{args.name}.json").write_text(json.dumps(card, indent=2) + "\n")
-    print(f"wrote {target} and {target.with_suffix('.json')}")
+    print(f"wrote {', '.join(map(str, zips))} and {PRETRAINED / args.name}.json")
 
 
 if __name__ == "__main__":
