@@ -7,7 +7,7 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 from agents.evaluate import evaluate
-from agents.pretrained import pretrained_card, pretrained_model_path, pretrained_names
+from agents.pretrained import pretrained_card, pretrained_members, pretrained_model_path, pretrained_names
 from agents.rl import load_agent
 from agents.tools.evaluate_cli import main
 
@@ -15,10 +15,11 @@ NAMES = pretrained_names()
 
 
 def test_the_hard_level_models_ship():
-    assert {"hard-ppo", "hard-ppo-switching", "hard-v2-ppo"} <= set(NAMES)
+    assert {"hard-ppo", "hard-ppo-switching", "hard-v2-ppo", "hard-v2-ppo-ensemble"} <= set(NAMES)
     for name in NAMES:
         card = pretrained_card(name)
-        assert card["name"] == name and pretrained_model_path(name).is_file()
+        files = pretrained_members(name) or (pretrained_model_path(name),)
+        assert card["name"] == name and all(f.is_file() for f in files)
         assert {"command", "seed", "timesteps", "wall_time_s"} <= set(card["training"])
         assert card["evaluation"]["personas"] == "test" and len(card["evaluation"]["table"]) >= 4
 
@@ -83,3 +84,66 @@ def test_the_evaluate_command_sets_the_policys_torch_threads(capsys):
     finally:
         torch.set_num_threads(before)
     capsys.readouterr()
+
+
+ENSEMBLE = "hard-v2-ppo-ensemble"
+
+
+def test_the_default_train_py_caregiver_ships_as_its_seeds_played_as_one(capsys):
+    from agents.rl.ensemble import EnsembleAgent
+
+    card = pretrained_card(ENSEMBLE)
+    agent = load_agent(f"pretrained:{ENSEMBLE}")
+    assert isinstance(agent, EnsembleAgent) and len(agent.members) == len(card["members"]) == 4
+    assert [m["seed"] for m in card["training"]["members"]] == card["training"]["seeds"] == [0, 1, 2, 3]
+    assert main(["--model", f"pretrained:{ENSEMBLE}", "--episodes", "4", "--json"]) == 0
+    assert f'"pretrained:{ENSEMBLE}"' in capsys.readouterr().out
+    with pytest.raises(ValueError, match=r"is an ensemble, not one model zip"):
+        pretrained_model_path(ENSEMBLE)
+
+
+@pytest.fixture
+def shipped_ensemble(tmp_path, monkeypatch):
+    """The ensemble's card and members copied to a folder that stands in for agents/pretrained."""
+    import shutil
+
+    import agents.pretrained
+
+    shutil.copyfile(agents.pretrained._folder() / f"{ENSEMBLE}.json", tmp_path / f"{ENSEMBLE}.json")
+    shutil.copytree(agents.pretrained._folder() / ENSEMBLE, tmp_path / ENSEMBLE)
+    monkeypatch.setattr(agents.pretrained, "_folder", lambda: tmp_path)
+    return tmp_path
+
+
+def test_a_missing_member_is_named(shipped_ensemble, capsys):
+    member = f"{ENSEMBLE}/seed_2.zip"
+    (shipped_ensemble / member).unlink()
+    assert ENSEMBLE in pretrained_names()
+    with pytest.raises(ValueError, match=rf"pretrained:{ENSEMBLE}: member '{member}' is missing"):
+        load_agent(f"pretrained:{ENSEMBLE}")
+    with pytest.raises(SystemExit) as exc:
+        main(["--model", f"pretrained:{ENSEMBLE}", "--episodes", "2"])
+    assert exc.value.code == 2 and f"member '{member}' is missing" in capsys.readouterr().err
+
+
+def test_a_damaged_member_is_named(shipped_ensemble):
+    member = shipped_ensemble / ENSEMBLE / "seed_1.zip"
+    member.write_bytes(member.read_bytes()[:1000])
+    with pytest.raises(ValueError, match=rf"member '{ENSEMBLE}/seed_1.zip' does not load \(could not load"):
+        load_agent(f"pretrained:{ENSEMBLE}")
+
+
+@pytest.mark.parametrize(
+    ("members", "problem"),
+    [
+        (["hard-v2-ppo-ensemble/seed_0.zip"], "not a list of two or more"),
+        (["../x.zip", "../y.zip"], "member '../x.zip' lies outside"),
+    ],
+)
+def test_a_card_naming_too_few_members_or_files_outside_is_refused(shipped_ensemble, members, problem):
+    import json
+
+    card = shipped_ensemble / f"{ENSEMBLE}.json"
+    card.write_text(json.dumps(json.loads(card.read_text()) | {"members": members}))
+    with pytest.raises(ValueError, match=problem):
+        load_agent(f"pretrained:{ENSEMBLE}")
