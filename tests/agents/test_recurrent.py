@@ -92,6 +92,31 @@ def test_a_seed_trains_the_same_weights_and_a_checkpoint_continues_exactly(lag: 
     assert not _same(first.params, other.params)
 
 
+@pytest.mark.parametrize("recurrent", [False, True], ids=["ppo", "recurrent"])
+def test_scoring_the_policy_between_rollouts_leaves_the_training_unchanged(recurrent: bool) -> None:
+    """A run's work at its rollout ends (the policy as SB3's model, scored on episodes) changes no draw of training."""
+    from agents.evaluate import evaluate
+    from agents.ppo import PPO
+    from agents.ppo.sb3_format import to_sb3
+    from agents.rl.callbacks import _current_policy
+
+    config = TINY if recurrent else PPOConfig(n_envs=4, n_steps=32, batch_size=64, n_epochs=2, policy_lag=0)
+    cls = RecurrentPPO if recurrent else PPO
+    scored = []
+
+    def score(learner: PPO) -> bool:
+        agent = _current_policy(to_sb3(learner, learner.acting_params), config.ALGO, HARD)
+        scored.append(evaluate(agent, HARD, "train", 8, 2_000_000, n_envs=8).success_rate)
+        return True
+
+    hooked = cls(HARD, config, seed=6, env_kwargs=WIDE).learn(512, score)
+    bare = cls(HARD, config, seed=6, env_kwargs=WIDE).learn(512)
+    assert len(scored) == 4
+    assert _same(hooked.params, bare.params)
+    ours, theirs = hooked.take_episodes(), bare.take_episodes()
+    assert len(ours["r"]) > 0 and all(np.array_equal(ours[k], theirs[k]) for k in ("r", "l", "outcome"))
+
+
 def test_a_seed_trains_the_same_weights_in_another_process_at_another_thread_count() -> None:
     code = (
         "import hashlib, numpy as np, jax, coop_gym\n"
