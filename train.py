@@ -33,7 +33,7 @@ class Args:
     seed: int = 0
     """seed of training (envs, network init, sampling)"""
     seeds: int | None = None
-    """seeds trained (--seed, --seed+1, ...); None: 4 for jax ppo, else 1"""
+    """seeds trained (--seed, --seed+1, ...); None: 6 for jax ppo, else 1"""
     keep: Literal["ensemble", "best"] | None = None
     """with --seeds > 1: ensemble (the seeds act as one) or the best on the validation people; None: ensemble for ppo"""
     out: str = "runs"
