@@ -31,7 +31,10 @@ from coop_gym.registration import LEVEL_ENV_IDS
 LEVELS = dict(reversed(LEVEL_ENV_IDS.items()))
 """Each level's id, the hardest first (hard-v2, hard, medium, easy, v0)."""
 AGENTS = ("oracle", "blind", "prober", "belief", "handbook", "push_then_lift")
-PRETRAINED = {"hard-v2": ("pretrained:hard-v2-ppo",), "hard": ("pretrained:hard-ppo", "pretrained:hard-ppo-switching")}
+PRETRAINED = {
+    "hard-v2": ("pretrained:hard-v2-ppo", "pretrained:hard-v2-ppo-ensemble"),
+    "hard": ("pretrained:hard-ppo", "pretrained:hard-ppo-switching"),
+}
 
 
 def level_report(env_id: str, agents: tuple[str, ...], episodes: int) -> dict[str, Any]:
