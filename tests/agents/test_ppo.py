@@ -115,19 +115,26 @@ def test_a_seed_trains_the_same_weights_and_a_checkpoint_continues_exactly(lag: 
     assert not _same(first.params, other.params)
 
 
-def test_a_seed_trains_the_same_weights_in_another_process_at_another_thread_count() -> None:
+@pytest.mark.parametrize("recurrent", [False, True], ids=["ppo", "recurrent"])
+def test_a_seed_trains_the_same_weights_in_another_process_at_another_thread_count(recurrent: bool) -> None:
     import hashlib
     import os
 
+    from agents.ppo.recurrent import RecurrentPPO, RecurrentPPOConfig
+
+    if recurrent:
+        cls, config, steps = RecurrentPPO, RecurrentPPOConfig(n_envs=4, n_steps=32, batch_size=64, n_epochs=2), 384
+    else:
+        cls, config, steps = PPO, TINY, 768
     code = (
         "import hashlib, numpy as np, jax, coop_gym\n"
         "from agents.ppo import PPO, PPOConfig\n"
-        "l = PPO('CoopGym/SitToStandHard-v2', PPOConfig(n_envs=4, n_steps=64, batch_size=128, n_epochs=2),"
-        " seed=5, env_kwargs={'personas': 'train_wide'}).learn(768)\n"
+        "from agents.ppo.recurrent import RecurrentPPO, RecurrentPPOConfig\n"
+        f"l = {cls.__name__}('{HARD}', {config!r}, seed=5, env_kwargs={WIDE!r}).learn({steps})\n"
         "leaves = [np.asarray(x) for x in jax.tree_util.tree_leaves(l.params)]\n"
         "print(hashlib.sha256(b''.join(x.tobytes() for x in leaves)).hexdigest())\n"
     )
-    here = PPO(HARD, TINY, seed=5, env_kwargs=WIDE).learn(768)
+    here = cls(HARD, config, seed=5, env_kwargs=WIDE).learn(steps)
     mine = hashlib.sha256(b"".join(x.tobytes() for x in _leaves(here.params))).hexdigest()
     for threads in ("1", "2"):
         env = {**os.environ, "OMP_NUM_THREADS": threads}
