@@ -9,7 +9,20 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["NumpyPolicy"]
+__all__ = ["NumpyPolicy", "head_columns"]
+
+
+def head_columns(nvec: tuple[int, ...] | list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """``(columns, last)``: each action dimension's logit columns as a row of a (dims, widest) table.
+
+    Rows are padded with column ``sum(nvec)``, read as a -inf logit (probability exactly 0);
+    ``last[d]`` is dimension ``d``'s highest action.
+    """
+    n_logits, widest, bounds = int(sum(nvec)), max(nvec), np.cumsum([0, *nvec])
+    columns = np.full((len(nvec), widest), n_logits)
+    for head, n in enumerate(nvec):
+        columns[head, :n] = np.arange(bounds[head], bounds[head] + n)
+    return columns, np.asarray(nvec) - 1
 
 
 class NumpyPolicy:
@@ -28,12 +41,8 @@ class NumpyPolicy:
 
         self.pi, self.vf = layers(params["params"]["pi"]), layers(params["params"]["vf"])
         self.act_fn = np.tanh if activation == "tanh" else (lambda x: np.maximum(x, 0.0))
-        n_logits, widest, bounds = int(sum(nvec)), max(nvec), np.cumsum([0, *nvec])
-        self.columns = np.full((len(nvec), widest), n_logits)  # column n_logits: the -inf pad
-        for head, n in enumerate(nvec):
-            self.columns[head, :n] = np.arange(bounds[head], bounds[head] + n)
-        self.last = np.asarray(nvec) - 1
-        self.offsets = np.arange(len(nvec)) * widest  # of each dimension's row in the flattened table
+        self.columns, self.last = head_columns(nvec)
+        self.offsets = np.arange(len(nvec)) * max(nvec)  # of each dimension's row in the flattened table
 
     def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
         for weight, bias in layers[:-1]:

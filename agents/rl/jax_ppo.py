@@ -36,6 +36,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.utils import explained_variance
 from stable_baselines3.common.vec_env import VecEnv
 
+from agents.ppo.numpy_policy import head_columns
 from agents.rl.jax_update import _jax, build
 from agents.rl.normalize import numpy_sum
 from agents.rl.sb3_vec import fused_step
@@ -64,15 +65,8 @@ class _RolloutPolicy:
         self.pi = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["pi"]]
         self.vf = [(np.asarray(w, dtype=np.float32), np.asarray(b, dtype=np.float32)) for w, b in params["vf"]]
         self.activation = (lambda x: np.maximum(x, 0.0)) if relu else np.tanh
-        # All heads at once: head h's logit columns in row h of a (heads, widest) table, padded
-        # with column `total`, which _shifted_blocks reads as a -inf logit: probability exactly 0.
-        total, widest = sum(nvec), max(nvec)
-        bounds = np.cumsum([0, *nvec])
-        columns = np.full((len(nvec), widest), total)
-        for head, n in enumerate(nvec):
-            columns[head, :n] = np.arange(bounds[head], bounds[head] + n)
-        self.columns = columns
-        self.last = np.asarray(nvec) - 1
+        # All heads at once (_shifted_blocks reads the padding column as a -inf logit).
+        self.columns, self.last = head_columns(nvec)
 
     def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
         for weight, bias in layers[:-1]:
