@@ -12,8 +12,8 @@ and the observation it gets (:data:`ROWS`):
   sb3-contrib's RecurrentPPO (an LSTM: memory) on the measurements alone / on the default observation;
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO trained by ``train.py``'s learner,
   :class:`agents.ppo.PPO`, on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
-  ``jax-lstm-raw`` / ``jax-lstm-kalman``: the recurrent rows trained by
-  :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO's settings, an LSTM before the heads); ``ROW@N``
+  ``jax-lstm-raw`` / ``jax-lstm-kalman`` / ``jax-lstm-population`` (across bodies): the recurrent rows trained
+  by :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO's settings, an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``, ``jax-kalman-lag`` (``train.py``'s default), ``jax-kalman-lag-population`` (trained across
@@ -26,16 +26,14 @@ and the observation it gets (:data:`ROWS`):
 - ``ROW-stackK`` (e.g. ``ppo-raw-stack16``): an SB3 row with its last ``K`` observations stacked
   into one (SB3's ``VecFrameStack``): memory of a fixed window of ``K`` x 0.1 s.
 
-Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's
-settings from :mod:`agents.hyperparams` with the budget ``--timesteps`` and the wider
-training personas, the best-validated policy of the last half kept
-(:class:`agents.rl.SelectionCallback`, training personas only), then ``--episodes``
-held-out episodes (test personas, seeds ``0..N-1``: the episodes of ``bench/levels.py``).
-The scripted oracle, best blind, prober and belief caregiver play the same episodes. Each row
-reports, over its training seeds, the interquartile mean of the held-out success rate and of
-the mind-reading score ``(success - blind) / (oracle - blind)`` with a stratified bootstrap
-95 % interval (rliable's method, :func:`agents.evaluate.headroom.iqm_across_runs`) and
-the training wall time.
+Every run follows ``train.py``'s protocol on ``CoopGym/SitToStandHard-v2``: the algorithm's settings from
+:mod:`agents.hyperparams` with the budget ``--timesteps`` and the wider training personas (or the row's), the
+best-validated policy of the last half kept (:class:`agents.rl.SelectionCallback`, training personas only),
+then ``--episodes`` held-out episodes (test personas, seeds ``0..N-1``: the episodes of ``bench/levels.py``),
+which the scripted oracle, best blind, prober and belief caregiver play too. Each row reports, over its
+training seeds, the interquartile mean of the held-out success rate and of the mind-reading score
+``(success - blind) / (oracle - blind)`` with a stratified bootstrap 95 % interval (rliable's method,
+:func:`agents.evaluate.headroom.iqm_across_runs`) and the training wall time.
 
 Each finished (row, seed) is written to ``--runs DIR/<row>__<seed>.json`` (with the kept model beside
 it) as soon as it is done; a rerun with the same ``--runs`` skips what is there, so an interrupted sweep
@@ -101,10 +99,8 @@ SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_
 work grows with its particles, so the default filter (1024 particles, 128 hypotheses, what the belief
 caregiver reads) would make each run several times longer (the rows' training time: ``train_wall_s`` in
 ``bench/results/learners.json``)."""
-SWITCHING_TRUE: dict[str, Any] = {
-    "estimator": "switching",
-    "estimator_options": {"n_particles": 256, "hypotheses": 1, "true_person": True},
-}
+_TRUE_PERSON = {"n_particles": 256, "hypotheses": 1, "true_person": True}
+SWITCHING_TRUE: dict[str, Any] = {"estimator": "switching", "estimator_options": _TRUE_PERSON}
 """The switching filter given each episode's true person: what a caregiver that had identified the person reads."""
 
 TRAINPY_FLAGS = (
@@ -123,6 +119,7 @@ DISCRETE_UNIT: dict[str, Any] = {"action_type": "discrete", "observation_scale":
 """The keywords that make :data:`ENV_ID` into :data:`CLEANRL_ENV_ID`."""
 _NO_NORM = "SitToStandHardDiscreteUnit-v2's 18 joint actions and unit-scaled observations, no observation normaliser"
 
+_POP = "train_population"
 ROWS: dict[str, Row] = {
     "ppo-kalman": Row("ppo", {}, "SB3's PPO (MLP), Kalman estimate + measurements (train.py --framework sb3)"),
     "ppo-switching": Row("ppo", SWITCHING, "PPO (MLP), + switching filter's P(xi) (256 particles, 32 hypotheses)"),
@@ -173,6 +170,9 @@ ROWS: dict[str, Row] = {
         "jax",
     ),
     "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
+    "jax-lstm-population": Row(
+        "recurrent_ppo", {}, "jax-lstm-kalman trained across bodies (train_population)", "jax", personas=_POP
+    ),
     "jax-unit": Row(
         "ppo",
         {"observation_scale": "unit"},

@@ -432,7 +432,7 @@ def _learner_row(label: str, row: dict[str, Any]) -> list[str]:
 
 _BODIES_COMMAND = (
     "python bench/learners.py --rows jax-kalman-lag,jax-kalman-lag-population,jax-switching-population,"
-    "jax-switching-true-population --seeds 0,1,2,3 --save bench/results/learners_bodies.json"
+    "jax-switching-true-population,jax-lstm-population --seeds 0,1,2,3 --save bench/results/learners_bodies.json"
 )
 
 
@@ -472,8 +472,9 @@ def across_bodies(results: Results) -> str:
 
 Each row trains as [Learners and observations](#learners-and-observations-on-the-hard-level) does
 ({report["timesteps"]:,} steps, the best policy of the last half on the training personas' validation episodes
-kept, `agents.ppo` with policy lag 1: `train.py`'s learner), the `-population` rows on 512 persons of the
-validation people's population instead of the wider training personas. Each seed's kept policy plays 1000
+kept; `agents.ppo` with policy lag 1, `train.py`'s learner, or for the `lstm` row the LSTM learner of
+`train.py --algo recurrent_ppo`), the `-population` rows on 512 persons of the validation people's population
+(`train_population`) instead of the wider training personas. Each seed's kept policy plays 1000
 episodes of the validation people (the set every choice is made on) and the same {report["episodes"]} held-out
 episodes of the test people ({scripted}); the gap column is the mean over seeds of the first minus the second.
 The `switching` rows observe the switching filter's `P(xi)` beside the Kalman estimate: its person hypotheses
