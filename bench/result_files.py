@@ -255,6 +255,12 @@ def _points(value: float, interval: Sequence[float] | None = None) -> str:
     return text if interval is None else f"{text} [{100 * interval[0]:+.1f}, {100 * interval[1]:+.1f}]"
 
 
+def _two_decimals(value: float, interval: Sequence[float | None] | None = None) -> str:
+    """A score to two decimals with its 95 % interval where it has one: ``0.42 [0.31, 0.55]``."""
+    text = f"{value:.2f}"
+    return text if interval is None or None in interval else f"{text} [{interval[0]:.2f}, {interval[1]:.2f}]"
+
+
 def _spread(summary: dict[str, Any], digits: int = 2, unit: str = TIMES) -> str:
     """Median and min..max of repeats: ``0.78x (0.74..0.86)`` (with a multiplication sign)."""
     return f"{summary['median']:.{digits}f}{unit} ({summary['min']:.{digits}f}..{summary['max']:.{digits}f})"
