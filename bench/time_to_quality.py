@@ -186,8 +186,6 @@ def _train_with_clock(
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from agents.evaluate import evaluate
-    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
     from estimator.compiled import background
 
     torch.set_num_threads(1)
@@ -200,10 +198,7 @@ def _train_with_clock(
     points: list[dict[str, Any]] = []
 
     def score() -> dict[str, Any]:
-        normalizer = ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env()))
-        agent = SB3Agent(model, "ppo", env_id, normalizer)
-        result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
-        return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
+        return _held_out(model, env_id, episodes, eval_seed)
 
     clock = _clock(f"{contender} seed {seed}", budget_s, every_s, targets, score, points)
 
@@ -216,6 +211,16 @@ def _train_with_clock(
     load_before = os.getloadavg()
     model.learn(total_timesteps=budget_steps or 10**12, callback=[clock, Budget()])
     return _record(contender, seed, model.n_envs, int(model.num_timesteps), clock, points, load_before)
+
+
+def _held_out(model: Any, env_id: str, episodes: int, eval_seed: int) -> dict[str, Any]:
+    """Success and unsafe rates of an SB3 ``model`` (its observation normaliser read from its env) held-out."""
+    from agents.evaluate import evaluate
+    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
+
+    agent = SB3Agent(model, "ppo", env_id, ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env())))
+    result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
+    return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
 
 
 def _record(
@@ -251,20 +256,15 @@ def _train_ppo_with_clock(
     budget_steps: int | None,
 ) -> dict[str, Any]:
     """:func:`_train_with_clock` for :class:`agents.ppo.PPO`: the clock and the scores at its rollout ends."""
-    from agents.evaluate import evaluate
     from agents.ppo import PPO, PPOConfig
     from agents.ppo.sb3_format import to_sb3
-    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
 
     config = _sized_config(contender, env_id)
     learner = PPO(env_id, PPOConfig.from_training(config), seed, {"personas": config.personas})
     points: list[dict[str, Any]] = []
 
     def score() -> dict[str, Any]:
-        model = to_sb3(learner, learner.acting_params)  # the policy the next rollout plays
-        agent = SB3Agent(model, "ppo", env_id, ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env())))
-        result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
-        return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
+        return _held_out(to_sb3(learner, learner.acting_params), env_id, episodes, eval_seed)  # the next rollout's
 
     clock = _clock(f"{contender} seed {seed}", budget_s, every_s, targets, score, points)
     clock.model = learner  # the clock reads wait_for_update and num_timesteps
