@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 from numpy.typing import NDArray
-from result_files import add_save_argument, held_out_report, save
+from result_files import CLEANRL_ENV_ID, add_save_argument, held_out_report, save
 
 import coop_gym
 from coop_gym.io import save_with, write_json
@@ -92,9 +92,8 @@ def run_script(
 
 # --- hard-v2 with a timeout priced as a failed assistance ---------------------------------
 
-PRICED_BASE_ENV_ID = "CoopGym/SitToStandHardDiscreteUnit-v2"
 PRICED_ENV_ID = "PricedTimeout/SitToStandHardDiscreteUnit-v2"
-"""A measurement aid, not an env version: :data:`PRICED_BASE_ENV_ID` whose reward also subtracts
+"""A measurement aid, not an env version: :data:`CLEANRL_ENV_ID` whose reward also subtracts
 :data:`TIMEOUT_PENALTY` when an episode ends in a timeout. On every coop_gym id a timeout costs
 only the time that passed (30 s x 0.01 = 0.3), less than a premature lift (0.5), so a learner that
 has not yet found the person's mind can settle on never lifting. Dynamics, observations and
@@ -120,8 +119,8 @@ class PricedTimeout(gym.Wrapper[Any, Any, Any, Any]):
 
 
 def make_priced(**kwargs: Any) -> gym.Env[Any, Any]:
-    """:data:`PRICED_BASE_ENV_ID` made as registered (its time limit included), in :class:`PricedTimeout`."""
-    return PricedTimeout(gym.make(PRICED_BASE_ENV_ID, **kwargs))
+    """:data:`CLEANRL_ENV_ID` made as registered (its time limit included), in :class:`PricedTimeout`."""
+    return PricedTimeout(gym.make(CLEANRL_ENV_ID, **kwargs))
 
 
 if PRICED_ENV_ID not in gym.registry:
@@ -131,15 +130,15 @@ if PRICED_ENV_ID not in gym.registry:
 # --- hard-v2 on train.py's wider training personas -----------------------------------------
 
 WIDE_ENV_ID = "WidePersonas/SitToStandHardDiscreteUnit-v2"
-"""A measurement aid, not an env version: :data:`PRICED_BASE_ENV_ID` made with
+"""A measurement aid, not an env version: :data:`CLEANRL_ENV_ID` made with
 ``personas="train_wide"``, the persona set ``train.py`` trains on, where the id's own default is
 ``"train"``. CleanRL's ``gym.make(env_id)`` passes no keyword, so the set goes into the
 registration (``bench/learners.py``'s ``cleanrl-ppo-wide`` row)."""
 
 
 def make_wide(**kwargs: Any) -> gym.Env[Any, Any]:
-    """:data:`PRICED_BASE_ENV_ID` made as registered, on the ``"train_wide"`` personas."""
-    return gym.make(PRICED_BASE_ENV_ID, **{"personas": "train_wide", **kwargs})
+    """:data:`CLEANRL_ENV_ID` made as registered, on the ``"train_wide"`` personas."""
+    return gym.make(CLEANRL_ENV_ID, **{"personas": "train_wide", **kwargs})
 
 
 if WIDE_ENV_ID not in gym.registry:
@@ -264,12 +263,12 @@ def make_study_env(**kwargs: Any) -> gym.Env[Any, Any]:
 
 
 STUDY_ENV_IDS: dict[str, dict[str, Any]] = {
-    "Logged/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID},
+    "Logged/SitToStandHardDiscreteUnit-v2": {"base": CLEANRL_ENV_ID},
     "Logged/SitToStandHardDiscrete-v2": {"base": "CoopGym/SitToStandHardDiscrete-v2"},
-    "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "mid_guidance": True},
-    "LoggedPriced/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "priced": True},
-    "LoggedCurriculum/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "curriculum": True},
-    "LoggedPopulation/SitToStandHardDiscreteUnit-v2": {"base": PRICED_BASE_ENV_ID, "personas": "train_population"},
+    "LoggedMidGuidance/SitToStandHardDiscreteUnit-v2": {"base": CLEANRL_ENV_ID, "mid_guidance": True},
+    "LoggedPriced/SitToStandHardDiscreteUnit-v2": {"base": CLEANRL_ENV_ID, "priced": True},
+    "LoggedCurriculum/SitToStandHardDiscreteUnit-v2": {"base": CLEANRL_ENV_ID, "curriculum": True},
+    "LoggedPopulation/SitToStandHardDiscreteUnit-v2": {"base": CLEANRL_ENV_ID, "personas": "train_population"},
 }
 """Measurement aids, not env versions: what CleanRL's script trains on in the never-lift study
 (``--env-id cleanrl_defaults:<id>``; ``gym.make`` passes no keyword, so each id's settings are in its

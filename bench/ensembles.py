@@ -32,8 +32,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
 from learners import ENV_ID
-from learners import VALIDATION_PEOPLE_KEYS as RATES
-from result_files import add_save_argument, save
+from result_files import add_save_argument, kept_json, rates, save
 
 from coop_gym.cli import positive_int, seed_list
 
@@ -54,24 +53,18 @@ def _ensemble(folder: Path, row: str, members: list[int], args: argparse.Namespa
     from agents.evaluate import evaluate
     from agents.rl.callbacks import VALIDATION_SEED
     from agents.rl.ensemble import load_ensemble
-    from coop_gym.io import write_json
 
-    path = folder / f"ensemble__{row}__{members[0]}+{len(members)}.json"
-    if path.is_file():
-        return dict(json.loads(path.read_text(encoding="utf-8")))
-    agent = load_ensemble([folder / f"{row}__{s}__{args.timesteps}" for s in members])
-    test = evaluate(agent, ENV_ID, "test", args.episodes, 0)
-    held_out = test.summary()
-    people = evaluate(agent, ENV_ID, "validation", args.validation_episodes, VALIDATION_SEED).summary()
-    found = {
-        **{key: held_out[key] for key in RATES},
-        "members": members,
-        "by_persona": test.persona_rates(),
-        "validation_people": {key: people[key] for key in RATES},
-    }
-    write_json(path, found)
-    print(f"ensemble {members}: held-out {found['success_rate']:.3f}, validation people {people['success_rate']:.3f}")
-    return found
+    def measure() -> dict[str, Any]:
+        agent = load_ensemble([folder / f"{row}__{s}__{args.timesteps}" for s in members])
+        test = evaluate(agent, ENV_ID, "test", args.episodes, 0)
+        people = evaluate(agent, ENV_ID, "validation", args.validation_episodes, VALIDATION_SEED).summary()
+        found = {**rates(test.summary()), "members": members, "by_persona": test.persona_rates()}
+        print(
+            f"ensemble {members}: held-out {found['success_rate']:.3f}, validation people {people['success_rate']:.3f}"
+        )
+        return {**found, "validation_people": rates(people)}
+
+    return dict(kept_json(folder / f"ensemble__{row}__{members[0]}+{len(members)}.json", measure))
 
 
 def _size(records: dict[int, dict[str, Any]], size: int, args: argparse.Namespace) -> dict[str, Any]:
@@ -80,7 +73,7 @@ def _size(records: dict[int, dict[str, Any]], size: int, args: argparse.Namespac
     for start in range(args.runs_of):
         members = list(range(start, start + size))
         best = max(members, key=lambda s: (records[s]["validation_people"]["success_rate"], -s))
-        runs["best"].append({**{k: records[best][k] for k in RATES}, "members": members, "kept_seed": best})
+        runs["best"].append({**rates(records[best]), "members": members, "kept_seed": best})
         runs["best"][-1].update({key: records[best][key] for key in ("validation_people", "by_persona")})
         if size > 1:
             runs["ensemble"].append(_ensemble(args.runs, args.row, members, args))

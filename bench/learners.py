@@ -49,24 +49,32 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import re
 import statistics
 import sys
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
-from result_files import add_save_argument, save
-from time_to_quality import resized, sizing
+from result_files import (
+    CLEANRL_ENV_ID,
+    add_save_argument,
+    import_learners,
+    iqm_ci,
+    kept_json,
+    rates,
+    resized,
+    save,
+    sizing,
+)
 
 from coop_gym.cli import positive_int, seed_list
+from coop_gym.registration import HARD_ENV_ID
 
-ENV_ID = "CoopGym/SitToStandHard-v2"
-CLEANRL_ENV_ID = "CoopGym/SitToStandHardDiscreteUnit-v2"
-"""The id CleanRL's ``ppo.py`` gets: hard-v2 with Discrete actions and unit-scaled observations (the same episodes)."""
+ENV_ID = HARD_ENV_ID
 SCRIPTED = ("oracle", "blind", "prober", "belief")
 """The reference caregivers played on the same episodes (``blind`` is the widened blind family's best)."""
 
@@ -290,10 +298,6 @@ def _rows(text: str) -> list[str]:
     return names
 
 
-VALIDATION_PEOPLE_KEYS = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
-"""What a run records of its kept policy on the validation people (``personas="validation"``)."""
-
-
 def train_cleanrl(
     name: str, script: Path, seed: int, timesteps: int, episodes: int, folder: Path, validation: int
 ) -> dict[str, Any]:
@@ -321,7 +325,7 @@ def train_cleanrl(
         "train_wall_s": run["wall_time_s"],
         "kept_step": timesteps,
         "validation_success_rate": checked.success_rate,
-        "validation_people": {key: people[key] for key in VALIDATION_PEOPLE_KEYS},
+        "validation_people": rates(people),
         "script_command": run["script_command"],
         "script_sha256": run["script_sha256"],
     }
@@ -377,7 +381,7 @@ def train_one(
         "train_wall_s": wall_s,
         "kept_step": selected["timesteps"],
         "validation_success_rate": selected["validation_success_rate"],
-        "validation_people": {key: on_people[key] for key in VALIDATION_PEOPLE_KEYS},
+        "validation_people": rates(on_people),
         **({"candidates": selected["scores"]} if people else {}),
     }
 
@@ -393,13 +397,13 @@ def _learn(row: Row, config: Any, seed: int, timesteps: int, selection: Any) -> 
         trained, selected = learn_selected(learner, timesteps, selection)
         learner.env.close()
         return trained, selected  # type: ignore[return-value]
-    from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
+    from stable_baselines3.common.vec_env import VecFrameStack
 
     from agents.rl import make_model, make_train_env
 
-    env = make_train_env(ENV_ID, config.n_envs, seed, personas=config.personas, env_kwargs=row.env_kwargs)
-    if config.normalize:
-        env = VecNormalize(env, norm_obs=True, norm_reward=False)
+    env = make_train_env(
+        ENV_ID, config.n_envs, seed, personas=config.personas, normalize=config.normalize, env_kwargs=row.env_kwargs
+    )
     if row.frame_stack > 1:  # normalised frames stacked (what the saved agent rebuilds when it plays)
         env = VecFrameStack(env, row.frame_stack)
     model = make_model(config, env, seed)
@@ -447,21 +451,14 @@ def rescore_by_persona(name: str, run: dict[str, Any], folder: Path, timesteps: 
 
 def aggregate(runs: list[dict[str, Any]], blind: float, oracle: float) -> dict[str, Any]:
     """IQM of success and of the mind-reading score over a row's runs, with stratified bootstrap intervals."""
-    from agents.evaluate.headroom import iqm_across_runs
-
     success = [r["success_rate"] for r in runs]
     # The score is undefined where the oracle does not beat the best blind policy (nothing to read).
     scores = [(s - blind) / (oracle - blind) for s in success] if oracle > blind else []
     out: dict[str, Any] = {"runs": len(runs), "training_seeds": [r["training_seed"] for r in runs]}
     out["score"] = {"iqm": None, "ci95": [None, None]}
     for key, values in (("success", success), ("score", scores)):
-        if not values:
-            continue
-        if len(values) >= 2:
-            found = iqm_across_runs({ENV_ID: values})
-            out[key] = {"iqm": found.iqm, "ci95": list(found.ci95)}
-        else:
-            out[key] = {"iqm": values[0], "ci95": [None, None]}
+        if values:
+            out[key] = iqm_ci(values)
     out["min_success"] = min(success)
     out["unsafe_rate_mean"] = statistics.fmean(r["unsafe_rate"] for r in runs)
     out["train_wall_s_median"] = statistics.median(r["train_wall_s"] for r in runs)
@@ -505,17 +502,10 @@ def _row_runs(name: str, args: argparse.Namespace, parser: argparse.ArgumentPars
     runs = []
     for seed in args.seeds:
         path = args.runs / f"{name}__{seed}__{args.timesteps}.json"
-        if not path.exists() and args.no_train:
+        found = kept_json(path, None if args.no_train else partial(_train, name, seed, args))
+        if found is None:
             continue
-        if not path.exists() and _row(name)[0].framework == "cleanrl":
-            run = train_cleanrl(
-                name, args.cleanrl_script, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes
-            )
-            write_json(path, run)
-        if not path.exists():
-            run = train_one(name, seed, args.timesteps, args.episodes, args.runs, args.validation_episodes, args.people)
-            write_json(path, run)
-        run = {**json.loads(path.read_text()), "training_seed": seed}  # the file's name holds the seed
+        run = {**found, "training_seed": seed}  # the file's name holds the seed
         if run["episodes"] != args.episodes:
             parser.error(f"{path} was scored on {run['episodes']} episodes, not --episodes {args.episodes}")
         if args.by_persona and "by_persona" not in run and _row(name)[0].framework != "cleanrl":
@@ -526,6 +516,14 @@ def _row_runs(name: str, args: argparse.Namespace, parser: argparse.ArgumentPars
     if not runs:
         parser.error(f"--no-train: no run of {name} in {args.runs} for --seeds {args.seeds}")
     return runs
+
+
+def _train(name: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """One (row, seed) run of ``name``: CleanRL's script for a ``cleanrl-*`` row, else :func:`train_one`."""
+    timesteps, episodes, validation = args.timesteps, args.episodes, args.validation_episodes
+    if _row(name)[0].framework == "cleanrl":
+        return train_cleanrl(name, args.cleanrl_script, seed, timesteps, episodes, args.runs, validation)
+    return train_one(name, seed, timesteps, episodes, args.runs, validation, args.people)
 
 
 def _what(name: str) -> str:
@@ -560,8 +558,8 @@ def main(argv: list[str] | None = None) -> int:
 
     args.runs.mkdir(parents=True, exist_ok=True)
     reference_file = args.runs / f"scripted__{args.episodes}.json"
-    reference = json.loads(reference_file.read_text()) if reference_file.exists() else None
-    if reference is None or (args.by_persona and "by_persona" not in reference["oracle"]):
+    reference = kept_json(reference_file, lambda: scripted(args.episodes))
+    if args.by_persona and "by_persona" not in reference["oracle"]:  # kept by a run without --by-persona
         reference = scripted(args.episodes)
         write_json(reference_file, reference)
     blind, oracle = reference["blind"]["success_rate"], reference["oracle"]["success_rate"]
@@ -586,12 +584,7 @@ def main(argv: list[str] | None = None) -> int:
     if all("by_persona" in v for v in reference.values()):
         report["scripted_by_persona"] = {k: v["by_persona"] for k, v in reference.items()}
     if args.save:
-        import stable_baselines3  # noqa: F401 -- the runs' torch, SB3 and JAX versions go into the results file
-        import torch  # noqa: F401
-
-        if any(_row(name)[0].framework == "jax" for name in args.rows):
-            import jax  # noqa: F401
-
+        import_learners(jax=any(_row(name)[0].framework == "jax" for name in args.rows))
         save(args.save, "learners", argv, report)
     return 0
 

@@ -67,12 +67,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -81,18 +81,27 @@ import numpy as np
 import torch
 from learners import TRAINPY_FLAGS
 from numpy.typing import NDArray
-from result_files import RESULTS, ROOT, add_save_argument, held_out_report, save
+from result_files import (
+    CLEANRL_ENV_ID,
+    RESULTS,
+    ROOT,
+    add_save_argument,
+    held_out_report,
+    iqm_ci,
+    kept_json,
+    rates,
+    save,
+)
 from stable_baselines3 import DQN, PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
 import coop_gym  # registers the ids
 from agents.rl import SB3Agent
 from coop_gym.cli import positive_int, seed_list
+from coop_gym.registration import HARD_ENV_ID
 
 ENV_IDS = {"ppo": "CoopGym/SitToStand-v0", "dqn": "CoopGym/SitToStandDiscrete-v0"}
-HARD_ID = "CoopGym/SitToStandHard-v2"
-CLEANRL_ENV_ID = "CoopGym/SitToStandHardDiscreteUnit-v2"
-"""The id CleanRL's ``ppo.py`` gets (``bench/learners.py``'s): hard-v2, Discrete(18) actions, unit-scaled."""
+HARD_ID = HARD_ENV_ID
 SCRIPTED = ("blind", "prober", "belief", "oracle")
 DEFAULTS_TIMESTEPS = 300_000
 """The budget of the ``sb3-defaults`` learner: what an SB3 user's first ``learn`` call takes here."""
@@ -231,9 +240,17 @@ def _seeds(args: argparse.Namespace, argv: list[str] | None) -> None:
         cells = ", ".join(f"{s['success_rate']:.3f} (never lifts {s['never_lift_rate']:.3f})" for s in row["per_seed"])
         print(f"{name}: IQM {row['success']['iqm']:.3f} {row['success']['ci95']}; per seed {cells}")
     print("scripted:", {a: s["success_rate"] for a, s in report["scripted"].items()})
+    _save_to(args, argv, "library_seeds_SitToStandHard-v2.json", report)
+
+
+_SAVE_DEFAULT = "library_defaults_<algo>_<env>_<timesteps>.json"
+"""``--save``'s file of one run (``<algo>_<env>_<timesteps>`` filled in); ``--seeds`` and ``--study`` name theirs."""
+
+
+def _save_to(args: argparse.Namespace, argv: list[str] | None, name: str, report: dict[str, Any]) -> None:
+    """With ``--save``: ``report`` to its ``PATH``, or without one to ``bench/results/<name>``."""
     if args.save:
-        default = str(RESULTS / "library_defaults_<algo>_<env>_<timesteps>.json")
-        target = RESULTS / "library_seeds_SitToStandHard-v2.json" if args.save == default else args.save
+        target = RESULTS / name if args.save == str(RESULTS / _SAVE_DEFAULT) else args.save
         save(target, "library_defaults", argv, report)
 
 
@@ -349,11 +366,8 @@ def lift_hazard_sweep(episodes: int) -> list[dict[str, Any]]:
     rows = []
     for hazard in LIFT_HAZARDS:
         score = evaluate(LiftHazard(hazard), CLEANRL_ENV_ID, "train", episodes, VALIDATION_SEED).summary()
-        rows.append({"lift_hazard": hazard, **{k: score[k] for k in (*RATE_KEYS, "mean_return")}})
+        rows.append({"lift_hazard": hazard, **rates(score), "mean_return": score["mean_return"]})
     return rows
-
-
-RATE_KEYS = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
 
 
 def training_outcomes(log: list[tuple[int, str]], timesteps: int, bin_steps: int) -> dict[str, Any]:
@@ -405,18 +419,13 @@ def _train_cell(cell: str, seed: int, timesteps: int, script: Path | None, folde
     return agent
 
 
-def _study_run(cell: str, seed: int, args: argparse.Namespace, folder: Path) -> dict[str, Any] | None:
-    """One (cell, seed): trained, its training outcomes and its scores on :data:`STUDY_SETS` (kept in ``folder``)."""
+def _study_run(cell: str, seed: int, args: argparse.Namespace, folder: Path) -> dict[str, Any]:
+    """One (cell, seed) trained in ``folder``: its training outcomes and its scores on :data:`STUDY_SETS`."""
     import cleanrl_defaults
 
     from agents.evaluate import evaluate
     from agents.rl.callbacks import VALIDATION_SEED
 
-    path = folder / f"{cell}__{seed}.json"
-    if path.exists():
-        return dict(json.loads(path.read_text()))
-    if args.no_train:
-        return None
     started = time.perf_counter()
     agent = _train_cell(cell, seed, args.timesteps, args.cleanrl_script, folder)
     wall = time.perf_counter() - started
@@ -425,23 +434,20 @@ def _study_run(cell: str, seed: int, args: argparse.Namespace, folder: Path) -> 
     run["training"] = training_outcomes(log, args.timesteps, args.bin_steps)
     for people in STUDY_SETS:
         score = evaluate(agent, NEVER_LIFT_CELLS[cell].scored_on, people, args.episodes, VALIDATION_SEED).summary()
-        run[people] = {key: score[key] for key in RATE_KEYS}
-    path.write_text(json.dumps(run, indent=2) + "\n")
+        run[people] = rates(score)
     print(f"{cell}__{seed}: {wall:.0f} s; validation {run['validation']}; {run['training']['collapse_step']=}")
     return run
 
 
 def _study_cell(cell: str, runs: list[dict[str, Any]]) -> dict[str, Any]:
     """A cell's report: per seed, and over seeds the IQM of success (bootstrap 95 %) on each set."""
-    from agents.evaluate.headroom import iqm_across_runs
-
     what = NEVER_LIFT_CELLS[cell]
     row: dict[str, Any] = {"what": what.what, "scored_on": what.scored_on, "flags": list(what.flags)}
     for people in STUDY_SETS:
-        success = iqm_across_runs({HARD_ID: [r[people]["success_rate"] for r in runs]})
+        success = iqm_ci([r[people]["success_rate"] for r in runs])
         row[people] = {
-            "success_iqm": success.iqm,
-            "success_ci95": None if math.isnan(success.ci95[0]) else list(success.ci95),  # one seed: none
+            "success_iqm": success["iqm"],
+            "success_ci95": None if success["ci95"][0] is None else success["ci95"],  # one seed: none
             "never_lift_seeds": sum(1 for r in runs if r[people]["timeout_rate"] >= COLLAPSE_SHARE),
         }
     keep = ("episodes", "first_success_step", "collapse_step", "successes_before_collapse", "unsafe_before_collapse")
@@ -463,20 +469,15 @@ def _references(folder: Path, episodes: int) -> tuple[dict[str, Any], list[dict[
     from agents.evaluate import evaluate
     from agents.rl.callbacks import VALIDATION_SEED
 
-    path = folder / f"references__{episodes}.json"
-    if path.exists():
-        kept = json.loads(path.read_text())
-        return kept["scripted"], kept["lift_hazard"]
-    scripted = {
-        people: {
-            a: {k: evaluate(a, HARD_ID, people, episodes, VALIDATION_SEED).summary()[k] for k in RATE_KEYS}
-            for a in SCRIPTED
+    def measure() -> dict[str, Any]:
+        scripted = {
+            people: {a: rates(evaluate(a, HARD_ID, people, episodes, VALIDATION_SEED).summary()) for a in SCRIPTED}
+            for people in STUDY_SETS
         }
-        for people in STUDY_SETS
-    }
-    hazard = lift_hazard_sweep(episodes)
-    path.write_text(json.dumps({"scripted": scripted, "lift_hazard": hazard}, indent=2) + "\n")
-    return scripted, hazard
+        return {"scripted": scripted, "lift_hazard": lift_hazard_sweep(episodes)}
+
+    kept = kept_json(folder / f"references__{episodes}.json", measure)
+    return kept["scripted"], kept["lift_hazard"]
 
 
 def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
@@ -487,7 +488,9 @@ def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     rows = {}
     for cell in args.cells.split(","):
-        runs = [run for seed in args.seeds if (run := _study_run(cell, seed, args, folder)) is not None]
+        train = {seed: None if args.no_train else partial(_study_run, cell, seed, args, folder) for seed in args.seeds}
+        found = [kept_json(folder / f"{cell}__{seed}.json", make) for seed, make in train.items()]
+        runs = [run for run in found if run is not None]
         if runs:
             rows[cell] = _study_cell(cell, runs)
     scripted, hazard = _references(folder, args.episodes)
@@ -511,14 +514,7 @@ def _study(args: argparse.Namespace, argv: list[str] | None) -> None:
         "lift hazard:",
         [(h["lift_hazard"], h["success_rate"], round(h["mean_return"], 2)) for h in report["lift_hazard"]],
     )
-    if args.save:
-        default = str(RESULTS / "library_defaults_<algo>_<env>_<timesteps>.json")
-        save(
-            RESULTS / "never_lift_SitToStandHard-v2.json" if args.save == default else args.save,
-            "library_defaults",
-            argv,
-            report,
-        )
+    _save_to(args, argv, "never_lift_SitToStandHard-v2.json", report)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -540,7 +536,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--cleanrl-script", type=Path, help="with --study: CleanRL's ppo.py, for the cleanrl-* cells")
     parser.add_argument("--bin-steps", type=positive_int, default=10_000, help="with --study: log bin [steps]")
-    add_save_argument(parser, "library_defaults_<algo>_<env>_<timesteps>.json")
+    add_save_argument(parser, _SAVE_DEFAULT)
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     if args.study is not None:

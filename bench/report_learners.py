@@ -20,6 +20,7 @@ from result_files import (
     _pct,
     _provenance,
     _table,
+    _two_decimals,
 )
 
 
@@ -38,21 +39,8 @@ def learners(report: dict[str, Any], record: dict[str, Any]) -> str:
     """Learner x observation on the hard level (``bench/learners.py``)."""
     rows = []
     for name, row in report["rows"].items():
-        success, score = row["success"], row["score"]
         per_seed = ", ".join(f"{100 * run['success_rate']:.1f}" for run in row["per_seed"])
-        score_ci = "" if score["ci95"][0] is None else f" [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]"
-        score_text = "—" if score["iqm"] is None else f"{score['iqm']:.2f}{score_ci}"
-        rows.append(
-            [
-                f"`{name}`: {row['what']}",
-                str(row["runs"]),
-                f"{_pct(success['iqm'])} {_ci(success['ci95']) if success['ci95'][0] is not None else ''}".rstrip(),
-                score_text,
-                per_seed,
-                _pct(row["unsafe_rate_mean"]),
-                f"{row['train_wall_s_median']:.0f} s",
-            ]
-        )
+        rows.append(_learner_row(f"`{name}`: {row['what']}", row, per_seed))
     for name, row in report["scripted"].items():
         rows.append([f"{name} (scripted)", "", _pct(row["success_rate"]), "", "", _pct(row["unsafe_rate"]), ""])
     header = [
@@ -354,12 +342,15 @@ def ppo_learner(results: Results) -> str:
     if record is None:
         return f"{head}\nNo results file yet: `{_PPO_COMMAND}`, then `python bench/report.py`.\n"
     report = record["results"]
-    rows = [_learner_row(f"`{name}`: {row['what']}", row) for name, row in report["rows"].items()]
+    rows = [
+        _learner_row(f"`{name}`: {row['what']}", row, _pct(row["min_success"])) for name, row in report["rows"].items()
+    ]
     for stem in ("learners", "learners_avx512"):
         found = results.get(stem)
         if found is not None and "jax-kalman-lag" in found["results"]["rows"]:
             reference = found["results"]["rows"]["jax-kalman-lag"]
-            rows.append(_learner_row(f"`jax-kalman-lag`: `JaxPPO` (`bench/results/{stem}.json`)", reference))
+            label = f"`jax-kalman-lag`: `JaxPPO` (`bench/results/{stem}.json`)"
+            rows.append(_learner_row(label, reference, _pct(reference["min_success"])))
     header = ["learner", "seeds", "success, IQM [95 % CI]", "mind-reading score, IQM [95 % CI]"]
     header += ["lowest seed", "unsafe (mean)", "training (median)"]
     return f"""{head}
@@ -414,17 +405,16 @@ other lift, timeout no lift in time.
 """
 
 
-def _learner_row(label: str, row: dict[str, Any]) -> list[str]:
+def _learner_row(label: str, row: dict[str, Any], seeds: str) -> list[str]:
+    """A ``learners*.json`` row's cells: seeds, success and mind-reading score (IQM [95 % CI]), ``seeds``, unsafe,
+    training time."""
     success, score = row["success"], row["score"]
     return [
         label,
         str(row["runs"]),
-        f"{_pct(success['iqm'])} {_ci(success['ci95']) if success['ci95'][0] is not None else ''}".rstrip(),
-        "—"
-        if score["iqm"] is None
-        else f"{score['iqm']:.2f}"
-        + ("" if score["ci95"][0] is None else f" [{score['ci95'][0]:.2f}, {score['ci95'][1]:.2f}]"),
-        _pct(row["min_success"]),
+        f"{_pct(success['iqm'])} {_ci(success['ci95'])}".rstrip(),
+        "—" if score["iqm"] is None else _two_decimals(score["iqm"], score["ci95"]),
+        seeds,
         _pct(row["unsafe_rate_mean"]),
         f"{row['train_wall_s_median']:.0f} s",
     ]

@@ -24,6 +24,7 @@ from result_files import (
     _provenance,
     _rate,
     _table,
+    _two_decimals,
 )
 
 
@@ -156,10 +157,7 @@ def _score(score: dict[str, Any] | None) -> str:
     """A mind-reading score with its interval (blank where it is not defined)."""
     if score is None or score.get("score") is None:
         return ""
-    interval = score.get("ci95") or (None, None)
-    if None in interval:
-        return f"{score['score']:.2f}"
-    return f"{score['score']:.2f} [{interval[0]:.2f}, {interval[1]:.2f}]"
+    return _two_decimals(score["score"], score.get("ci95"))
 
 
 def library_defaults(results: Results) -> str:
@@ -330,18 +328,15 @@ def _never_lift_tables(report: dict[str, Any]) -> tuple[str, str, str]:
     return _table(header, scores), _table(mech_header + shares, mechanism), _table(hazard_header, hazard)
 
 
-def never_lift(results: Results) -> str:
+@_from_results(
+    NEVER_LIFT,
+    "### Never lifting on the hard level: the measured why",
+    "python bench/library_defaults.py --study never-lift --seeds 0,1,2,3,4",
+)
+def never_lift(report: dict[str, Any], record: dict[str, Any]) -> str:
     """Why CleanRL's defaults never lift on the hard level, measured on the validation people and training personas."""
-    head = "### Never lifting on the hard level: the measured why\n"
-    record = results.get(NEVER_LIFT)
-    if record is None:
-        return head + "\n" + _missing("python bench/library_defaults.py --study never-lift --seeds 0,1,2,3,4") + "\n"
-    report = record["results"]
     scores, mechanism, hazard = _never_lift_tables(report)
-    return f"""{head}
-{_provenance(record)}
-
-Each cell is trained {_count(report["timesteps"])} steps once per seed, every training episode's outcome
+    return f"""Each cell is trained {_count(report["timesteps"])} steps once per seed, every training episode's outcome
 logged with its step (`bench/cleanrl_defaults.py`'s `OutcomeLog`); its final policy is scored greedy on
 {report["episodes"]} episodes (seeds from {report["episode_seed"]}) of the validation people and of the
 training personas, never the test personas, the scripted caregivers on the same episodes. *Never lifts*:

@@ -11,8 +11,10 @@ script also writes its report to ``PATH`` (default ``bench/results/<name>.json``
   Gymnasium, coop_gym (and of torch, SB3 and JAX when the run used them);
 - ``results``: the script's own report.
 
-The figures quoted in ``docs/BENCHMARKS.md`` come only from these files; the formatting its sections
-share (``bench/report.py``) is at the end of this module.
+The figures quoted in ``docs/BENCHMARKS.md`` come only from these files. What the trainers share
+(``bench/learners.py``, ``bench/time_to_quality.py``, ``bench/library_defaults.py``, ``bench/cleanrl_defaults.py``,
+``bench/ensembles.py``: the held-out scores, the IQM over runs, the run folders, a config's sizing) follows the
+files' handling; the formatting the sections of the page share (``bench/report.py``) is at the end of this module.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import datetime
 import json
 import os
 import platform
+import re
 import shlex
 import statistics
 import sys
@@ -129,6 +132,8 @@ def load_all(folder: Path = RESULTS) -> dict[str, dict[str, Any]]:
     return {path.stem: json.loads(path.read_text(encoding="utf-8")) for path in sorted(folder.glob("*.json"))}
 
 
+# --- what the trainers share ---------------------------------------------------------------------
+
 # Scores of a trained learner on the held-out personas, beside the handbook caregiver's (library_defaults.py,
 # cleanrl_defaults.py): every agent plays the same seeded episodes of the held-out personas; the handbook plays
 # them on CoopGym/SitToStand-v0 (the same model and people as the unit-scaled ids; the observation it reads).
@@ -147,6 +152,79 @@ def held_out_report(
     for label, score in scores.items():
         print(f"{label:>12}: success {score['success_rate']:.3f}, unsafe {score['unsafe_rate']:.3f}")
     return {**run, "env_id": env_id, "episodes": episodes, "reference_env_id": REFERENCE_ENV_ID, "scores": scores}
+
+
+CLEANRL_ENV_ID = "CoopGym/SitToStandHardDiscreteUnit-v2"
+"""The id CleanRL's ``ppo.py`` gets: hard-v2 with Discrete actions and unit-scaled observations (the same episodes)."""
+RATE_KEYS = ("success_rate", "unsafe_rate", "premature_rate", "timeout_rate")
+"""The outcome rates a run keeps of an evaluation summary (:meth:`agents.evaluate.results.EvaluationResult.summary`)."""
+
+
+def rates(summary: dict[str, Any]) -> dict[str, Any]:
+    """The :data:`RATE_KEYS` of an evaluation summary."""
+    return {key: summary[key] for key in RATE_KEYS}
+
+
+def iqm_ci(values: Sequence[float]) -> dict[str, Any]:
+    """``{"iqm", "ci95"}`` of runs' scores: the interquartile mean and its stratified bootstrap 95 % interval
+    (rliable's method, :func:`agents.evaluate.headroom.iqm_across_runs`); one run: its score, ``[None, None]``."""
+    from agents.evaluate.headroom import iqm_across_runs
+
+    if len(values) < 2:
+        return {"iqm": values[0], "ci95": [None, None]}
+    found = iqm_across_runs({"runs": list(values)})
+    return {"iqm": found.iqm, "ci95": list(found.ci95)}
+
+
+def kept_json(path: Path, make: Callable[[], Any] | None) -> Any:
+    """The JSON at ``path``, written there first from ``make()`` where there is none (None: none and no ``make``).
+
+    A sweep keeps each finished run (and its references) in its folder, so a rerun skips what is there.
+    """
+    from coop_gym.io import write_json
+
+    if not path.exists():
+        if make is None:
+            return None
+        write_json(path, make())
+    return json.loads(path.read_text())
+
+
+def sizing(size: str) -> tuple[int, int | None] | None:
+    """``N`` or ``N-eE`` (N envs, E epochs per update) as ``(N, E or None)``; None if it is neither.
+
+    The sizing after ``@`` in a contender of ``bench/time_to_quality.py`` and in a row of ``bench/learners.py``.
+    """
+    found = re.fullmatch(r"([1-9][0-9]*)(?:-e([1-9][0-9]*))?", size)
+    if found is None:
+        return None
+    return int(found.group(1)), int(found.group(2)) if found.group(2) else None
+
+
+def resized(config: Any, size: str) -> Any:
+    """``config`` on ``N`` envs with the same samples per update (``n_envs * n_steps``), and ``E`` epochs if given."""
+    found = sizing(size)
+    assert found is not None, size
+    n_envs, epochs = found
+    batch = config.n_envs * config.algo_kwargs["n_steps"]
+    if batch % n_envs:
+        raise ValueError(f"N must divide the {batch}-step rollout of its config, got {n_envs}")
+    kwargs = {**config.algo_kwargs, "n_steps": batch // n_envs}
+    if epochs is not None:
+        kwargs["n_epochs"] = epochs
+    return config.replace(n_envs=n_envs, algo_kwargs=kwargs)
+
+
+def import_learners(jax: bool) -> None:
+    """Import torch and SB3 (and JAX): :func:`machine` then records the versions the runs trained with.
+
+    A run may have trained in a worker process, or from a record, so the saving process imports them itself.
+    """
+    import stable_baselines3  # noqa: F401
+    import torch  # noqa: F401
+
+    if jax:
+        import jax as _jax  # noqa: F401
 
 
 # --- the formatting shared by the sections of docs/BENCHMARKS.md (bench/report.py) ---------------
@@ -175,6 +253,12 @@ def _points(value: float, interval: Sequence[float] | None = None) -> str:
     """A difference of rates in percentage points: ``+24.0 [+22.2, +25.8]``."""
     text = f"{100 * value:+.1f}"
     return text if interval is None else f"{text} [{100 * interval[0]:+.1f}, {100 * interval[1]:+.1f}]"
+
+
+def _two_decimals(value: float, interval: Sequence[float | None] | None = None) -> str:
+    """A score to two decimals with its 95 % interval where it has one: ``0.42 [0.31, 0.55]``."""
+    text = f"{value:.2f}"
+    return text if interval is None or None in interval else f"{text} [{interval[0]:.2f}, {interval[1]:.2f}]"
 
 
 def _spread(summary: dict[str, Any], digits: int = 2, unit: str = TIMES) -> str:

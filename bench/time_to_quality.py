@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import statistics
 import sys
 import time
@@ -58,7 +57,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/result_files.py, however this runs
-from result_files import add_save_argument, save
+from result_files import add_save_argument, import_learners, iqm_ci, resized, save, sizing
 
 from coop_gym.cli import output_path_problem, positive_int, seed_list
 
@@ -75,31 +74,6 @@ def _positive_float(text: str) -> float:
     if not value > 0 or value != value or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
     return value
-
-
-def sizing(size: str) -> tuple[int, int | None] | None:
-    """``N`` or ``N-eE`` (N envs, E epochs per update) as ``(N, E or None)``; None if it is neither.
-
-    The sizing after ``@`` in a contender here and in a row of ``bench/learners.py``.
-    """
-    found = re.fullmatch(r"([1-9][0-9]*)(?:-e([1-9][0-9]*))?", size)
-    if found is None:
-        return None
-    return int(found.group(1)), int(found.group(2)) if found.group(2) else None
-
-
-def resized(config: Any, size: str) -> Any:
-    """``config`` on ``N`` envs with the same samples per update (``n_envs * n_steps``), and ``E`` epochs if given."""
-    found = sizing(size)
-    assert found is not None, size
-    n_envs, epochs = found
-    batch = config.n_envs * config.algo_kwargs["n_steps"]
-    if batch % n_envs:
-        raise ValueError(f"N must divide the {batch}-step rollout of its config, got {n_envs}")
-    kwargs = {**config.algo_kwargs, "n_steps": batch // n_envs}
-    if epochs is not None:
-        kwargs["n_epochs"] = epochs
-    return config.replace(n_envs=n_envs, algo_kwargs=kwargs)
 
 
 def _contender(text: str) -> str:
@@ -135,15 +109,12 @@ def _build(contender: str, env_id: str, seed: int) -> Any:
     """The SB3 model of an SB3 contender (``default``, ``default@N``, ``first_script``) on fresh training envs."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.rl import make_model, make_train_env
 
     if contender.partition("@")[0] == "default":
         config = _sized_config(contender, env_id)
-        env = make_train_env(env_id, config.n_envs, seed, personas=config.personas)
-        if config.normalize:
-            env = VecNormalize(env, norm_obs=True, norm_reward=False)
+        env = make_train_env(env_id, config.n_envs, seed, personas=config.personas, normalize=config.normalize)
         return make_model(config, env, seed)
     # What a user writes first: SB3's defaults, 8 single envs.
     return PPO("MlpPolicy", make_vec_env(env_id, n_envs=8, seed=seed), seed=seed, device="cpu")
@@ -215,8 +186,6 @@ def _train_with_clock(
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from agents.evaluate import evaluate
-    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
     from estimator.compiled import background
 
     torch.set_num_threads(1)
@@ -229,10 +198,7 @@ def _train_with_clock(
     points: list[dict[str, Any]] = []
 
     def score() -> dict[str, Any]:
-        normalizer = ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env()))
-        agent = SB3Agent(model, "ppo", env_id, normalizer)
-        result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
-        return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
+        return _held_out(model, env_id, episodes, eval_seed)
 
     clock = _clock(f"{contender} seed {seed}", budget_s, every_s, targets, score, points)
 
@@ -245,6 +211,16 @@ def _train_with_clock(
     load_before = os.getloadavg()
     model.learn(total_timesteps=budget_steps or 10**12, callback=[clock, Budget()])
     return _record(contender, seed, model.n_envs, int(model.num_timesteps), clock, points, load_before)
+
+
+def _held_out(model: Any, env_id: str, episodes: int, eval_seed: int) -> dict[str, Any]:
+    """Success and unsafe rates of an SB3 ``model`` (its observation normaliser read from its env) held-out."""
+    from agents.evaluate import evaluate
+    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
+
+    agent = SB3Agent(model, "ppo", env_id, ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env())))
+    result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
+    return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
 
 
 def _record(
@@ -280,20 +256,15 @@ def _train_ppo_with_clock(
     budget_steps: int | None,
 ) -> dict[str, Any]:
     """:func:`_train_with_clock` for :class:`agents.ppo.PPO`: the clock and the scores at its rollout ends."""
-    from agents.evaluate import evaluate
     from agents.ppo import PPO, PPOConfig
     from agents.ppo.sb3_format import to_sb3
-    from agents.rl import ObsNormalizer, SB3Agent, find_vec_normalize
 
     config = _sized_config(contender, env_id)
     learner = PPO(env_id, PPOConfig.from_training(config), seed, {"personas": config.personas})
     points: list[dict[str, Any]] = []
 
     def score() -> dict[str, Any]:
-        model = to_sb3(learner, learner.acting_params)  # the policy the next rollout plays
-        agent = SB3Agent(model, "ppo", env_id, ObsNormalizer.from_vec_normalize(find_vec_normalize(model.get_env())))
-        result = evaluate(agent, env_id, "test", episodes, eval_seed, n_envs=min(64, episodes))
-        return {"success_rate": result.success_rate, "unsafe_rate": result.unsafe_rate}
+        return _held_out(to_sb3(learner, learner.acting_params), env_id, episodes, eval_seed)  # the next rollout's
 
     clock = _clock(f"{contender} seed {seed}", budget_s, every_s, targets, score, points)
     clock.model = learner  # the clock reads wait_for_update and num_timesteps
@@ -349,24 +320,19 @@ def _summary(runs: list[dict[str, Any]], contenders: tuple[str, ...], seeds: lis
     per-seed ratios of this contender's steps/s to that one's; ``steps_per_s_ratio_to_default``
     repeats those to ``default``.
     """
-    import statistics
-
-    from agents.evaluate.headroom import iqm_across_runs
-
     out: dict[str, Any] = {}
     for contender in contenders:
         mine = [r for r in runs if r["contender"] == contender]
         rates = [r["steps_per_s"] for r in mine if r["steps_per_s"]]
         curve = []
         for k in range(min(len(r["curve"]) for r in mine)):
-            values = [r["curve"][k]["success_rate"] for r in mine]
-            found = iqm_across_runs({"level": values}) if len(values) >= 2 else None
+            found = iqm_ci([r["curve"][k]["success_rate"] for r in mine])
             curve.append(
                 {
                     "train_s_median": statistics.median(r["curve"][k]["train_s"] for r in mine),
                     "timesteps_median": statistics.median(r["curve"][k]["timesteps"] for r in mine),
-                    "success_iqm": found.iqm if found else values[0],
-                    "ci95": list(found.ci95) if found else [None, None],
+                    "success_iqm": found["iqm"],
+                    "ci95": found["ci95"],
                 }
             )
         out[contender] = {
@@ -553,12 +519,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(f"{name:>13}: {_median_rate(row):.0f} steps/s{ratio_text}; time to {reached}")
     if args.save:
-        # The runs' torch, SB3 and JAX (in worker processes with --jobs) go into the results file.
-        import stable_baselines3  # noqa: F401
-        import torch  # noqa: F401
-
-        if any(c.startswith("jax") for c in contenders):
-            import jax  # noqa: F401
+        import_learners(jax=any(c.startswith("jax") for c in contenders))  # trained in workers with --jobs
         save(args.save.replace("<env>", stem), "time_to_quality", argv, report)
     return 0
 

@@ -500,8 +500,9 @@ def test_a_cleanrl_runs_record_scores_the_validation_people(tmp_path: Path, monk
     monkeypatch.setattr("agents.evaluate.evaluate", spy)
     run = learners.train_cleanrl("cleanrl-ppo-trainpy", tmp_path / "standin.py", 0, 64, 4, tmp_path, 4)
     assert seen == ["train", "validation", "test"]
-    assert set(run["validation_people"]) == set(learners.VALIDATION_PEOPLE_KEYS)
-    assert sum(run["validation_people"][key] for key in learners.VALIDATION_PEOPLE_KEYS) == pytest.approx(1.0)
+    rate_keys = _bench("result_files").RATE_KEYS
+    assert set(run["validation_people"]) == set(rate_keys)
+    assert sum(run["validation_people"][key] for key in rate_keys) == pytest.approx(1.0)
     assert tuple(run["script_command"][-len(learners.TRAINPY_FLAGS) :]) == learners.TRAINPY_FLAGS
 
 
