@@ -90,9 +90,8 @@ ENSEMBLE = "hard-v2-ppo-ensemble"
 
 
 def test_the_default_train_py_caregiver_ships_as_its_seeds_played_as_one(capsys):
-    from agents.rl.ensemble import EnsembleAgent
-
     import train
+    from agents.rl.ensemble import EnsembleAgent
     from agents.trainer.train_args import seeds_of
 
     default_seeds = seeds_of(train.Args())  # what `python train.py --seed 0` keeps as one
