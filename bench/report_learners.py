@@ -284,10 +284,7 @@ def _iqm_cell(success: list[float], report: dict[str, Any]) -> str:
     return f"{_pct(found.iqm)} {_ci(found.ci95)}; {score}"
 
 
-_SEEDS_COMMAND = "python train.py --seeds N --keep best (its seeds' records: " + _PEOPLE_COMMAND + ")"
-
-
-@_from_results("selection_people", "### Best of N seeds: `train.py --seeds N`", _SEEDS_COMMAND)
+@_from_results("selection_people", "### Best of N seeds: `train.py --seeds N`", _PEOPLE_COMMAND)
 def best_of_seeds(report: dict[str, Any], record: dict[str, Any]) -> str:
     """What ``train.py --seeds N`` keeps, from the per-seed records of ``bench/learners.py --people``."""
     import itertools

@@ -307,7 +307,8 @@ def _provenance(record: dict[str, Any]) -> str:
 
 
 def _missing(command: str) -> str:
-    return f"No results file yet: `{command} --save`, then `python bench/report.py`."
+    saving = command if re.search(r"(^| )--save( |$)", command) else f"{command} --save"
+    return f"No results file yet: `{saving}`, then `python bench/report.py`."
 
 
 def _from_results(

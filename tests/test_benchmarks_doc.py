@@ -671,3 +671,13 @@ def test_the_never_lift_studys_population_and_sb3_curriculum_cells_train_on_what
     wrapped = wrappers[1](gym.make(defaults.HARD_ID))
     assert isinstance(wrapped, cleanrl.OutcomeLog) and isinstance(wrapped.env, cleanrl.Curriculum)
     assert wrapped.env.easy.spec.id == cleanrl.CURRICULUM_EASY_SB3_ENV_ID
+
+
+def test_a_section_without_its_results_file_names_one_command_that_saves_it(tmp_path) -> None:
+    import re
+
+    page = _bench("report").render(tmp_path)  # an empty results folder: every section says what makes it
+    lines = re.findall(r"No results file yet: `([^`]*)`", page)
+    assert lines, page[:500]
+    for command in lines:
+        assert command.startswith("python bench/") and len(re.findall(r"(?:^| )--save(?= |$)", command)) == 1, command
