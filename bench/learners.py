@@ -149,7 +149,7 @@ ROWS: dict[str, Row] = {
         "jax-kalman-lag trained across bodies: 512 persons of the validation people's population (train_population)",
         "jax",
         algo_kwargs={"policy_lag": 1},
-        personas="train_population",
+        personas=_POP,
     ),
     "jax-switching-population": Row(
         "ppo",
@@ -157,7 +157,7 @@ ROWS: dict[str, Row] = {
         "jax-kalman-lag-population + the switching filter's P(xi) (32 person hypotheses weighed in each episode)",
         "jax",
         algo_kwargs={"policy_lag": 1},
-        personas="train_population",
+        personas=_POP,
     ),
     "jax-switching-true-population": Row(
         "ppo",
@@ -165,7 +165,7 @@ ROWS: dict[str, Row] = {
         "jax-switching-population with the filter given each episode's true person (the bound of identifying them)",
         "jax",
         algo_kwargs={"policy_lag": 1},
-        personas="train_population",
+        personas=_POP,
     ),
     "jax-switching": Row(
         "ppo", SWITCHING, "agents.ppo, + switching filter's P(xi) (256 particles, 32 hypotheses)", "jax"
