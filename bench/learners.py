@@ -13,7 +13,8 @@ and the observation it gets (:data:`ROWS`):
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO trained by ``train.py``'s learner,
   :class:`agents.ppo.PPO`, on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
   ``jax-lstm-raw`` / ``jax-lstm-kalman`` / ``jax-lstm-population`` (across bodies): the recurrent rows trained
-  by :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO's settings, an LSTM before the heads); ``ROW@N``
+  by :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO's settings, an LSTM before the heads), and
+  ``jax-lstm-kalman-agents-ppo``: ``jax-lstm-kalman`` by :class:`agents.ppo.recurrent.RecurrentPPO`; ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``, ``jax-kalman-lag`` (``train.py``'s default), ``jax-kalman-lag-population`` (trained across
@@ -100,6 +101,8 @@ class Row:
     ``policy_lag`` here runs ``policy_lag=0``, whatever ``train.py``'s default."""
     personas: str = "train_wide"
     """The people trained on (``train.py``'s wider training personas, or ``"train_population"``)."""
+    agents_ppo: bool = False
+    """A ``jax`` recurrent row trained by :class:`agents.ppo.recurrent.RecurrentPPO` (a ``jax`` PPO row always is)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -178,6 +181,9 @@ ROWS: dict[str, Row] = {
         "jax",
     ),
     "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
+    "jax-lstm-kalman-agents-ppo": Row(
+        "recurrent_ppo", {}, "agents.ppo's RecurrentPPO (LSTM), Kalman estimate + measurements", "jax", agents_ppo=True
+    ),
     "jax-lstm-population": Row(
         "recurrent_ppo", {}, "jax-lstm-kalman trained across bodies (train_population)", "jax", personas=_POP
     ),
@@ -387,13 +393,12 @@ def train_one(
 
 
 def _learn(row: Row, config: Any, seed: int, timesteps: int, selection: Any) -> tuple[Any, dict[str, Any]]:
-    """``(model, selected)``: row ``row`` trained (a ``jax`` PPO row by ``agents.ppo`` on coop_gym's vector env,
-    the others, ``JaxRecurrentPPO`` too, on SB3's), the policy kept."""
-    if row.framework == "jax" and row.algo == "ppo":
-        from agents.ppo import PPO, PPOConfig
-        from agents.rl.ppo_run import learn_selected
+    """``(model, selected)``: row ``row`` trained (a ``jax`` PPO row and an ``agents_ppo`` row by ``agents.ppo``
+    on coop_gym's vector env, the others, ``JaxRecurrentPPO`` too, on SB3's), the policy kept."""
+    if row.framework == "jax" and (row.algo == "ppo" or row.agents_ppo):
+        from agents.rl.ppo_run import learn_selected, make_learner
 
-        learner = PPO(ENV_ID, PPOConfig.from_training(config), seed, {"personas": config.personas, **row.env_kwargs})
+        learner = make_learner(config, ENV_ID, seed, row.env_kwargs)
         trained, selected = learn_selected(learner, timesteps, selection)
         learner.env.close()
         return trained, selected  # type: ignore[return-value]

@@ -27,6 +27,7 @@ from report_learners import (
     learners,
     learners_across_cpus,
     ppo_learner,
+    recurrent_learner,
     selection_people,
     training_budget,
 )
@@ -73,6 +74,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     learners,
     learners_across_cpus,
     ppo_learner,
+    recurrent_learner,
     by_persona,
     training_budget,
     selection_people,

@@ -115,14 +115,21 @@ def _seed_cells(row: dict[str, Any], scripted: dict[str, Any]) -> list[str]:
     ]
 
 
+OTHER_SECTIONS_RECORDS = ("learners_ppo", "learners_bodies", "learners_recurrent")
+"""``bench/learners.py``'s results files that hold other sections' rows (another learner, other people), not the
+rows of ``learners.json`` trained on another CPU."""
+
+
+def _cpu_record(stem: str) -> bool:
+    """Whether ``stem`` is ``learners.json``'s rows on some CPU: ``learners`` or ``learners_<cpu>``."""
+    others = stem.startswith(BUDGET_PREFIX) or stem in OTHER_SECTIONS_RECORDS
+    return stem == "learners" or (stem.startswith("learners_") and not others)
+
+
 def learners_across_cpus(results: Results) -> str:
     """The same rows and seeds of ``bench/learners.py`` trained on several CPUs (``learners*.json``)."""
     head = "### The same seeds on another CPU\n"
-    records = {
-        stem: record
-        for stem, record in results.items()
-        if stem == "learners" or (stem.startswith("learners_") and not stem.startswith(BUDGET_PREFIX))
-    }
+    records = {stem: record for stem, record in results.items() if _cpu_record(stem)}
     if "learners" not in records or len(records) < 2:
         return (
             f"{head}\nNo second machine yet: on a CPU other than `bench/results/learners.json`'s, `python"
@@ -180,7 +187,7 @@ def training_budget(results: Results) -> str:
     same_cpu = [
         record
         for stem, record in sorted(results.items())
-        if (stem == "learners" or stem.startswith("learners_")) and record["machine"].get("cpu") == cpu
+        if (_cpu_record(stem) or stem.startswith(BUDGET_PREFIX)) and record["machine"].get("cpu") == cpu
     ]
     rows = []
     for record in sorted(same_cpu, key=lambda r: r["results"]["timesteps"]):
@@ -361,6 +368,50 @@ settings) from the records named (their machines: the records' provenance). The 
 initial weights and actions.
 
 {_table(header, rows)}
+"""
+
+
+_RECURRENT_COMMAND = (
+    "python bench/learners.py --rows jax-lstm-kalman,jax-lstm-kalman-agents-ppo --seeds 0,1,2,3,4 "
+    "--save bench/results/learners_recurrent.json"
+)
+
+
+@_from_results(
+    "learners_recurrent",
+    "### The recurrent learner `agents.ppo.recurrent` against `JaxRecurrentPPO`",
+    _RECURRENT_COMMAND,
+)
+def recurrent_learner(report: dict[str, Any], record: dict[str, Any]) -> str:
+    """``RecurrentPPO`` beside ``JaxRecurrentPPO``, the learner ``train.py --algo recurrent_ppo`` still trains."""
+    scripted = report["scripted"]
+    rows = [
+        [
+            f"`{name}`: {row['what']}",
+            *_seed_cells(row, scripted),
+            "—" if row["score"]["iqm"] is None else _two_decimals(row["score"]["iqm"], row["score"]["ci95"]),
+            _pct(row["unsafe_rate_mean"]),
+            f"{row['train_wall_s_median']:.0f} s",
+        ]
+        for name, row in report["rows"].items()
+    ]
+    header = ["learner", *_SEED_COLUMNS, "mind-reading score, IQM [95 % CI]", "unsafe (mean)", "training (median)"]
+    on_these = ", ".join(f"{agent} {_pct(scripted[agent]['success_rate'])}" for agent in ("belief", "prober", "blind"))
+    per_seed = [
+        [f"`{name}`", ", ".join(f"{run['training_seed']}: {_pct(run['success_rate'])}" for run in row["per_seed"])]
+        for name, row in report["rows"].items()
+    ]
+    return f"""The rows train as those of [Learners and observations](#learners-and-observations-on-the-hard-level)
+do ({report["timesteps"]:,} steps, the wider training personas, the best policy of the last half on the training
+personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes. `jax-lstm-kalman` is
+`JaxRecurrentPPO`, the learner `train.py --algo recurrent_ppo --framework jax` trains; the other row is
+`agents.ppo.recurrent.RecurrentPPO`, its replacement, on the same settings. From the same initial weights, actions
+and minibatch orders the two compute the same rollouts and updates (`tests/agents/test_recurrent_equivalence.py`);
+their seeds draw different initial weights, actions and minibatch orders. On these episodes: {on_these}.
+
+{_table(header, rows)}
+
+{_table(["row", "held-out success of each training seed"], per_seed)}
 """
 
 

@@ -179,6 +179,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "learners_bodies",
         ),
         (
+            "learners",
+            [
+                *["--rows", "jax-lstm-kalman,jax-lstm-kalman-agents-ppo", "--seeds", "0", "--timesteps", "4096"],
+                *["--episodes", "4", "--validation-episodes", "4", "--runs", str(tmp / "learners")],
+            ],
+            "learners_recurrent.json",
+            "learners_recurrent",
+        ),
+        (
             "cleanrl_defaults",
             [
                 "--script",
@@ -249,8 +258,9 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     SB3 row's frames are stacked where a ``jax-*`` row's are refused.
     """
     pytest.importorskip("stable_baselines3")
-    import agents.ppo
+    import agents.ppo.recurrent
     import agents.rl
+    import agents.rl.ppo_run
 
     learners = _bench("learners")
     built: dict[str, Any] = {}
@@ -266,7 +276,8 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
         built.update(env=env, **config.algo_kwargs)
         raise Built
 
-    monkeypatch.setattr(agents.ppo, "PPO", capture)
+    monkeypatch.setattr(agents.rl.ppo_run, "PPO", capture)  # what make_learner builds
+    monkeypatch.setattr(agents.rl.ppo_run, "RecurrentPPO", capture)
     monkeypatch.setattr(agents.rl, "make_model", capture_sb3)
     for name, expected in (("jax-kalman@64-e4", (64, 64, 4)), ("jax-kalman@64", (64, 64, 10))):
         with pytest.raises(Built):
@@ -307,6 +318,11 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     with pytest.raises(Built):
         learners.train_one("jax-lstm-kalman", 0, 64, 4, tmp_path, 4)
     assert "env" in built and "config" not in built
+    built.clear()  # but its replacement's row is agents.ppo's RecurrentPPO, on train.py's settings
+    with pytest.raises(Built):
+        learners.train_one("jax-lstm-kalman-agents-ppo", 2, 64, 4, tmp_path, 4)
+    assert isinstance(built["config"], agents.ppo.recurrent.RecurrentPPOConfig) and built["seed"] == 2
+    assert built["config"].lstm_hidden_size == 64 and built["env_kwargs"] == {"personas": "train_wide"}
     # The same sizing names a time_to_quality contender.
     from agents.hyperparams import hyperparams_for
 
@@ -456,6 +472,22 @@ def test_training_budget_rows_are_one_cpus_budgets_and_not_another_cpu() -> None
     assert [row.split(" | ")[0] for row in rows] == ["| **1,000,000**", "| 2,000,000"], page
     cpus = report.learners_across_cpus(results)
     assert "2,000,000" not in cpus and cpus.count("| `jax-kalman-lag` |") == 2  # the two CPUs' 1M rows only
+
+
+def test_other_sections_records_are_not_the_learners_rows_on_another_cpu() -> None:
+    """``learners_ppo``/``learners_bodies`` hold ``jax-kalman-lag`` trained by another learner or on other people."""
+    report = _bench("report_learners")
+    results = {
+        stem: json.loads((BENCH / "results" / f"{stem}.json").read_text(encoding="utf-8"))
+        for stem in ("learners", "learners_ppo", "learners_bodies")
+    }
+    assert all("jax-kalman-lag" in record["results"]["rows"] for record in results.values())
+    assert "No second machine yet" in report.learners_across_cpus(results)
+    budgets = json.loads((BENCH / "results" / "learners_budget_2000000.json").read_text(encoding="utf-8"))
+    for record in results.values():
+        record["machine"]["cpu"] = budgets["machine"]["cpu"]
+    page = report.training_budget({**results, "learners_budget_2000000": budgets})
+    assert page.count("| **1,000,000** |") == 1, page  # learners.json's row alone
 
 
 def test_outside_learners_take_the_cleanrl_seeds_record_over_the_learners_one() -> None:

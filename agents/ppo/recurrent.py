@@ -12,9 +12,9 @@ plays and is scored without JAX.
 
 Not yet what ``train.py --algo recurrent_ppo --framework jax`` trains: that is still
 :class:`agents.rl.jax_recurrent.JaxRecurrentPPO`. The two agree rollout for rollout and update for
-update from the same weights and actions (``tests/agents/test_recurrent_equivalence.py``), yet the
-caregivers this one trains score below the other's on the held-out people, for a cause not yet found
-(docs/agents.md, "The PPO learner").
+update from the same weights and actions (``tests/agents/test_recurrent_equivalence.py``), and over
+training seeds their caregivers score alike on the held-out people (``bench/learners.py --rows
+jax-lstm-kalman,jax-lstm-kalman-agents-ppo``; docs/BENCHMARKS.md, "The recurrent learner").
 
 Example:
     >>> import coop_gym
