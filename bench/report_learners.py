@@ -360,9 +360,7 @@ def ppo_learner(results: Results) -> str:
     return f"""{head}
 {_provenance(record)}
 
-The rows train as those of [Learners and observations](#learners-and-observations-on-the-hard-level)
-do ({report["timesteps"]:,} steps, the wider training personas, the best policy of the last half on the training
-personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes. The first row is
+{_learners_protocol(report)} The first row is
 `train.py`'s learner (`agents.ppo`, policy lag 1), the `JaxPPO` rows the learner before it (policy lag 1, the same
 settings) from the records named (their machines: the records' provenance). The two learners' seeds draw different
 initial weights and actions.
@@ -389,7 +387,7 @@ def recurrent_learner(report: dict[str, Any], record: dict[str, Any]) -> str:
         [
             f"`{name}`: {row['what']}",
             *_seed_cells(row, scripted),
-            "—" if row["score"]["iqm"] is None else _two_decimals(row["score"]["iqm"], row["score"]["ci95"]),
+            _score_cell(row["score"]),
             _pct(row["unsafe_rate_mean"]),
             f"{row['train_wall_s_median']:.0f} s",
         ]
@@ -401,9 +399,7 @@ def recurrent_learner(report: dict[str, Any], record: dict[str, Any]) -> str:
         [f"`{name}`", ", ".join(f"{run['training_seed']}: {_pct(run['success_rate'])}" for run in row["per_seed"])]
         for name, row in report["rows"].items()
     ]
-    return f"""The rows train as those of [Learners and observations](#learners-and-observations-on-the-hard-level)
-do ({report["timesteps"]:,} steps, the wider training personas, the best policy of the last half on the training
-personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes. `jax-lstm-kalman` is
+    return f"""{_learners_protocol(report)} `jax-lstm-kalman` is
 `JaxRecurrentPPO`, the learner `train.py --algo recurrent_ppo --framework jax` trains; the other row is
 `agents.ppo.recurrent.RecurrentPPO`, its replacement, on the same settings. From the same initial weights, actions
 and minibatch orders the two compute the same rollouts and updates (`tests/agents/test_recurrent_equivalence.py`);
@@ -453,6 +449,18 @@ other lift, timeout no lift in time.
 """
 
 
+def _learners_protocol(report: dict[str, Any]) -> str:
+    """The sentence that says a ``learners*.json`` record's rows were trained and scored as ``learners.json``'s."""
+    return f"""The rows train as those of [Learners and observations](#learners-and-observations-on-the-hard-level)
+do ({report["timesteps"]:,} steps, the wider training personas, the best policy of the last half on the training
+personas' validation episodes kept) and play the same {report["episodes"]} held-out episodes."""
+
+
+def _score_cell(score: dict[str, Any]) -> str:
+    """A row's mind-reading score, IQM [95 % CI], or a dash where it has none."""
+    return "—" if score["iqm"] is None else _two_decimals(score["iqm"], score["ci95"])
+
+
 def _learner_row(label: str, row: dict[str, Any], seeds: str) -> list[str]:
     """A ``learners*.json`` row's cells: seeds, success and mind-reading score (IQM [95 % CI]), ``seeds``, unsafe,
     training time."""
@@ -461,7 +469,7 @@ def _learner_row(label: str, row: dict[str, Any], seeds: str) -> list[str]:
         label,
         str(row["runs"]),
         f"{_pct(success['iqm'])} {_ci(success['ci95'])}".rstrip(),
-        "—" if score["iqm"] is None else _two_decimals(score["iqm"], score["ci95"]),
+        _score_cell(score),
         seeds,
         _pct(row["unsafe_rate_mean"]),
         f"{row['train_wall_s_median']:.0f} s",
