@@ -169,7 +169,7 @@ class Args:
     seed: Seed = 0
     """first seed"""
     estimators: Annotated[
-        str, tyro.conf.arg(help=f"comma-separated subset of {','.join(ESTIMATORS)} (identified is slow: ~10 s a seed)")
+        str, tyro.conf.arg(help=f"comma-separated subset of {','.join(ESTIMATORS)} (identified: the slowest)")
     ] = ",".join(DEFAULT_ESTIMATORS)
     sweep: bool = True
     """run the judgment-delay sweep (--no-sweep: skip it)"""

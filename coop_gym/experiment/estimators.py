@@ -34,13 +34,12 @@ when confident:
 * ``oracle`` -- the bank on each subject's *true* parameters: not an estimator but the
   information bound of linear delay-aware filters at the judgment instant.
 
-``python -m coop_gym.experiment.calibrate`` reports all of them over 20 seeds. In short, on the
-calibrated defaults: the thresholded KF lands near the paper's Table I; MMAE and IMM on
-the paper's nominal model do *worse* than the thresholded KF (MAP needs more evidence
-than the 0.3 threshold, and the nominal model misses the reaction delay); the delay-aware
-and stiffness-aware bank gains about 11 points of balanced accuracy; the oracle bound is
-only a couple of points above it, because at 0.75 s the person has been responding for
-only ~0.45 s. Later judgments (1 s) gain much more.
+``python -m coop_gym.experiment.calibrate`` reports all of them over 20 seeds; their table is
+``python bench/papers_experiment.py`` (``bench/results/papers_experiment.json``, docs/BENCHMARKS.md,
+"The paper's experiment"). MMAE and IMM on the paper's nominal model need more evidence for
+their MAP than the 0.3 threshold, and the nominal model misses the reaction delay; at the
+0.75-s judgment the person has been responding for only 0.75 s minus that delay, which bounds
+what any filter (the oracle included) can know then.
 """
 
 from __future__ import annotations
