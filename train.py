@@ -67,7 +67,7 @@ class Args:
     progress: bool = True
     """show a progress bar while training"""
     framework: Literal["jax", "sb3", "rllib"] | None = None
-    """jax (ppo: agents/ppo, flax and optax; recurrent_ppo: JaxRecurrentPPO), sb3 or rllib; None: jax for ppo"""
+    """jax (agents/ppo, flax and optax: ppo and recurrent_ppo), sb3 or rllib; None: jax for ppo"""
     policy_lag: Literal[0, 1] | None = None
     """--framework jax, ppo: 1 runs each update on a second core while the next rollout plays (docs/agents.md,
     "Policy lag"); None: the env's (hyperparams.py JAX_POLICY_LAG: 1 on the hard level; --resume: the run's own)"""

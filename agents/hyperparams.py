@@ -45,7 +45,7 @@ ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo", "dqn")
 
 FRAMEWORKS: tuple[str, ...] = ("sb3", "jax")
 """Learners that train in this process: SB3 itself, or JAX (PPO: :class:`agents.ppo.PPO`; RecurrentPPO:
-:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`)."""
+:class:`agents.ppo.recurrent.RecurrentPPO`)."""
 
 JAX_ALGORITHMS: tuple[str, ...] = ("ppo", "recurrent_ppo")
 """Algorithms ``framework="jax"`` trains."""
@@ -81,8 +81,8 @@ class TrainingConfig:
         algo_kwargs: Keyword arguments of the SB3 algorithm's constructor.
         policy_kwargs: The policy's ``policy_kwargs`` (network sizes).
         framework: ``"sb3"`` (SB3's own class) or ``"jax"`` (``ppo``: :class:`agents.ppo.PPO`;
-            ``recurrent_ppo``: :class:`agents.rl.jax_recurrent.JaxRecurrentPPO`; the update
-            compiled by JAX).
+            ``recurrent_ppo``: :class:`agents.ppo.recurrent.RecurrentPPO`; flax networks, optax,
+            the update compiled by JAX).
     """
 
     algo: str
@@ -107,8 +107,8 @@ class TrainingConfig:
             )
         if self.framework != "jax" and "policy_lag" in self.algo_kwargs:
             raise ValueError(
-                f"TrainingConfig.algo_kwargs: policy_lag is JaxPPO's (framework='jax'); framework={self.framework!r} "
-                "has no such setting (drop it from algo_kwargs)"
+                "TrainingConfig.algo_kwargs: policy_lag is agents.ppo's (framework='jax'); "
+                f"framework={self.framework!r} has no such setting (drop it from algo_kwargs)"
             )
         check_integer("TrainingConfig.n_envs", self.n_envs, 1, SEED_LIMIT)  # envs seeded seed .. seed + n_envs - 1
         check_integer("TrainingConfig.total_timesteps", self.total_timesteps, 1, sys.maxsize)
@@ -246,7 +246,7 @@ JAX_SIZING: dict[str, Any] = {
     "n_envs": 16,
     "n_steps": 256,
 }
-"""How the JAX learners size PPO (``framework="jax"``: :class:`agents.ppo.PPO`, and ``JaxPPO`` in ``bench/``), over
+"""How the JAX learners size PPO (``framework="jax"``: :class:`agents.ppo.PPO` and its recurrent learner), over
 the settings above.
 
 With the update compiled, what is left per env step is Python's work per ``VecEnv`` step,
@@ -254,7 +254,7 @@ which more envs per step spread thinner; but shorter rollouts per env learn less
 16 envs x 256 steps keeps the 4096 samples per update, the minibatches and the epochs of
 the SB3 settings, and scored highest of 8 x 512, 16 x 256 and 64 x 64 on the training
 personas' validation episodes (python bench/learners.py --rows jax-kalman@8,jax-kalman,jax-kalman@64;
-docs/agents.md, "JaxPPO and the LSTM learner")."""
+docs/agents.md, "The JAX learners' sizing")."""
 
 
 JAX_POLICY_LAG: dict[str, int] = {"CoopGym/SitToStandHard-v2": 1}

@@ -13,13 +13,13 @@ and the observation it gets (:data:`ROWS`):
 - ``jax-kalman`` / ``jax-switching`` / ``jax-raw``: the same PPO trained by ``train.py``'s learner,
   :class:`agents.ppo.PPO`, on its sizing with ``policy_lag=0`` (``python train.py --policy-lag 0``);
   ``jax-lstm-raw`` / ``jax-lstm-kalman`` / ``jax-lstm-population`` (across bodies): the recurrent rows trained
-  by :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO's settings, an LSTM before the heads), and
-  ``jax-lstm-kalman-agents-ppo``: ``jax-lstm-kalman`` by :class:`agents.ppo.recurrent.RecurrentPPO`; ``ROW@N``
+  by :class:`agents.ppo.recurrent.RecurrentPPO` (PPO's settings, an LSTM before the heads); ``ROW@N``
   (a ``jax-*`` row on ``N`` envs, ``n_steps`` scaled so an update still takes the same
   samples) and ``ROW@N-eE`` (the same with ``E`` epochs per update) compare sizings;
   ``jax-unit``, ``jax-kalman-lag`` (``train.py``'s default), ``jax-kalman-lag-population`` (trained across
   bodies), ``jax-switching-*``, ``jax-discreteunit``: variations of ``jax-kalman``, each row's ``what``;
-  records saved before these rows moved to ``agents.ppo`` hold ``jax-*`` PPO rows trained by ``JaxPPO``;
+  records saved before these rows moved to ``agents.ppo`` hold ``jax-*`` rows trained by ``JaxPPO`` and
+  ``JaxRecurrentPPO`` (each record's ``what`` names its learner);
 - ``cleanrl-*``: CleanRL's public ``ppo.py`` as its user runs it (``--cleanrl-script PATH``; the script is
   not part of coop_gym, see ``bench/cleanrl_defaults.py``), given :data:`CLEANRL_ENV_ID`, its final policy
   greedy: ``cleanrl-ppo`` unmodified on its defaults (the library-defaults row), the others with the flags,
@@ -97,12 +97,10 @@ class Row:
     normalize: bool = True
     """Whether observations pass through ``VecNormalize``, as ``train.py``'s do (not CleanRL's script's)."""
     algo_kwargs: dict[str, Any] = field(default_factory=dict)
-    """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``). A JaxPPO row without
+    """The learner's settings beyond ``train.py``'s (e.g. ``{"policy_lag": 1}``). A ``jax`` PPO row without
     ``policy_lag`` here runs ``policy_lag=0``, whatever ``train.py``'s default."""
     personas: str = "train_wide"
     """The people trained on (``train.py``'s wider training personas, or ``"train_population"``)."""
-    agents_ppo: bool = False
-    """A ``jax`` recurrent row trained by :class:`agents.ppo.recurrent.RecurrentPPO` (a ``jax`` PPO row always is)."""
 
 
 SWITCHING: dict[str, Any] = {"estimator": "switching", "estimator_options": {"n_particles": 256, "hypotheses": 32}}
@@ -177,12 +175,11 @@ ROWS: dict[str, Row] = {
     "jax-lstm-raw": Row(
         "recurrent_ppo",
         {"observation_mode": "raw"},
-        "JaxRecurrentPPO (LSTM: memory), measurements only",
+        "agents.ppo's RecurrentPPO (LSTM: memory), measurements only",
         "jax",
     ),
-    "jax-lstm-kalman": Row("recurrent_ppo", {}, "JaxRecurrentPPO (LSTM), Kalman estimate + measurements", "jax"),
-    "jax-lstm-kalman-agents-ppo": Row(
-        "recurrent_ppo", {}, "agents.ppo's RecurrentPPO (LSTM), Kalman estimate + measurements", "jax", agents_ppo=True
+    "jax-lstm-kalman": Row(
+        "recurrent_ppo", {}, "agents.ppo's RecurrentPPO (LSTM), Kalman estimate + measurements", "jax"
     ),
     "jax-lstm-population": Row(
         "recurrent_ppo", {}, "jax-lstm-kalman trained across bodies (train_population)", "jax", personas=_POP
@@ -393,9 +390,9 @@ def train_one(
 
 
 def _learn(row: Row, config: Any, seed: int, timesteps: int, selection: Any) -> tuple[Any, dict[str, Any]]:
-    """``(model, selected)``: row ``row`` trained (a ``jax`` PPO row and an ``agents_ppo`` row by ``agents.ppo``
-    on coop_gym's vector env, the others, ``JaxRecurrentPPO`` too, on SB3's), the policy kept."""
-    if row.framework == "jax" and (row.algo == "ppo" or row.agents_ppo):
+    """``(model, selected)``: row ``row`` trained (a ``jax`` row by ``agents.ppo`` on coop_gym's vector env, the
+    others by SB3 on SB3's), the policy kept."""
+    if row.framework == "jax":
         from agents.rl.ppo_run import learn_selected, make_learner
 
         learner = make_learner(config, ENV_ID, seed, row.env_kwargs)

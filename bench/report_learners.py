@@ -370,8 +370,7 @@ initial weights and actions.
 
 
 _RECURRENT_COMMAND = (
-    "python bench/learners.py --rows jax-lstm-kalman,jax-lstm-kalman-agents-ppo --seeds 0,1,2,3,4 "
-    "--save bench/results/learners_recurrent.json"
+    "python bench/learners.py --rows jax-lstm-kalman --seeds 0,1,...,9 --save bench/results/learners_recurrent.json"
 )
 
 
@@ -381,7 +380,7 @@ _RECURRENT_COMMAND = (
     _RECURRENT_COMMAND,
 )
 def recurrent_learner(report: dict[str, Any], record: dict[str, Any]) -> str:
-    """``RecurrentPPO`` beside ``JaxRecurrentPPO``, the learner ``train.py --algo recurrent_ppo`` still trains."""
+    """``RecurrentPPO`` beside ``JaxRecurrentPPO``, the learner ``train.py --algo recurrent_ppo`` trained before it."""
     scripted = report["scripted"]
     rows = [
         [
@@ -399,11 +398,11 @@ def recurrent_learner(report: dict[str, Any], record: dict[str, Any]) -> str:
         [f"`{name}`", ", ".join(f"{run['training_seed']}: {_pct(run['success_rate'])}" for run in row["per_seed"])]
         for name, row in report["rows"].items()
     ]
-    return f"""{_learners_protocol(report)} `jax-lstm-kalman` is
-`JaxRecurrentPPO`, the learner `train.py --algo recurrent_ppo --framework jax` trains; the other row is
-`agents.ppo.recurrent.RecurrentPPO`, its replacement, on the same settings. From the same initial weights, actions
-and minibatch orders the two compute the same rollouts and updates (`tests/agents/test_recurrent_equivalence.py`);
-their seeds draw different initial weights, actions and minibatch orders. On these episodes: {on_these}.
+    return f"""{_learners_protocol(report)} Each row's learner is
+the one it names, on the same settings: `JaxRecurrentPPO` is the learner `train.py --algo recurrent_ppo --framework jax`
+trained before `agents.ppo.recurrent.RecurrentPPO`, which it and the row `jax-lstm-kalman` train now
+(`jax-lstm-kalman-agents-ppo` is that row under the name it had while both learners stood). Their seeds draw
+different initial weights, actions and minibatch orders. On these episodes: {on_these}.
 
 {_table(header, rows)}
 

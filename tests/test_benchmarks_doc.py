@@ -181,7 +181,7 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
         (
             "learners",
             [
-                *["--rows", "jax-lstm-kalman,jax-lstm-kalman-agents-ppo", "--seeds", "0", "--timesteps", "4096"],
+                *["--rows", "jax-lstm-kalman", "--seeds", "0", "--timesteps", "4096"],
                 *["--episodes", "4", "--validation-episodes", "4", "--runs", str(tmp / "learners")],
             ],
             "learners_recurrent.json",
@@ -314,13 +314,9 @@ def test_a_learner_rows_sizing_reaches_the_model(tmp_path: Path, monkeypatch: py
     assert isinstance(built["env"], VecFrameStack) and isinstance(built["env"].venv, VecNormalize)
     with pytest.raises(argparse.ArgumentTypeError, match="jax-raw-stack4"):
         learners._rows("jax-raw-stack4")
-    built.clear()  # the recurrent jax rows are JaxRecurrentPPO's, built as an SB3 class on SB3's vector env
+    built.clear()  # the recurrent jax rows are agents.ppo's RecurrentPPO, on train.py's settings
     with pytest.raises(Built):
-        learners.train_one("jax-lstm-kalman", 0, 64, 4, tmp_path, 4)
-    assert "env" in built and "config" not in built
-    built.clear()  # but its replacement's row is agents.ppo's RecurrentPPO, on train.py's settings
-    with pytest.raises(Built):
-        learners.train_one("jax-lstm-kalman-agents-ppo", 2, 64, 4, tmp_path, 4)
+        learners.train_one("jax-lstm-kalman", 2, 64, 4, tmp_path, 4)
     assert isinstance(built["config"], agents.ppo.recurrent.RecurrentPPOConfig) and built["seed"] == 2
     assert built["config"].lstm_hidden_size == 64 and built["env_kwargs"] == {"personas": "train_wide"}
     # The same sizing names a time_to_quality contender.

@@ -10,11 +10,8 @@ LSTMs from the states the rollout began with, zeroed where an episode starts ins
 learner saves as sb3-contrib's ``RecurrentPPO`` (:func:`agents.ppo.sb3_format.to_sb3`), which loads,
 plays and is scored without JAX.
 
-Not yet what ``train.py --algo recurrent_ppo --framework jax`` trains: that is still
-:class:`agents.rl.jax_recurrent.JaxRecurrentPPO`. The two agree rollout for rollout and update for
-update from the same weights and actions (``tests/agents/test_recurrent_equivalence.py``), and over
-training seeds their caregivers score alike on the held-out people (``bench/learners.py --rows
-jax-lstm-kalman,jax-lstm-kalman-agents-ppo``; docs/BENCHMARKS.md, "The recurrent learner").
+What ``train.py --algo recurrent_ppo --framework jax`` trains (:func:`agents.rl.ppo_run.make_learner`),
+and ``bench/learners.py``'s ``jax-lstm-*`` rows.
 
 Example:
     >>> import coop_gym

@@ -216,13 +216,15 @@ def _algo_from_zip(model_path: Path) -> str | None:
 
 
 def load_model(path: str | Path, env: VecEnv | None = None, **kwargs: Any) -> tuple[BaseAlgorithm, dict[str, Any]]:
-    """Load a saved model (algorithm from ``agent.json``, else tried in turn) and its metadata."""
+    """Load a saved model as its SB3 class (algorithm from ``agent.json``, else tried in turn) and its metadata.
+
+    A JAX learner's model (``framework`` ``"jax"``) is SB3's PPO or sb3-contrib's RecurrentPPO, its framework kept.
+    """
     model_path, info = resolve_saved(path)
     if problem := bundle_problem(model_path, info):
         raise ValueError(problem)
     guess = info.get("algo") or _algo_from_zip(model_path)
     algos = [guess] if guess else list(ALGORITHMS)
-    framework = "jax" if info.get("framework") == "jax" else "sb3"
     errors = []
     for algo in algos:
         try:
@@ -230,10 +232,12 @@ def load_model(path: str | Path, env: VecEnv | None = None, **kwargs: Any) -> tu
                 # A saved n-step DQN reloads its NStepReplayBuffer with n_steps and gamma in
                 # replay_buffer_kwargs; SB3 still warns that n_steps "is ignored" (it is not).
                 warnings.filterwarnings("ignore", message=r"`n_steps=\d+` is ignored", category=UserWarning)
-                model = algorithm_class(algo, framework).load(model_path, env=env, device="cpu", **kwargs)
+                model = algorithm_class(algo).load(model_path, env=env, device="cpu", **kwargs)
         except Exception as exc:  # a wrong class fails in many ways; try the next
             errors.append(f"{algo}: {exc}")
             continue
+        if info.get("framework") == "jax":
+            model.framework = "jax"  # type: ignore[attr-defined]  # who trained it, kept when it is saved again
         return model, info | {"algo": algo}
     raise ValueError(f"could not load {model_path} as any of {algos}: {'; '.join(errors)}")
 

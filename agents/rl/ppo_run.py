@@ -39,21 +39,32 @@ from agents.run_folder import CHECKPOINTS_DIR, MODEL_FILE, VECNORMALIZE_FILE
 from coop_gym.envs.config import Outcome
 from coop_gym.io import atomic_path
 
-__all__ = ["RunHooks", "continue_from_saved", "learn_selected", "make_learner", "restore_learner"]
+__all__ = ["RunHooks", "continue_from_saved", "learn_selected", "learner_config", "make_learner", "restore_learner"]
 
 STATE_FILE = "state.pkl"
 
 
-def make_learner(config: Any, env_id: str, seed: int, env_kwargs: dict[str, Any] | None = None) -> PPO:
-    """The learner of ``config`` (a :class:`agents.hyperparams.TrainingConfig`) on ``env_id``'s envs of its personas.
+def learner_config(config: Any) -> PPOConfig:
+    """The learner's settings of ``config`` (a ``framework="jax"`` :class:`agents.hyperparams.TrainingConfig`).
 
-    ``recurrent_ppo``: :class:`~agents.ppo.recurrent.RecurrentPPO`; ``ppo``: :class:`~agents.ppo.PPO`
-    (their configs' ``from_training`` refuse any other setting).
+    ``recurrent_ppo``: a :class:`~agents.ppo.recurrent.RecurrentPPOConfig`; ``ppo``: a :class:`~agents.ppo.PPOConfig`.
+
+    Raises:
+        ValueError: a setting the learner cannot run (the message names it).
+    """
+    return (RecurrentPPOConfig if config.algo == "recurrent_ppo" else PPOConfig).from_training(config)
+
+
+def make_learner(config: Any, env_id: str, seed: int, env_kwargs: dict[str, Any] | None = None) -> PPO:
+    """The learner of ``config`` (:func:`learner_config`) on ``env_id``'s envs of its personas.
+
+    ``recurrent_ppo``: :class:`~agents.ppo.recurrent.RecurrentPPO`; ``ppo``: :class:`~agents.ppo.PPO`.
     """
     kwargs = {"personas": config.personas, **(env_kwargs or {})}
-    if config.algo == "recurrent_ppo":
-        return RecurrentPPO(env_id, RecurrentPPOConfig.from_training(config), seed, kwargs)
-    return PPO(env_id, PPOConfig.from_training(config), seed, kwargs)
+    settings = learner_config(config)
+    if isinstance(settings, RecurrentPPOConfig):
+        return RecurrentPPO(env_id, settings, seed, kwargs)
+    return PPO(env_id, settings, seed, kwargs)
 
 
 class RunHooks:

@@ -17,24 +17,22 @@ steps all its envs with one compiled call instead of ``n_envs`` Python env steps
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
-from stable_baselines3.common.running_mean_std import RunningMeanStd
-from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
+from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from agents.rl.normalize import update_and_normalize, update_returns
 from coop_gym.cli import SEED_LIMIT
 from coop_gym.envs.contract import InfoBuilder
 from coop_gym.envs.vector import SitToStandVectorEnv
 from estimator.validate import check_integer
 
-__all__ = ["STEP_INFOS", "SB3VecEnvAdapter", "fused_step", "make_sb3_vec_env"]
+__all__ = ["STEP_INFOS", "SB3VecEnvAdapter", "make_sb3_vec_env"]
 
 STEP_INFOS: tuple[str, ...] = ("all", "finished")
 """What :class:`SB3VecEnvAdapter` puts in ``infos`` each step (its ``step_infos`` argument)."""
@@ -304,75 +302,3 @@ def make_sb3_vec_env(
     adapter = SB3VecEnvAdapter(venv, step_infos=step_infos)
     adapter.seed(seed)
     return adapter
-
-
-def _monitor_step(
-    monitor: VecMonitor, rewards: NDArray[Any], dones: NDArray[Any], infos: list[dict[str, Any]]
-) -> list[int]:
-    """``VecMonitor.step_wait``'s bookkeeping of one step, ``infos`` updated in place; the finished envs."""
-    monitor.episode_returns += rewards
-    monitor.episode_lengths += 1
-    finished = np.flatnonzero(dones).tolist()
-    for i in finished:
-        info = infos[i].copy()
-        episode = {
-            "r": monitor.episode_returns[i],
-            "l": monitor.episode_lengths[i],
-            "t": round(time.time() - monitor.t_start, 6),
-        }
-        for key in monitor.info_keywords:
-            episode[key] = info[key]
-        info["episode"] = episode
-        monitor.episode_count += 1
-        monitor.episode_returns[i] = 0
-        monitor.episode_lengths[i] = 0
-        if monitor.results_writer:
-            monitor.results_writer.write_row(episode)
-        infos[i] = info
-    return finished
-
-
-def fused_step(env: VecEnv) -> Callable[[NDArray[Any]], VecEnvStepReturn] | None:
-    """``env.step`` of the training stack :func:`agents.rl.make_train_env` builds, in one function.
-
-    The stack: ``VecNormalize`` (observations, not rewards) over ``VecMonitor`` over
-    :class:`SB3VecEnvAdapter` on coop_gym's batched env with ``step_infos="finished"``. The adapter
-    steps as always; the monitor's episode sums and records and the normaliser's update
-    (:func:`agents.rl.normalize.update_and_normalize`), discounted returns
-    (:func:`agents.rl.normalize.update_returns`) and terminal observations are done here, with the
-    wrappers' numbers, state and infos, without their per-step layers and copies
-    (``tests/agents/test_sb3_vec.py`` holds a run to the wrappers' bit for bit). While the
-    normaliser is not training, the step is ``env.step``. None for any other stack.
-    """
-    norm, monitor = env, getattr(env, "venv", None)
-    adapter = getattr(monitor, "venv", None)
-    if not (type(norm) is VecNormalize and type(monitor) is VecMonitor and type(adapter) is SB3VecEnvAdapter):
-        return None
-    if (
-        adapter._rows_env is None
-        or adapter.step_infos != "finished"
-        or not norm.norm_obs
-        or norm.norm_reward
-        or not isinstance(norm.obs_rms, RunningMeanStd)
-    ):
-        return None
-
-    def step(actions: NDArray[Any]) -> VecEnvStepReturn:
-        if not norm.training:
-            return env.step(actions)
-        adapter.step_async(actions)
-        obs, rewards, dones, infos = adapter.step_wait()
-        finished = _monitor_step(monitor, rewards, dones, infos)
-        # VecNormalize.step_wait (observations only)
-        norm.old_obs, norm.old_reward = obs, rewards
-        normalized = update_and_normalize(norm, obs)
-        update_returns(norm, rewards)
-        ended = [i for i in finished if "terminal_observation" in infos[i]]
-        if ended:  # normalize_obs row by row is elementwise: all rows at once are the same numbers
-            finals = norm.normalize_obs(np.stack([infos[i]["terminal_observation"] for i in ended]))
-            for i, final in zip(ended, finals, strict=True):
-                infos[i]["terminal_observation"] = final
-        norm.returns[dones] = 0
-        return normalized, rewards.astype(np.float32), dones, infos
-
-    return step

@@ -46,25 +46,12 @@ VEC_NORMALIZE_KWARGS: dict[str, Any] = {"norm_obs": True, "norm_reward": False}
 running mean and std, rewards left alone (they are already O(1))."""
 
 
-def algorithm_class(algo: str, framework: str = "sb3") -> type[BaseAlgorithm]:
-    """The class of an algorithm name (:data:`agents.hyperparams.ALGORITHMS`) in a ``framework``.
+def algorithm_class(algo: str) -> type[BaseAlgorithm]:
+    """The SB3 class of an algorithm name (:data:`agents.hyperparams.ALGORITHMS`): what trains and loads it.
 
-    ``framework="jax"`` is :class:`agents.rl.jax_ppo.JaxPPO` or
-    :class:`agents.rl.jax_recurrent.JaxRecurrentPPO` (PPO and RecurrentPPO); they load and
-    play without JAX, which only their training needs.
+    A model of the JAX learner (``framework="jax"``, :mod:`agents.ppo`) is saved as SB3's PPO or
+    sb3-contrib's RecurrentPPO, so this class loads it too.
     """
-    if framework == "jax" and algo == "ppo":
-        from agents.rl.jax_ppo import JaxPPO
-
-        return JaxPPO
-    if framework == "jax" and algo == "recurrent_ppo":
-        from agents.rl.jax_recurrent import JaxRecurrentPPO
-
-        return JaxRecurrentPPO
-    if framework not in ("sb3", "jax"):
-        raise ValueError(f"unknown framework {framework!r}; known: sb3, jax")
-    if framework == "jax":
-        raise ValueError(f"framework 'jax' trains ppo and recurrent_ppo only, not {algo!r}")
     if algo == "ppo":
         return PPO
     if algo == "dqn":
@@ -177,8 +164,17 @@ def make_model(
     verbose: int = 0,
     overrides: dict[str, Any] | None = None,
 ) -> BaseAlgorithm:
-    """Build ``config.algo`` (its ``config.framework`` class) on ``env`` with its settings plus ``overrides``."""
-    cls = algorithm_class(config.algo, config.framework)
+    """Build ``config.algo`` (SB3's class) on ``env`` with its settings plus ``overrides``.
+
+    Raises:
+        ValueError: a ``framework="jax"`` setting (its learner is :func:`agents.rl.ppo_run.make_learner`).
+    """
+    if config.framework != "sb3":
+        raise ValueError(
+            f"make_model builds SB3's classes; framework {config.framework!r} trains agents.ppo's learner "
+            "(agents.rl.ppo_run.make_learner)"
+        )
+    cls = algorithm_class(config.algo)
     kwargs = _schedules(config.model_kwargs() | dict(overrides or {}))
     return cls(
         config.policy,

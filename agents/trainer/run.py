@@ -6,9 +6,9 @@
 * :func:`train` -- the training env, the model (restored from the last checkpoint, continued
   from a saved model, or new), the callbacks (learning curve, selection of the saved policy,
   checkpoints), ``learn``, then the saved agent and ``training.json``; with ``--seeds N``, N such runs
-  in ``RUN/seeds/``, kept as one (``--keep ensemble``) or the one best on the validation people. PPO on the JAX
-  learner trains
-  :class:`agents.ppo.PPO` with the same tools at its rollout ends (:mod:`agents.rl.ppo_run`).
+  in ``RUN/seeds/``, kept as one (``--keep ensemble``) or the one best on the validation people. The JAX
+  learner (``--framework jax``) trains :class:`agents.ppo.PPO` (``--algo recurrent_ppo``:
+  :class:`agents.ppo.recurrent.RecurrentPPO`) with the same tools at its rollout ends (:mod:`agents.rl.ppo_run`).
 
 What happens after training (the evaluation against the baselines, the report) is
 :func:`agents.trainer.run_report.evaluate_and_report`; the arguments are ``train.Args``.
@@ -107,11 +107,11 @@ def plan_run(args: Any, folder: Path | None = None) -> Plan:
     if problem:
         raise RunProblem(problem)
     n_envs = args.n_envs or config.n_envs
-    if config.algo == "ppo" and config.framework == "jax" and not args.eval_only:
-        from agents.ppo import PPOConfig
+    if config.framework == "jax" and not args.eval_only:
+        from agents.rl.ppo_run import learner_config
 
         try:
-            PPOConfig.from_training(config.replace(n_envs=n_envs))
+            learner_config(config.replace(n_envs=n_envs))
         except ValueError as exc:
             raise RunProblem(f"--n-envs {n_envs}: {exc}") from None
     plan = Plan(Path(), algo, env_id, config, timesteps, n_envs, checkpoint_every, None)
@@ -168,7 +168,7 @@ def train(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
     """
     if seeds_of(args) > 1:
         return _train_seeds(args, plan, stop)
-    if plan.config.algo == "ppo" and plan.config.framework == "jax":
+    if plan.config.framework == "jax":
         return _train_learner(args, plan, stop)
     run_dir, config = plan.run_dir, plan.config
     checkpoint = latest_checkpoint(run_dir)
@@ -225,18 +225,16 @@ def _finish(
 
 
 def _train_learner(args: Any, plan: Plan, stop: StopSignals) -> dict[str, Any]:
-    """:func:`train` for PPO on the JAX learner: :class:`agents.ppo.PPO`, the run's tools at its rollout ends.
+    """:func:`train` on the JAX learner (:func:`agents.rl.ppo_run.make_learner`), the run's tools at its rollout ends.
 
     Raises:
         as :func:`train`.
     """
-    from agents.ppo import PPO, PPOConfig
     from agents.ppo.sb3_format import to_sb3
-    from agents.rl.ppo_run import RunHooks, continue_from_saved, restore_learner
+    from agents.rl.ppo_run import RunHooks, continue_from_saved, make_learner, restore_learner
 
     run_dir, config = plan.run_dir, plan.config
-    settings = PPOConfig.from_training(config.replace(n_envs=plan.n_envs))
-    learner = PPO(plan.env_id, settings, args.seed, {"personas": config.personas})
+    learner = make_learner(config.replace(n_envs=plan.n_envs), plan.env_id, args.seed)
     checkpoint, state, start_steps = latest_checkpoint(run_dir), {}, 0
     try:
         if checkpoint is not None:

@@ -19,7 +19,7 @@ K = 3
 
 
 def _stacked_model(seed: int = 0, n_envs: int = 4):
-    config = hyperparams_for("ppo", ENV_ID, "jax")
+    config = hyperparams_for("ppo", ENV_ID)
     env = make_train_env(ENV_ID, n_envs, seed, personas=config.personas, normalize=True, env_kwargs=RAW)
     env = VecFrameStack(env, K)
     model = make_model(config, env, seed, overrides={"n_steps": 32, "batch_size": 64, "n_epochs": 1})

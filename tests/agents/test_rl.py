@@ -124,7 +124,7 @@ def test_hyperparams_are_consistent():
         TrainingConfig("ppo", "CoopGym/SitToStand-v0", 8, 10, "MlpPolicy", False, personas=["typical", "frail"])
     lagged = hyperparams_for("ppo", "CoopGym/SitToStandHard-v2", "jax")
     assert lagged.algo_kwargs["policy_lag"] == 1
-    with pytest.raises(ValueError, match=r"policy_lag is JaxPPO's \(framework='jax'\); framework='sb3'"):
+    with pytest.raises(ValueError, match=r"policy_lag is agents.ppo's \(framework='jax'\); framework='sb3'"):
         lagged.replace(framework="sb3")
 
 

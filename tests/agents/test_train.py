@@ -233,3 +233,26 @@ def test_framework_jax_trains_and_reports_and_its_model_continues_with_jax(tmp_p
     assert results["training"]["timesteps"] >= 512
     assert results["evaluation"]["results"][0]["agent"] == "ppo (learned)" and results["framework"] == "jax"
     assert train.parse_args(["--resume", str(run_dir), "--out", str(tmp_path)]).framework == "jax"
+
+
+def test_recurrent_ppo_on_jax_trains_agents_ppos_lstm_learner_and_saves_sb3_contribs_class(tmp_path):
+    """train.py --algo recurrent_ppo --framework jax: agents.ppo.recurrent.RecurrentPPO, saved as sb3-contrib's class.
+
+    The model loads and plays without JAX, the report names the framework, and the saved model
+    holds the learner's LSTM. That its checkpoint continues exactly: tests/agents/test_recurrent.py.
+    """
+    from sb3_contrib import RecurrentPPO
+
+    from agents.rl import load_model
+
+    tiny = [*TINY, "--algo", "recurrent_ppo", "--framework", "jax", "--timesteps", "1024", "--checkpoint-every", "512"]
+    proc = run_train(*tiny, "--baselines", "blind", "--out", str(tmp_path), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (run_dir,) = tmp_path.iterdir()
+    model, info = load_model(run_dir / "model.zip")
+    assert isinstance(model, RecurrentPPO) and info["framework"] == "jax" and info["algo"] == "recurrent_ppo"
+    assert model.policy.lstm_actor.hidden_size == 64 and model.n_steps == 256  # the JAX sizing's rollout per env
+    results = json.loads((run_dir / "results.json").read_text())
+    assert results["framework"] == "jax" and results["training"]["timesteps"] >= 1024
+    assert results["evaluation"]["results"][0]["agent"] == "recurrent_ppo (learned)"
+    assert not (run_dir / "checkpoints").exists()  # a finished run keeps its model, not its checkpoints
