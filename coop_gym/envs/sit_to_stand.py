@@ -21,6 +21,7 @@ __all__ = [
     "observation_features",  # the contract's, for the importers of this module (agents.caregivers.scripted)
 ]
 
+
 class SitToStandEnv(ConfiguredEnv, gym.Env[NDArray[np.float32], Any]):
     r"""A robot caregiver helps an older adult stand up -- once the person is cooperative.
 
