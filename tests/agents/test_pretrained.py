@@ -47,6 +47,16 @@ def test_a_pretrained_model_loads_by_name_and_reproduces_its_card(name):
     assert check["same_as_the_evaluations_first_episodes"]
 
 
+def test_a_model_the_retired_jax_learner_saved_loads_as_sb3s_ppo_naming_its_framework():
+    """``hard-v2-ppo`` was saved by ``JaxPPO`` (``framework`` "jax"): it loads as SB3's own PPO, its framework kept."""
+    from stable_baselines3 import PPO
+
+    from agents.rl import load_model
+
+    model, info = load_model(pretrained_model_path("hard-v2-ppo"))
+    assert type(model) is PPO and info["framework"] == "jax" and model.framework == "jax"
+
+
 def test_an_unknown_name_lists_the_known_ones(capsys):
     with pytest.raises(ValueError, match=r"unknown pretrained model 'nope'; known: pretrained:hard-ppo"):
         load_agent("pretrained:nope")
