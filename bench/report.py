@@ -28,6 +28,7 @@ from report_learners import (
     learners_across_cpus,
     ppo_learner,
     recurrent_learner,
+    recurrent_rows,
     selection_people,
     training_budget,
 )
@@ -75,6 +76,7 @@ SECTIONS: tuple[Callable[[Results], str], ...] = (
     learners_across_cpus,
     ppo_learner,
     recurrent_learner,
+    recurrent_rows,
     by_persona,
     training_budget,
     selection_people,

@@ -115,7 +115,7 @@ def _seed_cells(row: dict[str, Any], scripted: dict[str, Any]) -> list[str]:
     ]
 
 
-OTHER_SECTIONS_RECORDS = ("learners_ppo", "learners_bodies", "learners_recurrent")
+OTHER_SECTIONS_RECORDS = ("learners_ppo", "learners_bodies", "learners_recurrent", "learners_lstm")
 """``bench/learners.py``'s results files that hold other sections' rows (another learner, other people), not the
 rows of ``learners.json`` trained on another CPU."""
 
@@ -381,6 +381,31 @@ _RECURRENT_COMMAND = (
 )
 def recurrent_learner(report: dict[str, Any], record: dict[str, Any]) -> str:
     """``RecurrentPPO`` beside ``JaxRecurrentPPO``, the learner ``train.py --algo recurrent_ppo`` trained before it."""
+    return f"""{_learners_protocol(report)} Each row's learner is
+the one it names, on the same settings: `JaxRecurrentPPO` is the learner `train.py --algo recurrent_ppo --framework jax`
+trained before `agents.ppo.recurrent.RecurrentPPO`, which it and the row `jax-lstm-kalman` train now
+(`jax-lstm-kalman-agents-ppo` is that row under the name it had while both learners stood). Their seeds draw
+different initial weights, actions and minibatch orders. {_recurrent_tables(report)}"""
+
+
+_LSTM_COMMAND = (
+    "python bench/learners.py --rows jax-lstm-raw,jax-lstm-population --seeds 0,1,2,3,4 "
+    "--save bench/results/learners_lstm.json"
+)
+
+
+@_from_results("learners_lstm", "### The memory rows on `agents.ppo.recurrent`", _LSTM_COMMAND)
+def recurrent_rows(report: dict[str, Any], record: dict[str, Any]) -> str:
+    """The other ``jax-lstm-*`` rows trained by ``RecurrentPPO`` (the learners records hold ``JaxRecurrentPPO``'s)."""
+    return f"""{_learners_protocol(report)} The rows are those of
+[Learners and observations](#learners-and-observations-on-the-hard-level) and
+[Across bodies](#across-bodies-what-the-observation-carries-to-people-not-met), trained by
+`agents.ppo.recurrent.RecurrentPPO`, what they train today (those tables' records: `JaxRecurrentPPO`); `jax-lstm-kalman`
+on it: the section above. {_recurrent_tables(report)}"""
+
+
+def _recurrent_tables(report: dict[str, Any]) -> str:
+    """The scripted caregivers' rates, the rows over their seeds, and each seed's held-out success."""
     scripted = report["scripted"]
     rows = [
         [
@@ -398,11 +423,7 @@ def recurrent_learner(report: dict[str, Any], record: dict[str, Any]) -> str:
         [f"`{name}`", ", ".join(f"{run['training_seed']}: {_pct(run['success_rate'])}" for run in row["per_seed"])]
         for name, row in report["rows"].items()
     ]
-    return f"""{_learners_protocol(report)} Each row's learner is
-the one it names, on the same settings: `JaxRecurrentPPO` is the learner `train.py --algo recurrent_ppo --framework jax`
-trained before `agents.ppo.recurrent.RecurrentPPO`, which it and the row `jax-lstm-kalman` train now
-(`jax-lstm-kalman-agents-ppo` is that row under the name it had while both learners stood). Their seeds draw
-different initial weights, actions and minibatch orders. On these episodes: {on_these}.
+    return f"""On these episodes: {on_these}.
 
 {_table(header, rows)}
 

@@ -188,6 +188,15 @@ def _cases(tmp: Path) -> list[tuple[str, list[str], str, str]]:
             "learners_recurrent",
         ),
         (
+            "learners",
+            [
+                *["--rows", "jax-lstm-raw", "--seeds", "0", "--timesteps", "4096"],
+                *["--episodes", "4", "--validation-episodes", "4", "--runs", str(tmp / "learners")],
+            ],
+            "learners_lstm.json",
+            "learners_lstm",
+        ),
+        (
             "cleanrl_defaults",
             [
                 "--script",
