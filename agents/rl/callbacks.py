@@ -186,9 +186,10 @@ class SelectionCallback(BaseCallback):
     ``episodes`` validation episodes: of ``personas`` (the training personas, or the
     validation people), seeds :data:`VALIDATION_SEED` onwards -- never the held-out personas. Each policy that scores at
     least as well as the best so far is saved to ``folder/best_step_N.zip`` (with its
-    observation statistics). PPO's held-out success moves by up to 16 points between policies
-    of one run a few hundred thousand steps apart, its success on the training personas by
-    less (docs/agents.md, "Which policy is saved"); the best validated one is the saved model.
+    observation statistics). PPO's held-out success moves between policies of one run a few
+    hundred thousand steps apart, its success on the training personas by less (docs/agents.md,
+    "Which policy is saved"; every candidate's scores: ``python bench/learners.py --people``,
+    ``bench/results/selection_people.json``); the best validated one is the saved model.
 
     Scoring does not touch training: the episodes run in their own envs and the policy acts
     deterministically, so the weights trained are those of a run without selection.

@@ -374,8 +374,7 @@ def _model_to_train(args: Any, plan: Plan, env: Any, checkpoint: Path | None) ->
         RunProblem: a damaged checkpoint or saved model (the message names it).
     """
     if checkpoint is not None:
-        framework = settings_framework(args, plan.algo)
-        expected = {"algo": plan.algo, "env_id": plan.env_id, "framework": framework, "n_envs": plan.n_envs}
+        expected = {"algo": plan.algo, "env_id": plan.env_id, "framework": plan.config.framework, "n_envs": plan.n_envs}
         try:
             model, state = restore_checkpoint(checkpoint, env, expected)
         except (OSError, ValueError) as exc:

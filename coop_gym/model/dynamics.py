@@ -159,8 +159,8 @@ def zoh_coefficients(
 
     ``expm`` of the (3, 3) Van Loan block by scaling and squaring a Taylor series: the
     block is halved until its 1-norm is at most 1/2, summed to 18 terms (truncation below
-    1e-22 relative) and squared back. It agrees with ``scipy.linalg.expm`` to ~1e-15;
-    scipy's BLAS calls cost 10 us to milliseconds (thread contention) per episode reset.
+    1e-22 relative) and squared back. It agrees with ``scipy.linalg.expm`` to ~1e-15, without
+    scipy's BLAS calls at each episode reset (and their thread contention).
     """
     # The block's powers keep a zero last row and its exponential the last row [0, 0, 1], so
     # only the top two rows (six numbers) are carried: no arrays, nothing allocated.

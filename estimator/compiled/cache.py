@@ -165,10 +165,11 @@ def _file_stamps(paths: list[Path]) -> list[str]:
 def _unchanged(file_stamps: list[str]) -> bool:
     """Whether every file of a stamp still has its recorded modification time and size.
 
-    The digest's sources are found by parsing every one of them (~0.1-0.3 s at each process
-    start); a file's times and size are what Numba's own cache trusts for the file that defines a
-    kernel, so an unchanged set needs no parsing. Any difference -- an edit, a moved checkout, a
-    missing file -- means the digest is computed again from the contents.
+    The digest's sources are found by parsing every one of them, part of each process start's
+    import of coop_gym (which ``python bench/cold_start.py`` times on its own,
+    ``bench/results/cold_start.json``); a file's times and size are what Numba's own cache trusts
+    for the file that defines a kernel, so an unchanged set needs no parsing. Any difference -- an
+    edit, a moved checkout, a missing file -- means the digest is computed again from the contents.
     """
     if not file_stamps:
         return False
